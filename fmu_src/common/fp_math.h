@@ -1,0 +1,101 @@
+/* Small fixed-size vector, rotation and quaternion helpers (header-only). */
+#ifndef FP_MATH_H
+#define FP_MATH_H
+
+#include <math.h>
+
+static inline void v3_cross(const double a[3], const double b[3], double out[3]) {
+    double x = a[1] * b[2] - a[2] * b[1];
+    double y = a[2] * b[0] - a[0] * b[2];
+    double z = a[0] * b[1] - a[1] * b[0];
+    out[0] = x;
+    out[1] = y;
+    out[2] = z;
+}
+
+static inline double v3_dot(const double a[3], const double b[3]) {
+    return a[0] * b[0] + a[1] * b[1] + a[2] * b[2];
+}
+
+/* Matrices are row-major double[9] (pass &m[0][0] for a double[3][3]). */
+static inline void m3_mul_v(const double *m, const double v[3], double out[3]) {
+    double x = m[0] * v[0] + m[1] * v[1] + m[2] * v[2];
+    double y = m[3] * v[0] + m[4] * v[1] + m[5] * v[2];
+    double z = m[6] * v[0] + m[7] * v[1] + m[8] * v[2];
+    out[0] = x;
+    out[1] = y;
+    out[2] = z;
+}
+
+static inline void m3_mul(const double *a, const double *b, double *out) {
+    double t[9];
+    int i, j;
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++)
+            t[3 * i + j] = a[3 * i] * b[j] + a[3 * i + 1] * b[3 + j] + a[3 * i + 2] * b[6 + j];
+    for (i = 0; i < 9; i++) out[i] = t[i];
+}
+
+/* Elementary rotations (active, right-handed). */
+static inline void rot_x(double a, double r[3][3]) {
+    double c = cos(a), s = sin(a);
+    r[0][0] = 1; r[0][1] = 0; r[0][2] = 0;
+    r[1][0] = 0; r[1][1] = c; r[1][2] = -s;
+    r[2][0] = 0; r[2][1] = s; r[2][2] = c;
+}
+
+static inline void rot_y(double a, double r[3][3]) {
+    double c = cos(a), s = sin(a);
+    r[0][0] = c; r[0][1] = 0; r[0][2] = s;
+    r[1][0] = 0; r[1][1] = 1; r[1][2] = 0;
+    r[2][0] = -s; r[2][1] = 0; r[2][2] = c;
+}
+
+static inline void rot_z(double a, double r[3][3]) {
+    double c = cos(a), s = sin(a);
+    r[0][0] = c; r[0][1] = -s; r[0][2] = 0;
+    r[1][0] = s; r[1][1] = c; r[1][2] = 0;
+    r[2][0] = 0; r[2][1] = 0; r[2][2] = 1;
+}
+
+/* Quaternion [w, x, y, z] of R_B^W = Rz(psi) Ry(theta) Rx(phi). */
+static inline void quat_from_euler(const double e[3], double q[4]) {
+    double cr = cos(0.5 * e[0]), sr = sin(0.5 * e[0]);
+    double cp = cos(0.5 * e[1]), sp = sin(0.5 * e[1]);
+    double cy = cos(0.5 * e[2]), sy = sin(0.5 * e[2]);
+    q[0] = cr * cp * cy + sr * sp * sy;
+    q[1] = sr * cp * cy - cr * sp * sy;
+    q[2] = cr * sp * cy + sr * cp * sy;
+    q[3] = cr * cp * sy - sr * sp * cy;
+}
+
+static inline void euler_from_quat(const double q[4], double e[3]) {
+    double w = q[0], x = q[1], y = q[2], z = q[3];
+    double s = 2.0 * (w * y - z * x);
+    if (s > 1.0) s = 1.0;
+    if (s < -1.0) s = -1.0;
+    e[0] = atan2(2.0 * (w * x + y * z), 1.0 - 2.0 * (x * x + y * y));
+    e[1] = asin(s);
+    e[2] = atan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z));
+}
+
+/* Rotation matrix R_B^W (body to world) of a unit quaternion. */
+static inline void rot_from_quat(const double q[4], double r[3][3]) {
+    double w = q[0], x = q[1], y = q[2], z = q[3];
+    r[0][0] = 1 - 2 * (y * y + z * z); r[0][1] = 2 * (x * y - w * z); r[0][2] = 2 * (x * z + w * y);
+    r[1][0] = 2 * (x * y + w * z); r[1][1] = 1 - 2 * (x * x + z * z); r[1][2] = 2 * (y * z - w * x);
+    r[2][0] = 2 * (x * z - w * y); r[2][1] = 2 * (y * z + w * x); r[2][2] = 1 - 2 * (x * x + y * y);
+}
+
+static inline void quat_normalize(double q[4]) {
+    double n = sqrt(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3]);
+    int i;
+    if (!(n > 0.0)) {
+        q[0] = 1.0; q[1] = q[2] = q[3] = 0.0;
+        return;
+    }
+    if (q[0] < 0.0) n = -n; /* keep w >= 0: one sign for one attitude */
+    for (i = 0; i < 4; i++) q[i] /= n;
+}
+
+#endif

@@ -1,0 +1,117 @@
+/*
+ * The contract between a model and the generic FMI layer.
+ *
+ * A model is a plain C struct (no pointers, so the FMI layer can snapshot it
+ * with memcpy), one variable table describing which struct members are FMU
+ * variables, and a handful of callbacks.  Nothing here mentions FMI types:
+ * the same model can sit behind the FMI 2.0 glue, the Python core library or
+ * a future FMI 3.0 layer.
+ */
+#ifndef FP_MODEL_H
+#define FP_MODEL_H
+
+#include <stddef.h>
+#include <stdint.h>
+
+/* Compile-time assertion that works in C99. */
+#define FP_STATIC_ASSERT(cond, tag) typedef char fp_static_assert_##tag[(cond) ? 1 : -1]
+
+typedef enum { FP_OK = 0, FP_WARNING = 1, FP_DISCARD = 2, FP_ERROR = 3 } FpStatus;
+
+typedef enum { FP_REAL = 0, FP_INTEGER = 1, FP_BOOLEAN = 2 } FpVarType;
+
+/* Causality + variability in one: the combinations our FMUs use. */
+typedef enum {
+    FP_PARAM_FIXED = 0,   /* parameter, fixed: set before initialization only */
+    FP_PARAM_TUNABLE = 1, /* parameter, tunable: may change between steps */
+    FP_INPUT = 2,         /* input, continuous (Real) or discrete (Integer/Boolean) */
+    FP_OUTPUT = 3         /* output, calculated */
+} FpVarKind;
+
+/*
+ * One row of a model's variable table.  An entry may be a scalar
+ * (rows = cols = 1), a vector (cols = 1, names "x[1]".."x[rows]") or a
+ * row-major matrix ("x[i,j]").  Element k has value reference vr + k.
+ * Real members are double, Integer members int32_t, Boolean members int32_t
+ * holding 0 or 1.
+ */
+typedef struct {
+    const char *name;
+    uint32_t vr;
+    FpVarType type;
+    FpVarKind kind;
+    uint16_t rows, cols;
+    size_t offset;
+    const char *unit; /* "" for none */
+    const char *description;
+} FpVar;
+
+/* Log categories, shared by every model (names appear in modelDescription.xml). */
+typedef enum {
+    FP_LOG_EVENTS = 0,  /* lifecycle: instantiation, initialization, reset */
+    FP_LOG_WARNING = 1, /* status warnings */
+    FP_LOG_ERROR = 2,   /* status errors */
+    FP_LOG_CALLS = 3,   /* every FMI call (very verbose) */
+    FP_LOG_MODEL = 4,   /* model-specific diagnostics */
+    FP_LOG_N_CATEGORIES = 5
+} FpLogCategory;
+
+const char *fp_log_category_name(int category);
+const char *fp_log_category_description(int category);
+
+/* A model logs through this; the FMI layer maps it to the importer's callback. */
+typedef struct {
+    void (*log)(void *env, FpStatus status, FpLogCategory category, const char *message);
+    void *env;
+} FpLogger;
+
+/* printf-style helper on top of FpLogger (defined in fp_log.c). */
+void fp_log(const FpLogger *logger, FpStatus status, FpLogCategory category, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 4, 5)))
+#endif
+    ;
+
+typedef struct {
+    const char *model_name;      /* also the FMI modelIdentifier */
+    const char *description;
+    size_t model_size;           /* sizeof the model struct */
+    const FpVar *vars;
+    size_t n_vars;
+    double default_step;         /* DefaultExperiment stepSize */
+    double default_stop;         /* DefaultExperiment stopTime */
+    /* Put every variable at its default (start) value and clear the state. */
+    void (*set_defaults)(void *model);
+    /*
+     * Validate parameters and compute the initial state and outputs at t0.
+     * Called whenever values are read or initialization ends after a change;
+     * must be idempotent.  FP_ERROR means the parameters are unusable (the
+     * message names the parameter); FP_WARNING means usable but odd.
+     */
+    FpStatus (*initialize)(void *model, double t0, const FpLogger *logger);
+    /*
+     * Advance from t by h.  Must leave the model untouched when it returns
+     * FP_ERROR or FP_DISCARD before integrating (e.g. invalid inputs).
+     */
+    FpStatus (*step)(void *model, double t, double h, const FpLogger *logger);
+    /* Re-validate tunable parameters changed while stepping (may be NULL). */
+    FpStatus (*tunables_changed)(void *model, const FpLogger *logger);
+} FpModelInfo;
+
+/* Each FMU links exactly one model that provides this. */
+const FpModelInfo *fp_model_info(void);
+
+/* Number of scalar elements of a table entry. */
+static inline uint32_t fp_var_count(const FpVar *v) { return (uint32_t)v->rows * v->cols; }
+
+/*
+ * Deterministic GUID derived from the model name and its variable table, so
+ * modelDescription.xml and the binary agree without a second source.
+ * Written with braces, e.g. "{0123abcd-...}"; buf must hold 40 bytes.
+ */
+void fp_model_guid(const FpModelInfo *info, char buf[40]);
+
+/* Write the structured name of element k of v (e.g. "pos[2]", "inertia[1,3]"). */
+int fp_var_element_name(const FpVar *v, uint32_t k, char *buf, size_t size);
+
+#endif

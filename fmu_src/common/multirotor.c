@@ -1,0 +1,248 @@
+#include "multirotor.h"
+
+#include <math.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "fp_math.h"
+
+void fp_rotor_rotation(double alpha, double beta, double gamma, double r[3][3]) {
+    double rz[3][3], rx[3][3], ry[3][3];
+    rot_z(gamma, rz);
+    rot_x(alpha, rx);
+    rot_y(beta, ry);
+    m3_mul(&rz[0][0], &rx[0][0], &r[0][0]);
+    m3_mul(&r[0][0], &ry[0][0], &r[0][0]);
+}
+
+void fp_thrust_direction(double alpha, double beta, double gamma, double t[3]) {
+    double sa = sin(alpha), ca = cos(alpha), sb = sin(beta), cb = cos(beta);
+    double lx = -sb, ly = sa * cb, lz = -ca * cb; /* -Rx(alpha) Ry(beta) e_z */
+    double cg = cos(gamma), sg = sin(gamma);
+    t[0] = cg * lx - sg * ly;
+    t[1] = sg * lx + cg * ly;
+    t[2] = lz;
+}
+
+void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, double *beta) {
+    double n = sqrt(v3_dot(f, f));
+    double cg = cos(gamma), sg = sin(gamma);
+    double lx, ly, lz, s;
+    if (!(n > 0.0)) {
+        *alpha = 0.0;
+        *beta = 0.0;
+        return;
+    }
+    /* undo the mounting rotation: l = Rz(-gamma) f / |f| */
+    lx = (cg * f[0] + sg * f[1]) / n;
+    ly = (-sg * f[0] + cg * f[1]) / n;
+    lz = f[2] / n;
+    s = -lx;
+    if (s > 1.0) s = 1.0;
+    if (s < -1.0) s = -1.0;
+    *beta = asin(s);
+    *alpha = atan2(ly, -lz);
+}
+
+static void torque_arm(const FpRotorSet *rs, int i, double m[3][3]) {
+    /* S(d_i) + r c_i I3 */
+    const double *d = rs->pos[i];
+    double rc = rs->k_d / rs->k_t * (double)rs->dir[i];
+    m[0][0] = rc; m[0][1] = -d[2]; m[0][2] = d[1];
+    m[1][0] = d[2]; m[1][1] = rc; m[1][2] = -d[0];
+    m[2][0] = -d[1]; m[2][1] = d[0]; m[2][2] = rc;
+}
+
+static FpStatus check_set(const FpRotorSet *rs) {
+    if (rs == NULL || rs->n < 1 || rs->n > FP_MAX_ROTORS || !(rs->k_t > 0.0)) return FP_ERROR;
+    return FP_OK;
+}
+
+FpStatus fp_effectiveness_b(const FpRotorSet *rs, double *b) {
+    int i, j, k, cols;
+    if (check_set(rs) != FP_OK || b == NULL) return FP_ERROR;
+    cols = 3 * rs->n;
+    for (i = 0; i < rs->n; i++) {
+        double m[3][3];
+        torque_arm(rs, i, m);
+        for (j = 0; j < 3; j++)
+            for (k = 0; k < 3; k++) {
+                b[j * cols + 3 * i + k] = j == k ? 1.0 : 0.0;
+                b[(3 + j) * cols + 3 * i + k] = m[j][k];
+            }
+    }
+    return FP_OK;
+}
+
+FpStatus fp_effectiveness_bprime(const FpRotorSet *rs, const double alpha[], const double beta[],
+                                 double *bp) {
+    int i, j, k, cols;
+    if (check_set(rs) != FP_OK || bp == NULL || alpha == NULL || beta == NULL) return FP_ERROR;
+    cols = 3 * rs->n;
+    for (i = 0; i < rs->n; i++) {
+        double m[3][3], r[3][3], mr[3][3];
+        torque_arm(rs, i, m);
+        fp_rotor_rotation(alpha[i], beta[i], rs->gamma[i], r);
+        m3_mul(&m[0][0], &r[0][0], &mr[0][0]);
+        for (j = 0; j < 3; j++)
+            for (k = 0; k < 3; k++) {
+                bp[j * cols + 3 * i + k] = r[j][k];
+                bp[(3 + j) * cols + 3 * i + k] = mr[j][k];
+            }
+    }
+    return FP_OK;
+}
+
+void fp_rotor_wrench(const FpRotorSet *rs, const double alpha[], const double beta[],
+                     const double omega[], const double efficiency[], double f_b[3],
+                     double tau_b[3]) {
+    int i, j;
+    for (j = 0; j < 3; j++) f_b[j] = tau_b[j] = 0.0;
+    for (i = 0; i < rs->n; i++) {
+        double t[3], f[3], arm[3], thrust;
+        fp_thrust_direction(alpha[i], beta[i], rs->gamma[i], t);
+        thrust = rs->k_t * omega[i] * omega[i] * (efficiency ? efficiency[i] : 1.0);
+        for (j = 0; j < 3; j++) f[j] = thrust * t[j];
+        v3_cross(rs->pos[i], f, arm);
+        for (j = 0; j < 3; j++) {
+            f_b[j] += f[j];
+            tau_b[j] += arm[j] + rs->k_d / rs->k_t * (double)rs->dir[i] * f[j];
+        }
+    }
+}
+
+int fp_rotor_tilts(const FpRotorSet *rs, int i) {
+    return rs->alpha_max[i] > rs->alpha_min[i] || rs->beta_max[i] > rs->beta_min[i];
+}
+
+FpStatus fp_cholesky_solve(double *a, int n, double *b) {
+    int i, j, k;
+    if (n < 1 || n > 32) return FP_ERROR;
+    for (j = 0; j < n; j++) {
+        double d = a[j * n + j];
+        for (k = 0; k < j; k++) d -= a[j * n + k] * a[j * n + k];
+        if (!(d > 0.0)) return FP_ERROR;
+        d = sqrt(d);
+        a[j * n + j] = d;
+        for (i = j + 1; i < n; i++) {
+            double s = a[i * n + j];
+            for (k = 0; k < j; k++) s -= a[i * n + k] * a[j * n + k];
+            a[i * n + j] = s / d;
+        }
+    }
+    for (i = 0; i < n; i++) {
+        double s = b[i];
+        for (k = 0; k < i; k++) s -= a[i * n + k] * b[k];
+        b[i] = s / a[i * n + i];
+    }
+    for (i = n - 1; i >= 0; i--) {
+        double s = b[i];
+        for (k = i + 1; k < n; k++) s -= a[k * n + i] * b[k];
+        b[i] = s / a[i * n + i];
+    }
+    return FP_OK;
+}
+
+FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], double alpha[],
+                             double beta[], double omega[], char *why, int why_size) {
+    /* Columns of the reduced effectiveness matrix: 3 per tilting rotor (its
+     * force vector), 1 per fixed rotor (its thrust along t_i). */
+    double cols[6][3 * FP_MAX_ROTORS];
+    double gram[36], y[6], x[3 * FP_MAX_ROTORS], back[6];
+    int first[FP_MAX_ROTORS];
+    int i, j, k, m = 0;
+    double trace = 0.0, scale = 0.0, err = 0.0;
+    FpStatus status = FP_OK;
+    if (why != NULL && why_size > 0) why[0] = '\0';
+    if (check_set(rs) != FP_OK) {
+        if (why) snprintf(why, (size_t)why_size, "invalid rotor set");
+        return FP_ERROR;
+    }
+    for (i = 0; i < rs->n; i++) {
+        double arm[3][3];
+        torque_arm(rs, i, arm);
+        first[i] = m;
+        if (fp_rotor_tilts(rs, i)) {
+            for (k = 0; k < 3; k++, m++)
+                for (j = 0; j < 3; j++) {
+                    cols[j][m] = j == k ? 1.0 : 0.0;
+                    cols[3 + j][m] = arm[j][k];
+                }
+        } else {
+            double t[3], at[3];
+            fp_thrust_direction(rs->alpha_min[i], rs->beta_min[i], rs->gamma[i], t);
+            m3_mul_v(&arm[0][0], t, at);
+            for (j = 0; j < 3; j++) {
+                cols[j][m] = t[j];
+                cols[3 + j][m] = at[j];
+            }
+            m++;
+        }
+    }
+    /* x = C^T (C C^T + eps I)^-1 w: the minimum-norm least-squares split; the
+     * tiny regularization keeps rank-deficient sets (quadrotor) solvable. */
+    for (i = 0; i < 6; i++)
+        for (j = 0; j < 6; j++) {
+            double s = 0.0;
+            for (k = 0; k < m; k++) s += cols[i][k] * cols[j][k];
+            gram[i * 6 + j] = s;
+        }
+    for (i = 0; i < 6; i++) trace += gram[i * 6 + i];
+    for (i = 0; i < 6; i++) gram[i * 6 + i] += 1e-12 * trace;
+    for (i = 0; i < 6; i++) y[i] = wrench[i];
+    if (fp_cholesky_solve(gram, 6, y) != FP_OK) {
+        if (why) snprintf(why, (size_t)why_size, "rotor geometry gives a singular allocation");
+        return FP_ERROR;
+    }
+    for (k = 0; k < m; k++) {
+        x[k] = 0.0;
+        for (i = 0; i < 6; i++) x[k] += cols[i][k] * y[i];
+    }
+    for (i = 0; i < 6; i++) {
+        back[i] = 0.0;
+        for (k = 0; k < m; k++) back[i] += cols[i][k] * x[k];
+        err += (back[i] - wrench[i]) * (back[i] - wrench[i]);
+        scale += wrench[i] * wrench[i];
+    }
+    for (i = 0; i < rs->n; i++) {
+        double thrust;
+        if (fp_rotor_tilts(rs, i)) {
+            const double *f = &x[first[i]];
+            thrust = sqrt(v3_dot(f, f));
+            fp_tilt_from_direction(f, rs->gamma[i], &alpha[i], &beta[i]);
+        } else {
+            thrust = x[first[i]];
+            alpha[i] = rs->alpha_min[i];
+            beta[i] = rs->beta_min[i];
+            if (thrust < 0.0 && status == FP_OK) {
+                status = FP_ERROR;
+                if (why)
+                    snprintf(why, (size_t)why_size, "rotor %d would need negative thrust %.4g N",
+                             i + 1, thrust);
+            }
+        }
+        omega[i] = sqrt(fabs(thrust) / rs->k_t);
+        if (status != FP_OK) continue;
+        if (omega[i] > rs->omega_max || omega[i] < rs->omega_min) {
+            status = FP_ERROR;
+            if (why)
+                snprintf(why, (size_t)why_size,
+                         "rotor %d would need omega %.6g rad/s outside [%.6g, %.6g]", i + 1,
+                         omega[i], rs->omega_min, rs->omega_max);
+        } else if (alpha[i] < rs->alpha_min[i] - 1e-12 || alpha[i] > rs->alpha_max[i] + 1e-12 ||
+                   beta[i] < rs->beta_min[i] - 1e-12 || beta[i] > rs->beta_max[i] + 1e-12) {
+            status = FP_ERROR;
+            if (why)
+                snprintf(why, (size_t)why_size,
+                         "rotor %d would need tilt alpha %.4g, beta %.4g rad outside its limits",
+                         i + 1, alpha[i], beta[i]);
+        }
+    }
+    if (status == FP_OK && err > 1e-12 * (scale > 1.0 ? scale : 1.0)) {
+        status = FP_ERROR;
+        if (why)
+            snprintf(why, (size_t)why_size,
+                     "the rotors cannot produce this wrench (residual %.3g)", sqrt(err));
+    }
+    return status;
+}

@@ -1,0 +1,80 @@
+/*
+ * Rotor geometry shared by the plant, the controller and the Python core
+ * library.  Conventions (pinned here, tested in tests/):
+ *
+ *  - Body frame FRD.  Rotor i sits at d_i, spins with c_i = +-1 and is tilted
+ *    by lambda_i = [alpha_i, beta_i, gamma_i].
+ *  - R_Mi^B(lambda_i) = Rz(gamma_i) * Rx(alpha_i) * Ry(beta_i): gamma_i is a
+ *    fixed mounting rotation about the body z axis (we set it to the arm's
+ *    azimuth, so alpha tilts about the arm), alpha_i is the outer servo about
+ *    the mounted x axis, beta_i the inner servo about the once-rotated y axis.
+ *  - Thrust f_mi = k_t * omega_i^2 acts along the rotor's -z axis, so at zero
+ *    tilt it points to body -z (up).  Its direction in the body frame is
+ *    t_i = -R_Mi^B e_z = -Rz(gamma)[sin(beta), -sin(alpha)cos(beta), cos(alpha)cos(beta)].
+ *  - The rotor's reaction (drag) torque is c_i * k_d * omega_i^2 along t_i,
+ *    so paper eq. (3) holds literally: tau_i = (S(d_i) + r c_i I3) f_bi with
+ *    r = k_d / k_t.
+ */
+#ifndef FP_MULTIROTOR_H
+#define FP_MULTIROTOR_H
+
+#include <stdint.h>
+
+#include "fp_model.h"
+
+#define FP_MAX_ROTORS 8
+
+/* Geometry and actuator limits of a rotor set (SI units, radians). */
+typedef struct {
+    int32_t n;
+    double k_t, k_d;
+    double pos[FP_MAX_ROTORS][3];
+    int32_t dir[FP_MAX_ROTORS];
+    double gamma[FP_MAX_ROTORS];
+    double alpha_min[FP_MAX_ROTORS], alpha_max[FP_MAX_ROTORS];
+    double beta_min[FP_MAX_ROTORS], beta_max[FP_MAX_ROTORS];
+    double omega_min, omega_max;
+} FpRotorSet;
+
+/* R_Mi^B(alpha, beta, gamma), row-major. */
+void fp_rotor_rotation(double alpha, double beta, double gamma, double r[3][3]);
+
+/* Unit thrust direction t_i in the body frame. */
+void fp_thrust_direction(double alpha, double beta, double gamma, double t[3]);
+
+/* Tilt angles that point the thrust along the body-frame vector f (|f| > 0). */
+void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, double *beta);
+
+/* Paper eq. (3): B (6 x 3n, row-major) mapping per-rotor body forces to [f_b; tau_b]. */
+FpStatus fp_effectiveness_b(const FpRotorSet *rs, double *b);
+
+/*
+ * Paper eq. (9)-(10): B'(lambda) (6 x 3n, row-major), so that
+ * [f_b; tau_b] = B'(lambda) F(omega) with F_i = [0, 0, -k_t omega_i^2].
+ */
+FpStatus fp_effectiveness_bprime(const FpRotorSet *rs, const double alpha[], const double beta[],
+                                 double *bp);
+
+/* Body force and torque produced by the rotors (efficiency may be NULL = all 1). */
+void fp_rotor_wrench(const FpRotorSet *rs, const double alpha[], const double beta[],
+                     const double omega[], const double efficiency[], double f_b[3],
+                     double tau_b[3]);
+
+/* A rotor can tilt when either servo has a non-empty range. */
+int fp_rotor_tilts(const FpRotorSet *rs, int i);
+
+/*
+ * Preferred actuator configuration for a body wrench [f_b; tau_b]: the
+ * minimum-norm split into per-rotor forces (a full 3-D force for a tilting
+ * rotor, a thrust along the fixed direction otherwise), converted to
+ * alpha, beta, omega.  Returns FP_OK when the split reproduces the wrench
+ * within 1e-6 relative and every actuator is inside its limits; otherwise
+ * FP_ERROR with the reason in why (and the unclamped split in the outputs).
+ */
+FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], double alpha[],
+                             double beta[], double omega[], char *why, int why_size);
+
+/* Cholesky solve of the SPD n x n system a x = b in place (n <= 32). */
+FpStatus fp_cholesky_solve(double *a, int n, double *b);
+
+#endif

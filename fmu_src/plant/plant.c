@@ -1,0 +1,598 @@
+#include "plant.h"
+
+#include <math.h>
+#include <stddef.h>
+#include <stdio.h>
+#include <string.h>
+
+#include "fp_math.h"
+#include "plant_vars.h"
+
+#define PI 3.14159265358979323846
+
+/* The variable table: each row must name a PlantModel member of matching size. */
+#define ELEM_SIZE_REAL sizeof(double)
+#define ELEM_SIZE_INTEGER sizeof(int32_t)
+#define ELEM_SIZE_BOOLEAN sizeof(int32_t)
+#define PLANT_CHECK(name, vr, type, kind, rows, cols, unit, desc)                                \
+    FP_STATIC_ASSERT(sizeof(((PlantModel *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type,     \
+                     name##_size);
+PLANT_VARIABLES(PLANT_CHECK)
+
+#define PLANT_ROW(name, vr, type, kind, rows, cols, unit, desc) \
+    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(PlantModel, name), unit, desc},
+static const FpVar plant_vars[] = {PLANT_VARIABLES(PLANT_ROW)};
+
+/* State vector layout. */
+enum { X_POS = 0, X_VEL = 3, X_QUAT = 6, X_RATE = 10, X_OMEGA = 13 };
+#define X_ALPHA (X_OMEGA + FP_MAX_ROTORS)
+#define X_BETA (X_ALPHA + FP_MAX_ROTORS)
+
+/* ------------------------------------------------------------------------ */
+/* Defaults: the paper's tilting hexacopter (Table I).                      */
+
+static void copy_rotor_set(const PlantModel *m, FpRotorSet *rs) {
+    memset(rs, 0, sizeof *rs);
+    rs->n = m->n_rotors;
+    rs->k_t = m->k_t;
+    rs->k_d = m->k_d;
+    memcpy(rs->pos, m->rotor_pos, sizeof rs->pos);
+    memcpy(rs->dir, m->rotor_dir, sizeof rs->dir);
+    memcpy(rs->gamma, m->rotor_gamma, sizeof rs->gamma);
+    memcpy(rs->alpha_min, m->alpha_min, sizeof rs->alpha_min);
+    memcpy(rs->alpha_max, m->alpha_max, sizeof rs->alpha_max);
+    memcpy(rs->beta_min, m->beta_min, sizeof rs->beta_min);
+    memcpy(rs->beta_max, m->beta_max, sizeof rs->beta_max);
+    rs->omega_min = m->omega_min;
+    rs->omega_max = m->omega_max;
+}
+
+static void hover_wrench(const PlantModel *m, const double euler[3], double w[6]) {
+    double q[4], r[3][3];
+    int j;
+    quat_from_euler(euler, q);
+    rot_from_quat(q, r);
+    /* f_b = -R^T (m g e_z): cancel gravity, no torque */
+    for (j = 0; j < 3; j++) {
+        w[j] = -m->mass * m->g * r[2][j];
+        w[3 + j] = 0.0;
+    }
+}
+
+void plant_set_defaults(void *model) {
+    PlantModel *m = (PlantModel *)model;
+    FpRotorSet rs;
+    double w[6], zero[3] = {0.0, 0.0, 0.0};
+    int i;
+    memset(m, 0, sizeof *m);
+    m->n_rotors = 6;
+    m->mass = 0.6656;
+    m->inertia[0][0] = 0.0041;
+    m->inertia[1][1] = 0.0048;
+    m->inertia[2][2] = 0.0599;
+    m->g = 9.81;
+    m->k_t = 1.14e-4;
+    m->k_d = 1.14e-6;
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        m->rotor_dir[i] = 1;
+        m->efficiency[i] = 1.0;
+    }
+    for (i = 0; i < 6; i++) {
+        double azimuth = (30.0 + 60.0 * i) * PI / 180.0;
+        m->rotor_pos[i][0] = 0.15 * cos(azimuth);
+        m->rotor_pos[i][1] = 0.15 * sin(azimuth);
+        m->rotor_dir[i] = (i % 2 == 0) ? 1 : -1;
+        m->rotor_gamma[i] = azimuth;
+        m->alpha_min[i] = m->beta_min[i] = -40.0 * PI / 180.0;
+        m->alpha_max[i] = m->beta_max[i] = 40.0 * PI / 180.0;
+    }
+    m->omega_min = 0.0;
+    m->omega_max = 2000.0 * 2.0 * PI / 60.0;
+    m->tau_motor = 1.0 / 53.94;
+    m->tau_servo = 1.0 / 53.94;
+    m->h_internal = 5e-4;
+    m->init_trim = 1;
+    m->noise_seed = 1;
+    /* Inputs start at hover trim so the FMU hovers when simulated alone. */
+    copy_rotor_set(m, &rs);
+    hover_wrench(m, zero, w);
+    if (fp_preferred_config(&rs, w, m->alpha_cmd, m->beta_cmd, m->omega_cmd, NULL, 0) != FP_OK) {
+        memset(m->omega_cmd, 0, sizeof m->omega_cmd);
+    }
+}
+
+/* ------------------------------------------------------------------------ */
+/* Noise: xoshiro256** seeded by splitmix64, normal deviates by Box-Muller. */
+
+static uint64_t splitmix64(uint64_t *s) {
+    uint64_t z = (*s += 0x9e3779b97f4a7c15ULL);
+    z = (z ^ (z >> 30)) * 0xbf58476d1ce4e5b9ULL;
+    z = (z ^ (z >> 27)) * 0x94d049bb133111ebULL;
+    return z ^ (z >> 31);
+}
+
+static uint64_t rotl(uint64_t x, int k) { return (x << k) | (x >> (64 - k)); }
+
+static uint64_t rng_next(uint64_t s[4]) {
+    uint64_t result = rotl(s[1] * 5, 7) * 9, t = s[1] << 17;
+    s[2] ^= s[0];
+    s[3] ^= s[1];
+    s[1] ^= s[2];
+    s[0] ^= s[3];
+    s[2] ^= t;
+    s[3] = rotl(s[3], 45);
+    return result;
+}
+
+static double rng_uniform(uint64_t s[4]) { /* in (0, 1) */
+    return ((double)(rng_next(s) >> 11) + 0.5) * (1.0 / 9007199254740992.0);
+}
+
+static double rng_normal(uint64_t s[4]) {
+    double u1 = rng_uniform(s), u2 = rng_uniform(s);
+    return sqrt(-2.0 * log(u1)) * cos(2.0 * PI * u2);
+}
+
+static void add_noise(uint64_t s[4], double *v, int n, double sigma) {
+    int i;
+    if (!(sigma > 0.0)) return;
+    for (i = 0; i < n; i++) v[i] += sigma * rng_normal(s);
+}
+
+/* ------------------------------------------------------------------------ */
+/* Dynamics                                                                 */
+
+typedef struct {
+    double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
+} Commands;
+
+/* dx = f(x); also returns the rotor wrench and accelerations when asked. */
+static void derivative(const PlantModel *m, const Commands *u, const double *x, double *dx,
+                       double f_b[3], double tau_b[3]) {
+    const double *q = x + X_QUAT, *w = x + X_RATE;
+    double r[3][3], fw[3], iw[3], gyro[3], tau[3], fb[3], tb[3];
+    int i, n = m->n_rotors;
+    fp_rotor_wrench(&m->rotors, x + X_ALPHA, x + X_BETA, x + X_OMEGA, m->efficiency, fb, tb);
+    rot_from_quat(q, r);
+    m3_mul_v(&r[0][0], fb, fw);
+    for (i = 0; i < 3; i++) {
+        dx[X_POS + i] = x[X_VEL + i];
+        dx[X_VEL + i] = (fw[i] + m->f_d[i]) / m->mass + m->a_d[i];
+    }
+    dx[X_VEL + 2] += m->g;
+    dx[X_QUAT + 0] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2]);
+    dx[X_QUAT + 1] = 0.5 * (q[0] * w[0] + q[2] * w[2] - q[3] * w[1]);
+    dx[X_QUAT + 2] = 0.5 * (q[0] * w[1] - q[1] * w[2] + q[3] * w[0]);
+    dx[X_QUAT + 3] = 0.5 * (q[0] * w[2] + q[1] * w[1] - q[2] * w[0]);
+    m3_mul_v(&m->inertia[0][0], w, iw);
+    v3_cross(w, iw, gyro);
+    for (i = 0; i < 3; i++) tau[i] = tb[i] + m->tau_d[i] - gyro[i];
+    m3_mul_v(&m->inertia_inv[0][0], tau, dx + X_RATE);
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        if (i < n) {
+            dx[X_OMEGA + i] = (u->omega[i] - x[X_OMEGA + i]) / m->tau_motor;
+            dx[X_ALPHA + i] = (u->alpha[i] - x[X_ALPHA + i]) / m->tau_servo;
+            dx[X_BETA + i] = (u->beta[i] - x[X_BETA + i]) / m->tau_servo;
+        } else {
+            dx[X_OMEGA + i] = dx[X_ALPHA + i] = dx[X_BETA + i] = 0.0;
+        }
+    }
+    if (f_b != NULL)
+        for (i = 0; i < 3; i++) {
+            f_b[i] = fb[i];
+            tau_b[i] = tb[i];
+        }
+}
+
+static void rk4_step(const PlantModel *m, const Commands *u, double *x, double h) {
+    double k1[PLANT_NX], k2[PLANT_NX], k3[PLANT_NX], k4[PLANT_NX], xt[PLANT_NX];
+    int i;
+    derivative(m, u, x, k1, NULL, NULL);
+    for (i = 0; i < PLANT_NX; i++) xt[i] = x[i] + 0.5 * h * k1[i];
+    derivative(m, u, xt, k2, NULL, NULL);
+    for (i = 0; i < PLANT_NX; i++) xt[i] = x[i] + 0.5 * h * k2[i];
+    derivative(m, u, xt, k3, NULL, NULL);
+    for (i = 0; i < PLANT_NX; i++) xt[i] = x[i] + h * k3[i];
+    derivative(m, u, xt, k4, NULL, NULL);
+    for (i = 0; i < PLANT_NX; i++) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
+    quat_normalize(x + X_QUAT);
+}
+
+static double clamp(double v, double lo, double hi, int32_t *flags, int bit) {
+    if (v < lo) {
+        *flags |= (int32_t)1 << bit;
+        return lo;
+    }
+    if (v > hi) {
+        *flags |= (int32_t)1 << bit;
+        return hi;
+    }
+    return v;
+}
+
+static void saturate(const PlantModel *m, Commands *u, int32_t *flags) {
+    int i;
+    *flags = 0;
+    memset(u, 0, sizeof *u);
+    for (i = 0; i < m->n_rotors; i++) {
+        u->omega[i] = clamp(m->omega_cmd[i], m->omega_min, m->omega_max, flags, i);
+        u->alpha[i] = clamp(m->alpha_cmd[i], m->alpha_min[i], m->alpha_max[i], flags, 8 + i);
+        u->beta[i] = clamp(m->beta_cmd[i], m->beta_min[i], m->beta_max[i], flags, 16 + i);
+    }
+}
+
+static void compute_outputs(PlantModel *m, const Commands *u) {
+    double dx[PLANT_NX];
+    int i;
+    derivative(m, u, m->x, dx, m->f_b, m->tau_b);
+    for (i = 0; i < 3; i++) {
+        m->pos[i] = m->x[X_POS + i];
+        m->vel[i] = m->x[X_VEL + i];
+        m->acc[i] = dx[X_VEL + i];
+        m->rate[i] = m->x[X_RATE + i];
+        m->ang_acc[i] = dx[X_RATE + i];
+    }
+    euler_from_quat(m->x + X_QUAT, m->euler);
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        int used = i < m->n_rotors;
+        m->omega[i] = used ? m->x[X_OMEGA + i] : 0.0;
+        m->alpha[i] = used ? m->x[X_ALPHA + i] : 0.0;
+        m->beta[i] = used ? m->x[X_BETA + i] : 0.0;
+    }
+    add_noise(m->rng, m->pos, 3, m->noise_pos);
+    add_noise(m->rng, m->vel, 3, m->noise_vel);
+    add_noise(m->rng, m->acc, 3, m->noise_acc);
+    add_noise(m->rng, m->euler, 3, m->noise_att);
+    add_noise(m->rng, m->rate, 3, m->noise_rate);
+    add_noise(m->rng, m->ang_acc, 3, m->noise_ang_acc);
+    if (m->noise_att > 0.0) quat_from_euler(m->euler, m->quat);
+    else memcpy(m->quat, m->x + X_QUAT, sizeof m->quat);
+    if (m->quat[0] < 0.0)
+        for (i = 0; i < 4; i++) m->quat[i] = -m->quat[i];
+}
+
+/* ------------------------------------------------------------------------ */
+/* Parameter validation                                                     */
+
+typedef struct {
+    const FpLogger *logger;
+    int errors;
+} Check;
+
+static void bad(Check *c, const char *fmt, const char *name, double value, const char *why) {
+    char label[64];
+    snprintf(label, sizeof label, fmt, name);
+    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %.17g: %s", label, value, why);
+    c->errors++;
+}
+
+static void require_finite(Check *c, const char *name, const double *v, int n, int width) {
+    int i;
+    char label[64];
+    for (i = 0; i < n; i++) {
+        if (isfinite(v[i])) continue;
+        if (n == 1) snprintf(label, sizeof label, "%s", name);
+        else if (width == 1) snprintf(label, sizeof label, "%s[%d]", name, i + 1);
+        else snprintf(label, sizeof label, "%s[%d,%d]", name, i / width + 1, i % width + 1);
+        bad(c, "%s", label, v[i], "must be finite");
+    }
+}
+
+static void require_positive(Check *c, const char *name, double v) {
+    if (isfinite(v) && !(v > 0.0)) bad(c, "%s", name, v, "must be positive");
+}
+
+/* Eigenvalues of a symmetric 3x3 matrix (trigonometric closed form). */
+static void sym3_eigenvalues(double a[3][3], double e[3]) {
+    double p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    double q = (a[0][0] + a[1][1] + a[2][2]) / 3.0, p2, p, b[3][3], r, phi;
+    int i, j;
+    if (p1 == 0.0) {
+        for (i = 0; i < 3; i++) e[i] = a[i][i];
+        return;
+    }
+    p2 = (a[0][0] - q) * (a[0][0] - q) + (a[1][1] - q) * (a[1][1] - q) +
+         (a[2][2] - q) * (a[2][2] - q) + 2.0 * p1;
+    p = sqrt(p2 / 6.0);
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) b[i][j] = (a[i][j] - (i == j ? q : 0.0)) / p;
+    r = 0.5 * (b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1]) -
+               b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0]) +
+               b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]));
+    phi = r <= -1.0 ? PI / 3.0 : (r >= 1.0 ? 0.0 : acos(r) / 3.0);
+    e[0] = q + 2.0 * p * cos(phi);
+    e[2] = q + 2.0 * p * cos(phi + 2.0 * PI / 3.0);
+    e[1] = 3.0 * q - e[0] - e[2];
+}
+
+static int invert3(double a[3][3], double inv[3][3]) {
+    double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) -
+                 a[0][1] * (a[1][0] * a[2][2] - a[1][2] * a[2][0]) +
+                 a[0][2] * (a[1][0] * a[2][1] - a[1][1] * a[2][0]);
+    int i, j;
+    if (!(fabs(det) > 0.0)) return -1;
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) {
+            int r0 = (j + 1) % 3, r1 = (j + 2) % 3, c0 = (i + 1) % 3, c1 = (i + 2) % 3;
+            inv[i][j] = (a[r0][c0] * a[r1][c1] - a[r0][c1] * a[r1][c0]) / det;
+        }
+    return 0;
+}
+
+static void check_inertia(Check *c, PlantModel *m) {
+    double e[3], scale = 0.0, m1, m2;
+    int i, j;
+    for (i = 0; i < 9; i++)
+        if (!isfinite(m->inertia[i / 3][i % 3])) return; /* reported as non-finite */
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) scale = fmax(scale, fabs(m->inertia[i][j]));
+    for (i = 0; i < 3; i++)
+        for (j = i + 1; j < 3; j++)
+            if (fabs(m->inertia[i][j] - m->inertia[j][i]) > 1e-12 * scale) {
+                char label[32];
+                snprintf(label, sizeof label, "inertia[%d,%d]", i + 1, j + 1);
+                bad(c, "%s", label, m->inertia[i][j], "the inertia matrix must be symmetric");
+            }
+    /* Sylvester: leading principal minors positive <=> positive definite. */
+    m1 = m->inertia[0][0];
+    m2 = m->inertia[0][0] * m->inertia[1][1] - m->inertia[0][1] * m->inertia[1][0];
+    sym3_eigenvalues(m->inertia, e);
+    if (!(m1 > 0.0) || !(m2 > 0.0) || !(e[0] > 0.0 && e[1] > 0.0 && e[2] > 0.0)) {
+        fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+               "parameter inertia is not positive definite (eigenvalues %.6g, %.6g, %.6g kg.m2)",
+               e[0], e[1], e[2]);
+        c->errors++;
+        return;
+    }
+    for (i = 0; i < 3; i++)
+        if (e[i] > e[(i + 1) % 3] + e[(i + 2) % 3] * (1.0 + 1e-12)) {
+            fp_log(c->logger, FP_WARNING, FP_LOG_WARNING,
+                   "parameter inertia: principal moment %.6g kg.m2 exceeds the sum of the other "
+                   "two (%.6g + %.6g), which no rigid body has; simulating it as given",
+                   e[i], e[(i + 1) % 3], e[(i + 2) % 3]);
+            break;
+        }
+}
+
+static void check_range(Check *c, const char *name, const double *v, int n, double lo, double hi,
+                        const char *why) {
+    int i;
+    char label[64];
+    for (i = 0; i < n; i++)
+        if (isfinite(v[i]) && (v[i] < lo || v[i] > hi)) {
+            snprintf(label, sizeof label, "%s[%d]", name, i + 1);
+            bad(c, "%s", label, v[i], why);
+        }
+}
+
+static int validate(PlantModel *m, const FpLogger *logger) {
+    Check c;
+    int i, n = m->n_rotors;
+    char label[64];
+    c.logger = logger;
+    c.errors = 0;
+    if (n < 1 || n > FP_MAX_ROTORS) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "parameter n_rotors = %d: must be in 1..%d",
+               (int)n, FP_MAX_ROTORS);
+        return 1; /* per-rotor checks need a valid n */
+    }
+    require_finite(&c, "mass", &m->mass, 1, 1);
+    require_positive(&c, "mass", m->mass);
+    require_finite(&c, "inertia", &m->inertia[0][0], 9, 3);
+    check_inertia(&c, m);
+    require_finite(&c, "g", &m->g, 1, 1);
+    require_finite(&c, "k_t", &m->k_t, 1, 1);
+    require_positive(&c, "k_t", m->k_t);
+    require_finite(&c, "k_d", &m->k_d, 1, 1);
+    if (isfinite(m->k_d) && m->k_d < 0.0) bad(&c, "%s", "k_d", m->k_d, "must not be negative");
+    require_finite(&c, "rotor_pos", &m->rotor_pos[0][0], 3 * n, 3);
+    require_finite(&c, "rotor_gamma", m->rotor_gamma, n, 1);
+    for (i = 0; i < n; i++)
+        if (m->rotor_dir[i] != 1 && m->rotor_dir[i] != -1) {
+            snprintf(label, sizeof label, "rotor_dir[%d]", i + 1);
+            bad(&c, "%s", label, m->rotor_dir[i], "must be +1 or -1");
+        }
+    require_finite(&c, "alpha_min", m->alpha_min, n, 1);
+    require_finite(&c, "alpha_max", m->alpha_max, n, 1);
+    require_finite(&c, "beta_min", m->beta_min, n, 1);
+    require_finite(&c, "beta_max", m->beta_max, n, 1);
+    check_range(&c, "alpha_min", m->alpha_min, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
+    check_range(&c, "alpha_max", m->alpha_max, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
+    check_range(&c, "beta_min", m->beta_min, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
+    check_range(&c, "beta_max", m->beta_max, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
+    for (i = 0; i < n; i++) {
+        if (m->alpha_min[i] > m->alpha_max[i]) {
+            snprintf(label, sizeof label, "alpha_min[%d]", i + 1);
+            bad(&c, "%s", label, m->alpha_min[i], "exceeds alpha_max (inverted limits)");
+        }
+        if (m->beta_min[i] > m->beta_max[i]) {
+            snprintf(label, sizeof label, "beta_min[%d]", i + 1);
+            bad(&c, "%s", label, m->beta_min[i], "exceeds beta_max (inverted limits)");
+        }
+    }
+    require_finite(&c, "omega_min", &m->omega_min, 1, 1);
+    require_finite(&c, "omega_max", &m->omega_max, 1, 1);
+    if (m->omega_min < 0.0) bad(&c, "%s", "omega_min", m->omega_min, "must not be negative");
+    require_positive(&c, "omega_max", m->omega_max);
+    if (m->omega_min > m->omega_max)
+        bad(&c, "%s", "omega_min", m->omega_min, "exceeds omega_max (inverted limits)");
+    require_finite(&c, "tau_motor", &m->tau_motor, 1, 1);
+    require_positive(&c, "tau_motor", m->tau_motor);
+    require_finite(&c, "tau_servo", &m->tau_servo, 1, 1);
+    require_positive(&c, "tau_servo", m->tau_servo);
+    require_finite(&c, "h_internal", &m->h_internal, 1, 1);
+    require_positive(&c, "h_internal", m->h_internal);
+    require_finite(&c, "pos0", m->pos0, 3, 1);
+    require_finite(&c, "vel0", m->vel0, 3, 1);
+    require_finite(&c, "euler0", m->euler0, 3, 1);
+    require_finite(&c, "rate0", m->rate0, 3, 1);
+    if (!m->init_trim) {
+        require_finite(&c, "omega0", m->omega0, n, 1);
+        require_finite(&c, "alpha0", m->alpha0, n, 1);
+        require_finite(&c, "beta0", m->beta0, n, 1);
+        for (i = 0; i < n; i++) {
+            if (m->omega0[i] < m->omega_min || m->omega0[i] > m->omega_max) {
+                snprintf(label, sizeof label, "omega0[%d]", i + 1);
+                bad(&c, "%s", label, m->omega0[i], "outside [omega_min, omega_max]");
+            }
+            if (m->alpha0[i] < m->alpha_min[i] || m->alpha0[i] > m->alpha_max[i]) {
+                snprintf(label, sizeof label, "alpha0[%d]", i + 1);
+                bad(&c, "%s", label, m->alpha0[i], "outside [alpha_min, alpha_max]");
+            }
+            if (m->beta0[i] < m->beta_min[i] || m->beta0[i] > m->beta_max[i]) {
+                snprintf(label, sizeof label, "beta0[%d]", i + 1);
+                bad(&c, "%s", label, m->beta0[i], "outside [beta_min, beta_max]");
+            }
+        }
+    }
+    require_finite(&c, "noise_pos", &m->noise_pos, 1, 1);
+    require_finite(&c, "noise_vel", &m->noise_vel, 1, 1);
+    require_finite(&c, "noise_acc", &m->noise_acc, 1, 1);
+    require_finite(&c, "noise_att", &m->noise_att, 1, 1);
+    require_finite(&c, "noise_rate", &m->noise_rate, 1, 1);
+    require_finite(&c, "noise_ang_acc", &m->noise_ang_acc, 1, 1);
+    if (m->noise_pos < 0.0) bad(&c, "%s", "noise_pos", m->noise_pos, "must not be negative");
+    if (m->noise_vel < 0.0) bad(&c, "%s", "noise_vel", m->noise_vel, "must not be negative");
+    if (m->noise_acc < 0.0) bad(&c, "%s", "noise_acc", m->noise_acc, "must not be negative");
+    if (m->noise_att < 0.0) bad(&c, "%s", "noise_att", m->noise_att, "must not be negative");
+    if (m->noise_rate < 0.0) bad(&c, "%s", "noise_rate", m->noise_rate, "must not be negative");
+    if (m->noise_ang_acc < 0.0)
+        bad(&c, "%s", "noise_ang_acc", m->noise_ang_acc, "must not be negative");
+    if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->tau_motor, m->tau_servo))
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+               "parameter h_internal = %g s is coarse against the actuator time constants "
+               "(%g s, %g s); RK4 will be inaccurate",
+               m->h_internal, m->tau_motor, m->tau_servo);
+    return c.errors;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Model callbacks                                                          */
+
+static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger) {
+    PlantModel *m = (PlantModel *)model;
+    Commands u;
+    uint64_t seed;
+    int i;
+    (void)t0;
+    if (validate(m, logger) != 0) return FP_ERROR;
+    copy_rotor_set(m, &m->rotors);
+    if (invert3(m->inertia, m->inertia_inv) != 0) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "parameter inertia is singular");
+        return FP_ERROR;
+    }
+    memset(m->x, 0, sizeof m->x);
+    for (i = 0; i < 3; i++) {
+        m->x[X_POS + i] = m->pos0[i];
+        m->x[X_VEL + i] = m->vel0[i];
+        m->x[X_RATE + i] = m->rate0[i];
+    }
+    quat_from_euler(m->euler0, m->x + X_QUAT);
+    quat_normalize(m->x + X_QUAT);
+    if (m->init_trim) {
+        double w[6];
+        char why[160];
+        hover_wrench(m, m->euler0, w);
+        if (fp_preferred_config(&m->rotors, w, m->x + X_ALPHA, m->x + X_BETA, m->x + X_OMEGA, why,
+                                (int)sizeof why) != FP_OK) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                   "parameter init_trim: no hover trim at euler0 = [%g, %g, %g] rad: %s",
+                   m->euler0[0], m->euler0[1], m->euler0[2], why);
+            return FP_ERROR;
+        }
+    } else {
+        for (i = 0; i < m->n_rotors; i++) {
+            m->x[X_OMEGA + i] = m->omega0[i];
+            m->x[X_ALPHA + i] = m->alpha0[i];
+            m->x[X_BETA + i] = m->beta0[i];
+        }
+    }
+    seed = (uint64_t)(uint32_t)m->noise_seed;
+    for (i = 0; i < 4; i++) m->rng[i] = splitmix64(&seed);
+    saturate(m, &u, &m->sat_flags);
+    m->sat_flags = 0;
+    compute_outputs(m, &u);
+    fp_log(logger, FP_OK, FP_LOG_MODEL, "initial state: %d rotors, omega_1 = %g rad/s",
+           (int)m->n_rotors, m->x[X_OMEGA]);
+    return FP_OK;
+}
+
+static int check_inputs(const PlantModel *m, const FpLogger *logger) {
+    static const char *const names[] = {"omega_cmd", "alpha_cmd", "beta_cmd", "efficiency"};
+    const double *vectors[4];
+    int i, k, n = m->n_rotors;
+    vectors[0] = m->omega_cmd;
+    vectors[1] = m->alpha_cmd;
+    vectors[2] = m->beta_cmd;
+    vectors[3] = m->efficiency;
+    for (k = 0; k < 4; k++)
+        for (i = 0; i < n; i++)
+            if (!isfinite(vectors[k][i])) {
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] = %g is not finite", names[k],
+                       i + 1, vectors[k][i]);
+                return 1;
+            }
+    for (i = 0; i < n; i++)
+        if (m->efficiency[i] < 0.0 || m->efficiency[i] > 1.0) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input efficiency[%d] = %g is outside [0, 1]",
+                   i + 1, m->efficiency[i]);
+            return 1;
+        }
+    for (i = 0; i < 3; i++) {
+        const char *name = !isfinite(m->f_d[i]) ? "f_d" : !isfinite(m->tau_d[i]) ? "tau_d"
+                                                       : !isfinite(m->a_d[i])   ? "a_d"
+                                                                                : NULL;
+        if (name != NULL) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] is not finite", name, i + 1);
+            return 1;
+        }
+    }
+    return 0;
+}
+
+#define MAX_SUBSTEPS 10000000.0
+
+static FpStatus plant_step(void *model, double t, double h, const FpLogger *logger) {
+    PlantModel *m = (PlantModel *)model;
+    Commands u;
+    double ratio = h / m->h_internal, substeps = floor(ratio + 0.5), hi;
+    long k, n;
+    (void)t;
+    if (substeps < 1.0 || fabs(ratio - substeps) > 1e-9 * substeps) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "communication step %.12g s is not a whole multiple of the internal RK4 step "
+               "h_internal = %.12g s; use a multiple or change h_internal",
+               h, m->h_internal);
+        return FP_ERROR;
+    }
+    if (substeps > MAX_SUBSTEPS) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "communication step %.12g s would take %.0f internal steps (limit %.0f)", h,
+               substeps, MAX_SUBSTEPS);
+        return FP_ERROR;
+    }
+    if (check_inputs(m, logger) != 0) return FP_ERROR;
+    saturate(m, &u, &m->sat_flags);
+    n = (long)substeps;
+    hi = h / substeps;
+    for (k = 0; k < n; k++) rk4_step(m, &u, m->x, hi);
+    compute_outputs(m, &u);
+    return FP_OK;
+}
+
+static const FpModelInfo plant_info = {
+    "MultirotorPlant",
+    "6-DoF multirotor with up to 8 tilting rotors (paper eq. 1-3), first-order motor and servo "
+    "dynamics, hard limits, disturbances and optional sensor noise; fixed-step RK4",
+    sizeof(PlantModel),
+    plant_vars,
+    sizeof plant_vars / sizeof plant_vars[0],
+    0.002,
+    10.0,
+    plant_set_defaults,
+    plant_initialize,
+    plant_step,
+    NULL,
+};
+
+const FpModelInfo *plant_model_info(void) { return &plant_info; }

@@ -1,0 +1,53 @@
+/* MultirotorPlant: 6-DoF rigid body of paper eq. (1)-(3) with first-order
+ * actuators, integrated by fixed-step RK4. */
+#ifndef PLANT_H
+#define PLANT_H
+
+#include <stdint.h>
+
+#include "fp_model.h"
+#include "multirotor.h"
+
+#define PLANT_NX (13 + 3 * FP_MAX_ROTORS) /* p, v, q, Omega, omega, alpha, beta */
+
+typedef struct {
+    /* parameters */
+    int32_t n_rotors;
+    double mass;
+    double inertia[3][3];
+    double g;
+    double k_t, k_d;
+    double rotor_pos[FP_MAX_ROTORS][3];
+    int32_t rotor_dir[FP_MAX_ROTORS];
+    double rotor_gamma[FP_MAX_ROTORS];
+    double alpha_min[FP_MAX_ROTORS], alpha_max[FP_MAX_ROTORS];
+    double beta_min[FP_MAX_ROTORS], beta_max[FP_MAX_ROTORS];
+    double omega_min, omega_max, tau_motor, tau_servo, h_internal;
+    double pos0[3], vel0[3], euler0[3], rate0[3];
+    int32_t init_trim;
+    double omega0[FP_MAX_ROTORS], alpha0[FP_MAX_ROTORS], beta0[FP_MAX_ROTORS];
+    int32_t noise_seed;
+    double noise_pos, noise_vel, noise_acc, noise_att, noise_rate, noise_ang_acc;
+    /* inputs */
+    double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
+    double efficiency[FP_MAX_ROTORS];
+    double f_d[3], tau_d[3], a_d[3];
+    /* outputs */
+    double pos[3], vel[3], acc[3], euler[3], quat[4], rate[3], ang_acc[3];
+    double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
+    double f_b[3], tau_b[3];
+    int32_t sat_flags;
+    /* internal state, derived at initialization */
+    double x[PLANT_NX];
+    double inertia_inv[3][3];
+    FpRotorSet rotors;
+    uint64_t rng[4];
+} PlantModel;
+
+/* The plant model; its FMU returns it from fp_model_info(). */
+const FpModelInfo *plant_model_info(void);
+
+/* Exposed for the Python core library: the same defaults the FMU starts from. */
+void plant_set_defaults(void *model);
+
+#endif
