@@ -1,0 +1,1 @@
+"""Controller design: filters, gains, allocation weights, feasible-force polytope."""

@@ -1,0 +1,1 @@
+"""MAVLink bridge: fly the co-simulation from ground tools (issue: MAVLink bridge)."""

@@ -1,0 +1,1 @@
+"""Orchestrator: the fmpy master, scenarios, results and the ``fullpose`` CLI."""

@@ -1,0 +1,189 @@
+"""A thin typed handle on one FMI 2.0 co-simulation FMU through fmpy's low-level API.
+
+Value references are resolved once by variable name; vectors of them are kept
+as ctypes arrays so a step costs one FMI call per direction, not a Python loop.
+"""
+
+from __future__ import annotations
+
+import ctypes
+import shutil
+from collections.abc import Callable, Iterable, Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi2 import (
+    FMU2Slave,
+    fmi2CallbackAllocateMemoryTYPE,
+    fmi2CallbackFreeMemoryTYPE,
+    fmi2CallbackFunctions,
+    fmi2CallbackLoggerTYPE,
+    fmi2ValueReference,
+)
+from fmpy.model_description import ModelDescription
+
+LogSink = Callable[[int, str, str], None]
+"""Receives (status, category, message) for every message the FMU logs."""
+
+_STATUS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
+
+
+def status_name(status: int) -> str:
+    return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+
+
+@dataclass
+class Signal:
+    """A group of Real variables read or written together (e.g. ``pos[1..3]``)."""
+
+    names: list[str]
+    refs: ctypes.Array[fmi2ValueReference]
+    values: np.ndarray = field(repr=False)
+
+
+class FmuInstance:
+    """One instance of an FMU, with name-based access and buffers built once.
+
+    ``log`` receives the FMU's messages; by default they are kept in
+    ``self.messages`` as (status name, category, message) tuples.
+    """
+
+    def __init__(
+        self,
+        fmu_path: str | Path,
+        instance_name: str | None = None,
+        log: LogSink | None = None,
+        logging_on: bool = False,
+        unzip_dir: str | Path | None = None,
+    ) -> None:
+        self.path = Path(fmu_path)
+        self.md: ModelDescription = read_model_description(str(self.path))
+        self._owns_unzip = unzip_dir is None
+        self.unzip_dir = str(unzip_dir) if unzip_dir is not None else extract(str(self.path))
+        self.messages: list[tuple[str, str, str]] = []
+        self._sink = log
+        self.variables = {v.name: v for v in self.md.modelVariables}
+        self._callbacks = fmi2CallbackFunctions()
+        self._callbacks.logger = fmi2CallbackLoggerTYPE(self._on_log)
+        self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
+        self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
+        _add_logger_proxy(self._callbacks)
+        self.slave = FMU2Slave(
+            guid=self.md.guid,
+            unzipDirectory=self.unzip_dir,
+            modelIdentifier=self.md.coSimulation.modelIdentifier,
+            instanceName=instance_name or self.md.modelName,
+        )
+        self.slave.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
+        self.time = 0.0
+
+    # -- logging ---------------------------------------------------------------
+
+    def _on_log(self, env: object, name: bytes, status: int, category: bytes,
+                message: bytes) -> None:
+        cat = category.decode(errors="replace") if category else ""
+        msg = message.decode(errors="replace") if message else ""
+        if self._sink is not None:
+            self._sink(status, cat, msg)
+        else:
+            self.messages.append((status_name(status), cat, msg))
+
+    # -- variables -------------------------------------------------------------
+
+    def vr(self, name: str) -> int:
+        try:
+            return int(self.variables[name].valueReference)
+        except KeyError:
+            raise KeyError(f"{self.md.modelName} has no variable {name!r}") from None
+
+    def expand(self, name: str) -> list[str]:
+        """``pos`` -> [``pos[1]``, ``pos[2]``, ``pos[3]``]; scalar names pass through."""
+        if name in self.variables:
+            return [name]
+        prefix = name + "["
+        names = [n for n in self.variables if n.startswith(prefix)]
+        if not names:
+            raise KeyError(f"{self.md.modelName} has no variable {name!r}")
+        return names
+
+    def signal(self, names: str | Iterable[str]) -> Signal:
+        expanded: list[str] = []
+        for n in [names] if isinstance(names, str) else names:
+            expanded += self.expand(n)
+        refs = (fmi2ValueReference * len(expanded))(*[self.vr(n) for n in expanded])
+        return Signal(expanded, refs, np.zeros(len(expanded)))
+
+    def read(self, sig: Signal) -> np.ndarray:
+        sig.values[:] = self.slave.getReal(sig.refs)
+        return sig.values
+
+    def write(self, sig: Signal, values: Iterable[float] | np.ndarray) -> None:
+        self.slave.setReal(sig.refs, list(np.asarray(values, dtype=float).reshape(-1)))
+
+    def get(self, name: str) -> float | int | bool:
+        v = self.variables[name]
+        ref = [int(v.valueReference)]
+        if v.type == "Real":
+            return float(self.slave.getReal(ref)[0])
+        if v.type == "Integer":
+            return int(self.slave.getInteger(ref)[0])
+        return bool(self.slave.getBoolean(ref)[0])
+
+    def set(self, name: str, value: float | int | bool) -> None:
+        try:
+            v = self.variables[name]
+        except KeyError:
+            raise KeyError(f"{self.md.modelName} has no variable {name!r}") from None
+        ref = [int(v.valueReference)]
+        if v.type == "Real":
+            self.slave.setReal(ref, [float(value)])
+        elif v.type == "Integer":
+            self.slave.setInteger(ref, [int(value)])
+        else:
+            self.slave.setBoolean(ref, [bool(value)])
+
+    def set_many(self, values: Mapping[str, float | int | bool]) -> None:
+        for name, value in values.items():
+            self.set(name, value)
+
+    # -- lifecycle -------------------------------------------------------------
+
+    def initialize(self, start_time: float = 0.0,
+                   parameters: Mapping[str, float | int | bool] | None = None) -> None:
+        self.slave.setupExperiment(startTime=start_time)
+        if parameters:
+            self.set_many(parameters)
+        self.slave.enterInitializationMode()
+        self.slave.exitInitializationMode()
+        self.time = start_time
+
+    def step(self, h: float) -> None:
+        self.slave.doStep(currentCommunicationPoint=self.time, communicationStepSize=h)
+        self.time += h
+
+    def close(self) -> None:
+        try:
+            self.slave.terminate()
+        except Exception:  # noqa: BLE001 - terminate is illegal in some states; freeing is what matters
+            pass
+        self.slave.freeInstance()
+        if self._owns_unzip:
+            shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+    def __enter__(self) -> FmuInstance:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _add_logger_proxy(callbacks: fmi2CallbackFunctions) -> None:
+    """FMI log messages are printf formats; fmpy's proxy formats them in C."""
+    try:
+        from fmpy.logging import addLoggerProxy
+
+        addLoggerProxy(ctypes.byref(callbacks))
+    except Exception:  # noqa: BLE001 - without the proxy messages arrive unformatted
+        pass

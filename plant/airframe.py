@@ -1,0 +1,390 @@
+"""Airframe description files (TOML): loading, validation, FMU parameters.
+
+An airframe file describes the body, the propulsion and the rotor geometry in
+user units (degrees, rpm where the key says so).  Errors name the file, the
+field and what is expected.  See docs/airframes.md for the format.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+from dataclasses import dataclass
+from importlib import resources
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from plant.effectiveness import RotorSet
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+MAX_ROTORS = 8
+RPM = 2.0 * math.pi / 60.0
+
+
+class AirframeError(ValueError):
+    """An airframe file is missing, unreadable or inconsistent."""
+
+    def __init__(self, source: str, field: str, reason: str) -> None:
+        self.source = source
+        self.field = field
+        self.reason = reason
+        where = f"field '{field}': " if field else ""
+        super().__init__(f"{source}: {where}{reason}")
+
+
+@dataclass(frozen=True)
+class Airframe:
+    """A validated airframe, in SI units and radians."""
+
+    name: str
+    description: str
+    source: str
+    mass: float
+    inertia: np.ndarray  # (3, 3)
+    gravity: float
+    k_t: float
+    k_d: float
+    omega_min: float
+    omega_max: float
+    tau_motor: float
+    tau_servo: float
+    tilting: bool
+    positions: np.ndarray  # (n, 3)
+    spins: np.ndarray  # (n,) int
+    gamma: np.ndarray  # (n,)
+    alpha_limits: np.ndarray  # (n, 2); equal columns = fixed tilt
+    beta_limits: np.ndarray  # (n, 2)
+
+    @property
+    def n_rotors(self) -> int:
+        return int(self.positions.shape[0])
+
+    def rotor_set(self) -> RotorSet:
+        return RotorSet(
+            k_t=self.k_t,
+            k_d=self.k_d,
+            positions=self.positions,
+            spins=self.spins.astype(np.int32),
+            gamma=self.gamma,
+            alpha_limits=self.alpha_limits,
+            beta_limits=self.beta_limits,
+            omega_limits=(self.omega_min, self.omega_max),
+        )
+
+    def fmu_parameters(self) -> dict[str, float | int | bool]:
+        """Start values for the MultirotorPlant FMU, keyed by variable name."""
+        p: dict[str, float | int | bool] = {
+            "n_rotors": self.n_rotors,
+            "mass": self.mass,
+            "g": self.gravity,
+            "k_t": self.k_t,
+            "k_d": self.k_d,
+            "omega_min": self.omega_min,
+            "omega_max": self.omega_max,
+            "tau_motor": self.tau_motor,
+            "tau_servo": self.tau_servo,
+        }
+        for i in range(3):
+            for j in range(3):
+                p[f"inertia[{i + 1},{j + 1}]"] = float(self.inertia[i, j])
+        for k in range(MAX_ROTORS):
+            used = k < self.n_rotors
+            r = k + 1
+            for j in range(3):
+                p[f"rotor_pos[{r},{j + 1}]"] = float(self.positions[k, j]) if used else 0.0
+            p[f"rotor_dir[{r}]"] = int(self.spins[k]) if used else 1
+            p[f"rotor_gamma[{r}]"] = float(self.gamma[k]) if used else 0.0
+            p[f"alpha_min[{r}]"] = float(self.alpha_limits[k, 0]) if used else 0.0
+            p[f"alpha_max[{r}]"] = float(self.alpha_limits[k, 1]) if used else 0.0
+            p[f"beta_min[{r}]"] = float(self.beta_limits[k, 0]) if used else 0.0
+            p[f"beta_max[{r}]"] = float(self.beta_limits[k, 1]) if used else 0.0
+        return p
+
+    def hover_trim(self, euler: object = (0.0, 0.0, 0.0)) -> tuple[np.ndarray, ...]:
+        """(alpha, beta, omega) holding hover at the given attitude (C core)."""
+        e = np.asarray(euler, dtype=float)
+        rs = self.rotor_set()
+        # f_b = -R^T m g e_z with R = Rz(psi) Ry(theta) Rx(phi); its third row is needed only
+        c_phi, s_phi = math.cos(e[0]), math.sin(e[0])
+        c_th, s_th = math.cos(e[1]), math.sin(e[1])
+        row3 = np.array([-s_th, s_phi * c_th, c_phi * c_th])
+        wrench = np.concatenate([-self.mass * self.gravity * row3, np.zeros(3)])
+        return rs.preferred_config(wrench)
+
+
+# ---------------------------------------------------------------------------
+# Loading
+
+
+def list_airframes() -> list[str]:
+    """Names of the airframe files shipped with the package."""
+    root = resources.files("plant").joinpath("airframes")
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_airframe(name_or_path: str | Path) -> Path:
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        return path
+    shipped = resources.files("plant").joinpath("airframes", f"{name_or_path}.toml")
+    if shipped.is_file():
+        return Path(str(shipped))
+    raise AirframeError(
+        str(name_or_path), "", f"no such file or shipped airframe (shipped: "
+        f"{', '.join(list_airframes())})")
+
+
+def load_airframe(name_or_path: str | Path) -> Airframe:
+    """Load and validate an airframe file, or a shipped airframe by name."""
+    path = resolve_airframe(name_or_path)
+    source = str(path)
+    try:
+        data = tomllib.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise AirframeError(source, "", "file not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise AirframeError(source, "", f"not valid TOML: {e}") from None
+    return parse_airframe(data, source)
+
+
+class _Reader:
+    """Typed access to a TOML table with errors that name the field."""
+
+    def __init__(self, source: str, data: dict[str, Any], prefix: str = "") -> None:
+        self.source = source
+        self.data = data
+        self.prefix = prefix
+        self.used: set[str] = set()
+
+    def field(self, key: str) -> str:
+        return f"{self.prefix}{key}"
+
+    def fail(self, key: str, reason: str) -> AirframeError:
+        return AirframeError(self.source, self.field(key), reason)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def table(self, key: str, required: bool = True) -> _Reader | None:
+        self.used.add(key)
+        if key not in self.data:
+            if required:
+                raise self.fail(key, "missing table")
+            return None
+        value = self.data[key]
+        if not isinstance(value, dict):
+            raise self.fail(key, "expected a table")
+        return _Reader(self.source, value, f"{self.field(key)}.")
+
+    def number(self, key: str, default: float | None = None, *, positive: bool = False,
+               nonnegative: bool = False) -> float:
+        self.used.add(key)
+        if key not in self.data:
+            if default is None:
+                raise self.fail(key, "missing (expected a number)")
+            return default
+        value = self.data[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(key, f"expected a number, got {value!r}")
+        x = float(value)
+        if not math.isfinite(x):
+            raise self.fail(key, f"expected a finite number, got {value!r}")
+        if positive and not x > 0:
+            raise self.fail(key, f"must be positive, got {value!r}")
+        if nonnegative and x < 0:
+            raise self.fail(key, f"must not be negative, got {value!r}")
+        return x
+
+    def string(self, key: str, default: str | None = None) -> str:
+        self.used.add(key)
+        if key not in self.data:
+            if default is None:
+                raise self.fail(key, "missing (expected a string)")
+            return default
+        value = self.data[key]
+        if not isinstance(value, str):
+            raise self.fail(key, f"expected a string, got {value!r}")
+        return value
+
+    def numbers(self, key: str, length: int | None = None,
+                default: list[float] | None = None) -> list[float]:
+        self.used.add(key)
+        if key not in self.data:
+            if default is None:
+                raise self.fail(key, "missing (expected an array of numbers)")
+            return default
+        value = self.data[key]
+        if not isinstance(value, list) or not all(
+            isinstance(v, (int, float)) and not isinstance(v, bool) for v in value
+        ):
+            raise self.fail(key, f"expected an array of numbers, got {value!r}")
+        if length is not None and len(value) != length:
+            raise self.fail(key, f"expected {length} numbers, got {len(value)}")
+        if not all(math.isfinite(float(v)) for v in value):
+            raise self.fail(key, "expected finite numbers")
+        return [float(v) for v in value]
+
+    def limits_deg(self, key: str) -> tuple[float, float]:
+        lo, hi = self.numbers(key, 2)
+        if lo > hi:
+            raise self.fail(key, f"lower limit {lo} exceeds upper limit {hi}")
+        if lo < -90 or hi > 90:
+            raise self.fail(key, "limits must be within [-90, 90] degrees")
+        return math.radians(lo), math.radians(hi)
+
+    def reject_unknown(self) -> None:
+        for key in self.data:
+            if key not in self.used:
+                raise self.fail(key, "unknown field")
+
+
+def _inertia(body: _Reader) -> np.ndarray:
+    raw = body.data.get("inertia")
+    body.used.add("inertia")
+    if raw is None:
+        raise body.fail("inertia", "missing (expected [Ixx, Iyy, Izz] or a 3x3 matrix)")
+    if isinstance(raw, list) and len(raw) == 3 and all(isinstance(r, list) for r in raw):
+        numeric = all(
+            len(r) == 3 and all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in r)
+            for r in raw
+        )
+        matrix = np.array(raw, dtype=float) if numeric else np.full((3, 3), np.nan)
+        if not np.all(np.isfinite(matrix)):
+            raise body.fail("inertia", "expected a 3x3 matrix of finite numbers")
+    else:
+        matrix = np.diag(body.numbers("inertia", 3))
+    if not np.allclose(matrix, matrix.T, rtol=0, atol=1e-12 * np.abs(matrix).max()):
+        raise body.fail("inertia", "matrix must be symmetric")
+    eig = np.linalg.eigvalsh(matrix)
+    if not np.all(eig > 0):
+        raise body.fail("inertia", f"must be positive definite (eigenvalues {eig.tolist()})")
+    return matrix
+
+
+def _per_rotor(reader: _Reader, key: str, n: int, default: float) -> list[float]:
+    values = reader.numbers(key, None, [default] * n)
+    if len(values) != n:
+        raise reader.fail(key, f"expected {n} values (one per rotor), got {len(values)}")
+    return values
+
+
+def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe:
+    top = _Reader(source, data)
+    name = top.string("name")
+    description = top.string("description", "")
+
+    body = top.table("body")
+    assert body is not None
+    mass = body.number("mass", positive=True)
+    inertia = _inertia(body)
+    gravity = body.number("gravity", 9.81, nonnegative=True)
+    body.reject_unknown()
+
+    prop = top.table("propulsion")
+    assert prop is not None
+    k_t = prop.number("k_t", positive=True)
+    k_d = prop.number("k_d", nonnegative=True)
+    omega_min = prop.number("omega_min_rpm", 0.0, nonnegative=True) * RPM
+    omega_max = prop.number("omega_max_rpm", positive=True) * RPM
+    if omega_min > omega_max:
+        raise prop.fail("omega_min_rpm", "exceeds omega_max_rpm")
+    tau_motor = prop.number("time_constant", positive=True)
+    prop.reject_unknown()
+
+    servo = top.table("servo", required=False)
+    tilting = servo is not None
+    if servo is not None:
+        tau_servo = servo.number("time_constant", positive=True)
+        alpha_lim = servo.limits_deg("alpha_limits_deg")
+        beta_lim = servo.limits_deg("beta_limits_deg")
+        servo.reject_unknown()
+    else:
+        tau_servo = tau_motor
+
+    ring = top.table("ring", required=False)
+    rotors_raw = data.get("rotor")
+    top.used.add("rotor")
+    if (ring is None) == (rotors_raw is None):
+        raise AirframeError(source, "ring", "give exactly one of [ring] or [[rotor]] entries")
+
+    positions: list[list[float]] = []
+    spins: list[int] = []
+    gammas: list[float] = []
+    fixed_alpha: list[float] = []
+    fixed_beta: list[float] = []
+    if ring is not None:
+        n = int(ring.number("count", positive=True))
+        if ring.data.get("count") != n or not 1 <= n <= MAX_ROTORS:
+            raise ring.fail("count", f"expected an integer in 1..{MAX_ROTORS}")
+        radius = ring.number("radius", positive=True)
+        first = math.radians(ring.number("first_azimuth_deg", 0.0))
+        height = ring.number("height", 0.0)
+        spin_values = ring.numbers("spin", n)
+        fixed_alpha = [math.radians(a) for a in _per_rotor(ring, "alpha_deg", n, 0.0)]
+        fixed_beta = [math.radians(b) for b in _per_rotor(ring, "beta_deg", n, 0.0)]
+        for k in range(n):
+            az = first + 2.0 * math.pi * k / n
+            positions.append([radius * math.cos(az), radius * math.sin(az), height])
+            gammas.append(az)
+        spins = [int(s) for s in spin_values]
+        if any(s not in (-1, 1) or s != v for s, v in zip(spins, spin_values, strict=True)):
+            raise ring.fail("spin", "each spin must be +1 or -1")
+        ring.reject_unknown()
+    else:
+        if not isinstance(rotors_raw, list) or not all(isinstance(r, dict) for r in rotors_raw):
+            raise AirframeError(source, "rotor", "expected an array of tables [[rotor]]")
+        if not 1 <= len(rotors_raw) <= MAX_ROTORS:
+            raise AirframeError(source, "rotor", f"expected 1..{MAX_ROTORS} rotors")
+        for k, raw in enumerate(rotors_raw):
+            r = _Reader(source, raw, f"rotor[{k + 1}].")
+            positions.append(r.numbers("position", 3))
+            spin = r.number("spin")
+            if spin not in (-1.0, 1.0):
+                raise r.fail("spin", "must be +1 or -1")
+            spins.append(int(spin))
+            gammas.append(math.radians(r.number("gamma_deg", 0.0)))
+            fixed_alpha.append(math.radians(r.number("alpha_deg", 0.0)))
+            fixed_beta.append(math.radians(r.number("beta_deg", 0.0)))
+            r.reject_unknown()
+    top.reject_unknown()
+
+    n = len(positions)
+    if tilting:
+        if any(a != 0 for a in fixed_alpha + fixed_beta):
+            raise AirframeError(source, "servo", "fixed tilt angles (alpha_deg/beta_deg) need "
+                                "a frame without [servo]; with servos the tilt is commanded")
+        alpha_limits = np.tile(alpha_lim, (n, 1))
+        beta_limits = np.tile(beta_lim, (n, 1))
+    else:
+        alpha_limits = np.column_stack([fixed_alpha, fixed_alpha])
+        beta_limits = np.column_stack([fixed_beta, fixed_beta])
+    for k in range(n):
+        if abs(alpha_limits[k, 0]) > math.pi / 2 or abs(beta_limits[k, 0]) > math.pi / 2:
+            raise AirframeError(source, "alpha_deg", "fixed tilts must be within [-90, 90] deg")
+
+    return Airframe(
+        name=name,
+        description=description,
+        source=source,
+        mass=mass,
+        inertia=inertia,
+        gravity=gravity,
+        k_t=k_t,
+        k_d=k_d,
+        omega_min=omega_min,
+        omega_max=omega_max,
+        tau_motor=tau_motor,
+        tau_servo=tau_servo,
+        tilting=tilting,
+        positions=np.array(positions, dtype=float),
+        spins=np.array(spins, dtype=int),
+        gamma=np.array(gammas, dtype=float),
+        alpha_limits=np.asarray(alpha_limits, dtype=float),
+        beta_limits=np.asarray(beta_limits, dtype=float),
+    )

@@ -1,0 +1,128 @@
+"""Effectiveness matrices and rotor kinematics, computed by the C core.
+
+Thin numpy wrappers over ``libfullpose_core`` (the same code the FMUs run):
+nothing here re-implements the model.  Conventions are those of
+``fmu_src/common/multirotor.h``: R_Mi^B = Rz(gamma) Rx(alpha) Ry(beta), thrust
+along the rotor's -z axis, reaction torque c_i k_d omega^2 along the thrust.
+"""
+
+from __future__ import annotations
+
+import ctypes
+from dataclasses import dataclass
+
+import numpy as np
+from numpy.typing import NDArray
+
+from plant._native import core
+
+Array = NDArray[np.float64]
+
+
+def _dp(a: NDArray[np.float64]) -> ctypes._Pointer[ctypes.c_double]:
+    return a.ctypes.data_as(ctypes.POINTER(ctypes.c_double))
+
+
+def _vec(values: object, n: int, name: str) -> Array:
+    a = np.ascontiguousarray(np.asarray(values, dtype=np.float64).reshape(-1))
+    if a.size != n:
+        raise ValueError(f"{name} must have {n} elements, got {a.size}")
+    return a
+
+
+@dataclass(frozen=True)
+class RotorSet:
+    """Geometry and limits of n rotors (SI units, radians)."""
+
+    k_t: float
+    k_d: float
+    positions: Array  # (n, 3) body FRD
+    spins: NDArray[np.int32]  # (n,) +-1
+    gamma: Array  # (n,)
+    alpha_limits: Array  # (n, 2)
+    beta_limits: Array  # (n, 2)
+    omega_limits: tuple[float, float]
+
+    @property
+    def n(self) -> int:
+        return int(self.positions.shape[0])
+
+    def _buffer(self) -> ctypes.Array[ctypes.c_char]:
+        lib = core()
+        buf = ctypes.create_string_buffer(lib.fp_rotor_set_size())
+        pos = np.ascontiguousarray(self.positions, dtype=np.float64)
+        spins = np.ascontiguousarray(self.spins, dtype=np.int32)
+        gamma = np.ascontiguousarray(self.gamma, dtype=np.float64)
+        lims = [np.ascontiguousarray(x, dtype=np.float64) for x in (
+            self.alpha_limits[:, 0], self.alpha_limits[:, 1],
+            self.beta_limits[:, 0], self.beta_limits[:, 1])]
+        status = lib.fp_rotor_set_init(
+            buf, self.n, self.k_t, self.k_d, _dp(pos),
+            spins.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)), _dp(gamma),
+            *(_dp(x) for x in lims), self.omega_limits[0], self.omega_limits[1])
+        if status != 0:
+            raise ValueError(f"invalid rotor set (n = {self.n}, k_t = {self.k_t})")
+        return buf
+
+    def B(self) -> Array:
+        """Paper eq. (3): 6 x 3n map from per-rotor body forces to [f_b; tau_b]."""
+        out = np.zeros((6, 3 * self.n))
+        if core().fp_effectiveness_b_api(self._buffer(), _dp(out)) != 0:
+            raise ValueError("effectiveness B failed")
+        return out
+
+    def B1(self) -> Array:
+        return self.B()[:3]
+
+    def B2(self) -> Array:
+        return self.B()[3:]
+
+    def B_prime(self, alpha: object, beta: object) -> Array:
+        """Paper eq. (9)-(10): B'(lambda), 6 x 3n, with F_i = [0, 0, -k_t omega_i^2]."""
+        a = _vec(alpha, self.n, "alpha")
+        b = _vec(beta, self.n, "beta")
+        out = np.zeros((6, 3 * self.n))
+        if core().fp_effectiveness_bprime_api(self._buffer(), _dp(a), _dp(b), _dp(out)) != 0:
+            raise ValueError("effectiveness B' failed")
+        return out
+
+    def wrench(
+        self, alpha: object, beta: object, omega: object, efficiency: object = None
+    ) -> tuple[Array, Array]:
+        """Body force and torque of the rotors at the given actuator state."""
+        a, b, w = (_vec(x, self.n, nm) for x, nm in ((alpha, "alpha"), (beta, "beta"),
+                                                     (omega, "omega")))
+        eff = None if efficiency is None else _vec(efficiency, self.n, "efficiency")
+        f = np.zeros(3)
+        t = np.zeros(3)
+        core().fp_rotor_wrench_api(self._buffer(), _dp(a), _dp(b), _dp(w),
+                                   None if eff is None else _dp(eff), _dp(f), _dp(t))
+        return f, t
+
+    def preferred_config(self, wrench: object) -> tuple[Array, Array, Array]:
+        """Minimum-norm per-rotor split of a body wrench as (alpha, beta, omega).
+
+        Raises ValueError naming the rotor and limit when the split is not feasible.
+        """
+        w = _vec(wrench, 6, "wrench")
+        a, b, o = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
+        why = ctypes.create_string_buffer(256)
+        status = core().fp_preferred_config_api(self._buffer(), _dp(w), _dp(a), _dp(b), _dp(o),
+                                                why, len(why))
+        if status != 0:
+            raise ValueError(why.value.decode())
+        return a, b, o
+
+
+def rotor_rotation(alpha: float, beta: float, gamma: float) -> Array:
+    """R_Mi^B(alpha, beta, gamma) = Rz(gamma) Rx(alpha) Ry(beta)."""
+    out = np.zeros(9)
+    core().fp_rotor_rotation_api(alpha, beta, gamma, _dp(out))
+    return out.reshape(3, 3)
+
+
+def thrust_direction(alpha: float, beta: float, gamma: float) -> Array:
+    """Unit thrust direction of a rotor in the body frame (-R_Mi^B e_z)."""
+    out = np.zeros(3)
+    core().fp_thrust_direction_api(alpha, beta, gamma, _dp(out))
+    return out
