@@ -166,8 +166,8 @@ class FmuInstance:
     def close(self) -> None:
         try:
             self.slave.terminate()
-        except Exception:  # noqa: BLE001 - terminate is illegal in some states; freeing is what matters
-            pass
+        except Exception:
+            pass  # terminate is illegal after an error; freeing the instance is what matters
         self.slave.freeInstance()
         if self._owns_unzip:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
@@ -185,5 +185,5 @@ def _add_logger_proxy(callbacks: fmi2CallbackFunctions) -> None:
         from fmpy.logging import addLoggerProxy
 
         addLoggerProxy(ctypes.byref(callbacks))
-    except Exception:  # noqa: BLE001 - without the proxy messages arrive unformatted
-        pass
+    except Exception:
+        pass  # without the proxy, messages arrive as unformatted printf formats

@@ -46,7 +46,7 @@ def run_hover(airframe: str = "paper_hexacopter", duration: float = 10.0,
     params.update({f"pos0[{i + 1}]": v for i, v in enumerate(pos0)})
     params["init_trim"] = True
     n = af.n_rotors
-    steps = int(round(duration / STEP))
+    steps = round(duration / STEP)
     with FmuInstance(fmu_path("MultirotorPlant"), "plant") as fmu:
         fmu.initialize(parameters=params)
         meas = fmu.signal(["omega", "alpha", "beta"])
@@ -63,7 +63,7 @@ def run_hover(airframe: str = "paper_hexacopter", duration: float = 10.0,
             table[k, 0] = k * STEP
             table[k, 1:] = fmu.read(outputs)
         wall = time.perf_counter() - t0
-    names = ["time"] + outputs.names
+    names = ["time", *outputs.names]
     drift = np.linalg.norm(table[:, 1:4] - np.asarray(pos0), axis=1)
     summary = HoverSummary(
         airframe=af.name,

@@ -12,7 +12,7 @@ import ctypes
 import os
 import sys
 from functools import cache
-from importlib import resources
+from importlib import metadata, resources
 from pathlib import Path
 
 _LIB_NAMES = {"win32": "fullpose_core.dll", "darwin": "libfullpose_core.dylib"}
@@ -35,6 +35,12 @@ def _candidates(package: str, subdir: str, filename: str) -> list[Path]:
     # editable installs put built files beside the installed package, not the sources
     for entry in getattr(sys.modules.get(package), "__path__", []):
         found.append(Path(entry) / subdir / filename)
+    # the source tree imported ahead of the installed package (python -m pytest in a checkout)
+    try:
+        found.append(Path(str(metadata.distribution("fullpose").locate_file(
+            f"{package}/{subdir}/{filename}"))))
+    except metadata.PackageNotFoundError:
+        pass
     return found
 
 

@@ -1,0 +1,26 @@
+"""The Python sources are ruff-clean (configuration in pyproject.toml)."""
+
+import shutil
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_ruff_clean():
+    ruff = shutil.which("ruff")
+    if ruff is None:
+        pytest.fail("ruff is a test dependency: pip install '.[test]'")
+    targets = ["plant", "controller", "orchestrator", "mavlink_bridge", "tests"]
+    res = subprocess.run([ruff, "check", *targets], cwd=ROOT, capture_output=True, text=True,
+                         check=False)
+    assert res.returncode == 0, res.stdout + res.stderr
+
+
+def test_python_version_floor_is_declared():
+    text = (ROOT / "pyproject.toml").read_text()
+    assert 'requires-python = ">=3.10"' in text
+    assert sys.version_info >= (3, 10)
