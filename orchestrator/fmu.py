@@ -69,7 +69,6 @@ class FmuInstance:
         self._callbacks.logger = fmi2CallbackLoggerTYPE(self._on_log)
         self._callbacks.allocateMemory = fmi2CallbackAllocateMemoryTYPE(calloc)
         self._callbacks.freeMemory = fmi2CallbackFreeMemoryTYPE(free)
-        _add_logger_proxy(self._callbacks)
         self.slave = FMU2Slave(
             guid=self.md.guid,
             unzipDirectory=self.unzip_dir,
@@ -84,7 +83,10 @@ class FmuInstance:
     def _on_log(self, env: object, name: bytes, status: int, category: bytes,
                 message: bytes) -> None:
         cat = category.decode(errors="replace") if category else ""
-        msg = message.decode(errors="replace") if message else ""
+        # FMI messages are printf formats.  fmpy's formatting proxy keeps one
+        # process-wide logger, so it cannot serve several masters; our FMUs pass
+        # no varargs and only escape '%', which is undone here.
+        msg = message.decode(errors="replace").replace("%%", "%") if message else ""
         if self._sink is not None:
             self._sink(status, cat, msg)
         else:
@@ -177,13 +179,3 @@ class FmuInstance:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
-
-
-def _add_logger_proxy(callbacks: fmi2CallbackFunctions) -> None:
-    """FMI log messages are printf formats; fmpy's proxy formats them in C."""
-    try:
-        from fmpy.logging import addLoggerProxy
-
-        addLoggerProxy(ctypes.byref(callbacks))
-    except Exception:
-        pass  # without the proxy, messages arrive as unformatted printf formats
