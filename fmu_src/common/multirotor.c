@@ -115,7 +115,7 @@ int fp_rotor_tilts(const FpRotorSet *rs, int i) {
     return rs->alpha_max[i] > rs->alpha_min[i] || rs->beta_max[i] > rs->beta_min[i];
 }
 
-FpStatus fp_cholesky_solve(double *a, int n, double *b) {
+FpStatus fp_cholesky_factor(double *a, int n) {
     int i, j, k;
     if (n < 1 || n > 32) return FP_ERROR;
     for (j = 0; j < n; j++) {
@@ -130,16 +130,26 @@ FpStatus fp_cholesky_solve(double *a, int n, double *b) {
             a[i * n + j] = s / d;
         }
     }
+    return FP_OK;
+}
+
+void fp_cholesky_backsolve(const double *l, int n, double *b) {
+    int i, k;
     for (i = 0; i < n; i++) {
         double s = b[i];
-        for (k = 0; k < i; k++) s -= a[i * n + k] * b[k];
-        b[i] = s / a[i * n + i];
+        for (k = 0; k < i; k++) s -= l[i * n + k] * b[k];
+        b[i] = s / l[i * n + i];
     }
     for (i = n - 1; i >= 0; i--) {
         double s = b[i];
-        for (k = i + 1; k < n; k++) s -= a[k * n + i] * b[k];
-        b[i] = s / a[i * n + i];
+        for (k = i + 1; k < n; k++) s -= l[k * n + i] * b[k];
+        b[i] = s / l[i * n + i];
     }
+}
+
+FpStatus fp_cholesky_solve(double *a, int n, double *b) {
+    if (fp_cholesky_factor(a, n) != FP_OK) return FP_ERROR;
+    fp_cholesky_backsolve(a, n, b);
     return FP_OK;
 }
 
@@ -150,7 +160,7 @@ FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], doubl
     double cols[6][3 * FP_MAX_ROTORS];
     double gram[36], y[6], x[3 * FP_MAX_ROTORS], back[6];
     int first[FP_MAX_ROTORS];
-    int i, j, k, m = 0;
+    int i, j, k, m = 0, pass;
     double trace = 0.0, scale = 0.0, err = 0.0;
     FpStatus status = FP_OK;
     if (why != NULL && why_size > 0) why[0] = '\0';
@@ -189,20 +199,26 @@ FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], doubl
         }
     for (i = 0; i < 6; i++) trace += gram[i * 6 + i];
     for (i = 0; i < 6; i++) gram[i * 6 + i] += 1e-12 * trace;
-    for (i = 0; i < 6; i++) y[i] = wrench[i];
-    if (fp_cholesky_solve(gram, 6, y) != FP_OK) {
+    if (fp_cholesky_factor(gram, 6) != FP_OK) {
         if (why) snprintf(why, (size_t)why_size, "rotor geometry gives a singular allocation");
         return FP_ERROR;
     }
-    for (k = 0; k < m; k++) {
-        x[k] = 0.0;
-        for (i = 0; i < 6; i++) x[k] += cols[i][k] * y[i];
-    }
-    for (i = 0; i < 6; i++) {
-        back[i] = 0.0;
-        for (k = 0; k < m; k++) back[i] += cols[i][k] * x[k];
-        err += (back[i] - wrench[i]) * (back[i] - wrench[i]);
-        scale += wrench[i] * wrench[i];
+    for (k = 0; k < m; k++) x[k] = 0.0;
+    for (i = 0; i < 6; i++) y[i] = wrench[i];
+    /* two passes: the second (iterative refinement) removes the regularization's
+     * and the normal equations' rounding error from the reproduced wrench */
+    for (pass = 0; pass < 2; pass++) {
+        fp_cholesky_backsolve(gram, 6, y);
+        for (k = 0; k < m; k++)
+            for (i = 0; i < 6; i++) x[k] += cols[i][k] * y[i];
+        err = scale = 0.0;
+        for (i = 0; i < 6; i++) {
+            back[i] = 0.0;
+            for (k = 0; k < m; k++) back[i] += cols[i][k] * x[k];
+            y[i] = wrench[i] - back[i];
+            err += y[i] * y[i];
+            scale += wrench[i] * wrench[i];
+        }
     }
     for (i = 0; i < rs->n; i++) {
         double thrust;

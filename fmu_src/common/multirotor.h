@@ -74,6 +74,12 @@ int fp_rotor_tilts(const FpRotorSet *rs, int i);
 FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], double alpha[],
                              double beta[], double omega[], char *why, int why_size);
 
+/* Cholesky of an SPD n x n matrix in place (lower factor; n <= 32). */
+FpStatus fp_cholesky_factor(double *a, int n);
+
+/* Solve L L^T x = b in place with a factor from fp_cholesky_factor. */
+void fp_cholesky_backsolve(const double *l, int n, double *b);
+
 /* Cholesky solve of the SPD n x n system a x = b in place (n <= 32). */
 FpStatus fp_cholesky_solve(double *a, int n, double *b);
 

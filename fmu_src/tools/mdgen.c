@@ -193,12 +193,14 @@ int main(int argc, char **argv) {
                 free(model);
                 return 1;
             }
+    /* Outputs are computed at the end of a step from the held inputs: no direct
+     * feedthrough, so no output depends on an input (no algebraic loop for masters). */
     fputs("  </ModelVariables>\n  <ModelStructure>\n    <Outputs>\n", f);
     for (i = 0; i < info->n_vars; i++)
         for (k = 0; k < fp_var_count(&info->vars[i]); k++) {
             index++;
             if (info->vars[i].kind == FP_OUTPUT)
-                fprintf(f, "      <Unknown index=\"%u\"/>\n", (unsigned)index);
+                fprintf(f, "      <Unknown index=\"%u\" dependencies=\"\"/>\n", (unsigned)index);
         }
     fputs("    </Outputs>\n    <InitialUnknowns>\n", f);
     index = 0;

@@ -1,0 +1,98 @@
+"""Shared fixtures for the FMU tests: where the FMU is, instances that clean up, recording."""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy import extract
+
+import plant
+from orchestrator.fmu import FmuInstance
+
+H = 0.002
+"""Communication step of the co-simulation (500 Hz), s."""
+
+
+@pytest.fixture(scope="session")
+def plant_fmu() -> Path:
+    """Path of the built MultirotorPlant FMU (plant._native also finds the installed one
+    when the source tree is imported first, as with `python -m pytest`)."""
+    return Path(plant.fmu_path(plant.PLANT_FMU))
+
+
+@pytest.fixture(scope="session")
+def plant_unzip_dir(plant_fmu: Path) -> Iterator[str]:
+    """The FMU extracted once: every instance of a session loads the same shared library,
+    so instances share one copy of any global state the binary might (wrongly) keep."""
+    root = tempfile.mkdtemp(prefix="plant_fmu_")
+    extract(str(plant_fmu), root)
+    yield root
+    shutil.rmtree(root, ignore_errors=True)
+
+
+MakePlant = Callable[..., FmuInstance]
+
+
+@pytest.fixture
+def make_plant(plant_fmu: Path, plant_unzip_dir: str) -> Iterator[MakePlant]:
+    """Factory: ``make_plant(parameters=None, *, initialize=True, name=None, logging_on=False)``.
+
+    Returns an FmuInstance of the plant, initialized at t = 0 with the given start-value
+    overrides (variable name -> value) unless ``initialize`` is False.  Every instance made
+    is closed after the test, even when initialization failed.
+    """
+    made: list[FmuInstance] = []
+
+    def make(parameters: Mapping[str, float | int | bool] | None = None, *,
+             initialize: bool = True, name: str | None = None,
+             logging_on: bool = False) -> FmuInstance:
+        inst = FmuInstance(plant_fmu, name or f"plant{len(made) + 1}",
+                           logging_on=logging_on, unzip_dir=plant_unzip_dir)
+        made.append(inst)
+        if initialize:
+            inst.initialize(parameters=parameters)
+        return inst
+
+    yield make
+    for inst in made:
+        inst.close()
+
+
+def record(inst: FmuInstance, n: int, outputs: Iterable[str], h: float = H,
+           before_step: Callable[[int], None] | None = None) -> dict[str, np.ndarray]:
+    """Step ``inst`` n times by h and record Real outputs.
+
+    Returns name -> array of shape (n + 1, width) (row 0: the values before the first
+    step; a scalar name gives width 1), plus ``"t"`` of shape (n + 1,).
+    ``before_step(k)`` runs before step k (0-based), e.g. to write inputs.
+    """
+    names = list(outputs)
+    signals = {name: inst.signal(name) for name in names}
+    out = {name: np.empty((n + 1, len(sig.names))) for name, sig in signals.items()}
+    t = np.empty(n + 1)
+    t[0] = inst.time
+    for name, sig in signals.items():
+        out[name][0] = inst.read(sig)
+    for k in range(n):
+        if before_step is not None:
+            before_step(k)
+        inst.step(h)
+        t[k + 1] = inst.time
+        for name, sig in signals.items():
+            out[name][k + 1] = inst.read(sig)
+    out["t"] = t
+    return out
+
+
+Record = Callable[..., dict[str, np.ndarray]]
+
+
+@pytest.fixture
+def run_steps() -> Record:
+    """The :func:`record` helper: ``run_steps(inst, n, ["pos", "quat"], h=0.002)``."""
+    return record
