@@ -44,6 +44,50 @@ void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, doub
     *alpha = atan2(ly, -lz);
 }
 
+void fp_paper_hexacopter(FpAirframe *af) {
+    const double pi = 3.14159265358979323846;
+    FpRotorSet *rs = &af->rotors;
+    int i;
+    memset(af, 0, sizeof *af);
+    af->mass = 0.6656;
+    af->inertia[0][0] = 0.0041;
+    af->inertia[1][1] = 0.0048;
+    af->inertia[2][2] = 0.0599;
+    af->g = 9.81;
+    af->tau_motor = 1.0 / 53.94;
+    af->tau_servo = 1.0 / 53.94;
+    rs->n = 6;
+    rs->k_t = 1.14e-4;
+    rs->k_d = 1.14e-6;
+    for (i = 0; i < FP_MAX_ROTORS; i++) rs->dir[i] = 1;
+    for (i = 0; i < 6; i++) {
+        double azimuth = (30.0 + 60.0 * i) * pi / 180.0; /* hexa "X", gamma = arm azimuth */
+        rs->pos[i][0] = 0.15 * cos(azimuth);
+        rs->pos[i][1] = 0.15 * sin(azimuth);
+        rs->dir[i] = (i % 2 == 0) ? 1 : -1;
+        rs->gamma[i] = azimuth;
+        rs->alpha_min[i] = rs->beta_min[i] = -40.0 * pi / 180.0;
+        rs->alpha_max[i] = rs->beta_max[i] = 40.0 * pi / 180.0;
+    }
+    rs->omega_min = 0.0;
+    rs->omega_max = 2000.0 * 2.0 * pi / 60.0;
+}
+
+void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, double dt_dalpha[3],
+                                  double dt_dbeta[3]) {
+    double sa = sin(alpha), ca = cos(alpha), sb = sin(beta), cb = cos(beta);
+    double cg = cos(gamma), sg = sin(gamma);
+    /* t = Rz(gamma) [-sb, sa cb, -ca cb] */
+    double ax = 0.0, ay = ca * cb, az = sa * cb;
+    double bx = -cb, by = -sa * sb, bz = ca * sb;
+    dt_dalpha[0] = cg * ax - sg * ay;
+    dt_dalpha[1] = sg * ax + cg * ay;
+    dt_dalpha[2] = az;
+    dt_dbeta[0] = cg * bx - sg * by;
+    dt_dbeta[1] = sg * bx + cg * by;
+    dt_dbeta[2] = bz;
+}
+
 static void torque_arm(const FpRotorSet *rs, int i, double m[3][3]) {
     /* S(d_i) + r c_i I3 */
     const double *d = rs->pos[i];
@@ -89,6 +133,35 @@ FpStatus fp_effectiveness_bprime(const FpRotorSet *rs, const double alpha[], con
                 bp[j * cols + 3 * i + k] = r[j][k];
                 bp[(3 + j) * cols + 3 * i + k] = mr[j][k];
             }
+    }
+    return FP_OK;
+}
+
+FpStatus fp_effectiveness_b2prime(const FpRotorSet *rs, const double alpha[], const double beta[],
+                                  const double omega[], double *b2p) {
+    int i, j, k, cols;
+    if (check_set(rs) != FP_OK || b2p == NULL) return FP_ERROR;
+    cols = 3 * rs->n;
+    for (i = 0; i < rs->n; i++) {
+        double m[3][3], t[3], da[3], db[3], c[3][3];
+        double thrust = rs->k_t * omega[i] * omega[i];
+        torque_arm(rs, i, m);
+        fp_thrust_direction(alpha[i], beta[i], rs->gamma[i], t);
+        fp_thrust_direction_jacobian(alpha[i], beta[i], rs->gamma[i], da, db);
+        for (j = 0; j < 3; j++) { /* d(force)/d(alpha, beta, omega) */
+            c[j][0] = thrust * da[j];
+            c[j][1] = thrust * db[j];
+            c[j][2] = 2.0 * rs->k_t * omega[i] * t[j];
+        }
+        for (k = 0; k < 3; k++) {
+            double col[3], torque[3];
+            for (j = 0; j < 3; j++) col[j] = c[j][k];
+            m3_mul_v(&m[0][0], col, torque);
+            for (j = 0; j < 3; j++) {
+                b2p[j * cols + 3 * i + k] = col[j];
+                b2p[(3 + j) * cols + 3 * i + k] = torque[j];
+            }
+        }
     }
     return FP_OK;
 }

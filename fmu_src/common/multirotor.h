@@ -36,6 +36,23 @@ typedef struct {
     double omega_min, omega_max;
 } FpRotorSet;
 
+/* The paper's hexacopter (Table I), the default airframe of both FMUs. */
+typedef struct {
+    FpRotorSet rotors;
+    double mass, inertia[3][3], g, tau_motor, tau_servo;
+} FpAirframe;
+
+void fp_paper_hexacopter(FpAirframe *af);
+
+/* Partial derivatives of the thrust direction t_i with respect to alpha and beta. */
+void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, double dt_dalpha[3],
+                                  double dt_dbeta[3]);
+
+/* Paper eq. (12)-(13): B''(u_a) = d(B'(lambda) F(omega))/du_a, 6 x 3n row-major,
+ * columns ordered [alpha_1, beta_1, omega_1, ..., alpha_n, beta_n, omega_n]. */
+FpStatus fp_effectiveness_b2prime(const FpRotorSet *rs, const double alpha[], const double beta[],
+                                  const double omega[], double *b2p);
+
 /* R_Mi^B(alpha, beta, gamma), row-major. */
 void fp_rotor_rotation(double alpha, double beta, double gamma, double r[3][3]);
 

@@ -61,35 +61,30 @@ static void hover_wrench(const PlantModel *m, const double euler[3], double w[6]
 
 void plant_set_defaults(void *model) {
     PlantModel *m = (PlantModel *)model;
+    FpAirframe af;
     FpRotorSet rs;
     double w[6], zero[3] = {0.0, 0.0, 0.0};
     int i;
     memset(m, 0, sizeof *m);
-    m->n_rotors = 6;
-    m->mass = 0.6656;
-    m->inertia[0][0] = 0.0041;
-    m->inertia[1][1] = 0.0048;
-    m->inertia[2][2] = 0.0599;
-    m->g = 9.81;
-    m->k_t = 1.14e-4;
-    m->k_d = 1.14e-6;
-    for (i = 0; i < FP_MAX_ROTORS; i++) {
-        m->rotor_dir[i] = 1;
-        m->efficiency[i] = 1.0;
-    }
-    for (i = 0; i < 6; i++) {
-        double azimuth = (30.0 + 60.0 * i) * PI / 180.0;
-        m->rotor_pos[i][0] = 0.15 * cos(azimuth);
-        m->rotor_pos[i][1] = 0.15 * sin(azimuth);
-        m->rotor_dir[i] = (i % 2 == 0) ? 1 : -1;
-        m->rotor_gamma[i] = azimuth;
-        m->alpha_min[i] = m->beta_min[i] = -40.0 * PI / 180.0;
-        m->alpha_max[i] = m->beta_max[i] = 40.0 * PI / 180.0;
-    }
-    m->omega_min = 0.0;
-    m->omega_max = 2000.0 * 2.0 * PI / 60.0;
-    m->tau_motor = 1.0 / 53.94;
-    m->tau_servo = 1.0 / 53.94;
+    fp_paper_hexacopter(&af);
+    m->n_rotors = af.rotors.n;
+    m->mass = af.mass;
+    memcpy(m->inertia, af.inertia, sizeof m->inertia);
+    m->g = af.g;
+    m->k_t = af.rotors.k_t;
+    m->k_d = af.rotors.k_d;
+    memcpy(m->rotor_pos, af.rotors.pos, sizeof m->rotor_pos);
+    memcpy(m->rotor_dir, af.rotors.dir, sizeof m->rotor_dir);
+    memcpy(m->rotor_gamma, af.rotors.gamma, sizeof m->rotor_gamma);
+    memcpy(m->alpha_min, af.rotors.alpha_min, sizeof m->alpha_min);
+    memcpy(m->alpha_max, af.rotors.alpha_max, sizeof m->alpha_max);
+    memcpy(m->beta_min, af.rotors.beta_min, sizeof m->beta_min);
+    memcpy(m->beta_max, af.rotors.beta_max, sizeof m->beta_max);
+    m->omega_min = af.rotors.omega_min;
+    m->omega_max = af.rotors.omega_max;
+    m->tau_motor = af.tau_motor;
+    m->tau_servo = af.tau_servo;
+    for (i = 0; i < FP_MAX_ROTORS; i++) m->efficiency[i] = 1.0;
     m->h_internal = 5e-4;
     m->init_trim = 1;
     m->noise_seed = 1;

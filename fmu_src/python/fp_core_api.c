@@ -4,10 +4,15 @@
  * implementation of the model (no numpy copy).  Every function returns 0 on
  * success and a non-zero FpStatus otherwise.
  */
+#if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
+#define _POSIX_C_SOURCE 199309L /* clock_gettime for fp_wls_bench_api */
+#endif
 #include <string.h>
+#include <time.h>
 
 #include "multirotor.h"
 #include "plant.h"
+#include "wls.h"
 
 #if defined(_WIN32)
 #define FP_API __declspec(dllexport)
@@ -82,4 +87,111 @@ FP_API int fp_preferred_config_api(const void *rotor_set, const double *wrench, 
                                    double *beta, double *omega, char *why, int why_size) {
     return fp_preferred_config((const FpRotorSet *)rotor_set, wrench, alpha, beta, omega, why,
                                why_size);
+}
+
+/* ---- Constrained least-squares allocation solver (wls.h) ----------------
+ * The FpWls struct is opaque to Python: allocate fp_wls_size() bytes.  The
+ * working set crosses the API as int8[n_vars + n_cons]: first the bounds
+ * (-1 at lb, +1 at ub, 0 free), then the rows of C (1 active, 0 not). */
+
+FP_API int fp_wls_size(void) { return (int)sizeof(FpWls); }
+
+/* caps[0..2] = FP_WLS_MAX_VARS, FP_WLS_MAX_ROWS, FP_WLS_MAX_CONS */
+FP_API int fp_wls_caps(int32_t *caps) {
+    caps[0] = FP_WLS_MAX_VARS;
+    caps[1] = FP_WLS_MAX_ROWS;
+    caps[2] = FP_WLS_MAX_CONS;
+    return FP_OK;
+}
+
+FP_API int fp_wls_setup_api(void *buffer, int n_vars, int n_rows, int n_cons) {
+    return fp_wls_setup((FpWls *)buffer, n_vars, n_rows, n_cons);
+}
+
+FP_API int fp_wls_set_data_api(void *buffer, const double *A, const double *b, const double *lb,
+                               const double *ub, const double *C, const double *d) {
+    return fp_wls_set_data((FpWls *)buffer, A, b, lb, ub, C, d);
+}
+
+/* Start of the next solve: x0 (NULL keeps the stored x) and working set (NULL keeps it). */
+FP_API int fp_wls_set_start_api(void *buffer, const double *x0, const int8_t *ws) {
+    FpWls *w = (FpWls *)buffer;
+    if (w == NULL || w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS) return FP_ERROR;
+    if (x0 != NULL) memcpy(w->x, x0, (size_t)w->n_vars * sizeof(double));
+    if (ws != NULL) {
+        memcpy(w->bound_ws, ws, (size_t)w->n_vars);
+        memcpy(w->cons_ws, ws + w->n_vars, (size_t)w->n_cons);
+    }
+    return FP_OK;
+}
+
+FP_API int fp_wls_get_working_set_api(const void *buffer, int8_t *ws) {
+    const FpWls *w = (const FpWls *)buffer;
+    if (w == NULL) return FP_ERROR;
+    memcpy(ws, w->bound_ws, (size_t)w->n_vars);
+    memcpy(ws + w->n_vars, w->cons_ws, (size_t)w->n_cons);
+    return FP_OK;
+}
+
+/* Solve; x[n_vars] gets the solution, info[4] = status, iterations,
+ * phase-1 iterations, warm start flag; fout[2] = objective, max violation. */
+FP_API int fp_wls_solve_api(void *buffer, int max_iter, double *x, int32_t *info, double *fout) {
+    FpWls *w = (FpWls *)buffer;
+    FpWlsResult res;
+    FpStatus st = fp_wls_solve(w, max_iter, &res);
+    if (w == NULL) return FP_ERROR;
+    if (x != NULL) memcpy(x, w->x, (size_t)w->n_vars * sizeof(double));
+    info[0] = (int32_t)res.status;
+    info[1] = res.iterations;
+    info[2] = res.phase1_iterations;
+    info[3] = res.warm_start;
+    fout[0] = res.objective;
+    fout[1] = res.max_violation;
+    return st;
+}
+
+static double fp_now_ns(void) {
+#if defined(CLOCK_MONOTONIC)
+    struct timespec ts;
+    clock_gettime(CLOCK_MONOTONIC, &ts);
+    return (double)ts.tv_sec * 1e9 + (double)ts.tv_nsec;
+#else
+    return (double)clock() * (1e9 / (double)CLOCKS_PER_SEC);
+#endif
+}
+
+/* Benchmark: solve the stored problem `repeats` times, each time from the same
+ * start (the x and working set stored on entry), and write each solve's wall
+ * time in ns to ns_out[repeats]; x, info and fout as fp_wls_solve_api for the
+ * last solve.  The struct is left as after the last solve. */
+FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_out, double *x,
+                            int32_t *info, double *fout) {
+    FpWls *w = (FpWls *)buffer;
+    double x0[FP_WLS_MAX_VARS];
+    int8_t bws[FP_WLS_MAX_VARS], cws[FP_WLS_MAX_CONS];
+    FpWlsResult res;
+    FpStatus st = FP_OK;
+    int r;
+    if (w == NULL || repeats < 1) return FP_ERROR;
+    memcpy(x0, w->x, sizeof x0);
+    memcpy(bws, w->bound_ws, sizeof bws);
+    memcpy(cws, w->cons_ws, sizeof cws);
+    for (r = 0; r < repeats; r++) {
+        double t0, t1;
+        memcpy(w->x, x0, sizeof x0);
+        memcpy(w->bound_ws, bws, sizeof bws);
+        memcpy(w->cons_ws, cws, sizeof cws);
+        t0 = fp_now_ns();
+        st = fp_wls_solve(w, max_iter, &res);
+        t1 = fp_now_ns();
+        ns_out[r] = t1 - t0;
+    }
+    if (x != NULL) memcpy(x, w->x, (size_t)w->n_vars * sizeof(double));
+    info[0] = (int32_t)res.status;
+    info[1] = res.iterations;
+    info[2] = res.phase1_iterations;
+    info[3] = res.warm_start;
+    fout[0] = res.objective;
+    fout[1] = res.max_violation;
+    return st;
 }

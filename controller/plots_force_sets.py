@@ -1,0 +1,150 @@
+"""Figure like the paper's Fig. 3: the attainable force set vs S(0) and the hover slice P_xy.
+
+    python -m controller.plots_force_sets [AIRFRAME] [OUT.png]
+
+Left: the AFS (translucent green) and S(tau = 0) (blue edges) in body FRD, f_bz axis pointing
+down so that thrust is drawn upwards, with the hover plane slice P_xy of S(0) in red.
+Right: P_xy = S(0) cut by f_bz = -m g (hover, zero attitude) as a polygon (the outer
+H-representation the controller uses), with the slices of the AFS and of the inner hull
+(attainable forces; the exact set lies between the two) for reference.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
+
+from controller.force_sets import (
+    Polytope,
+    attainable_force_set,
+    feasible_force_set,
+    hover_force,
+)
+from plant.airframe import Airframe, load_airframe
+
+GREEN, BLUE, RED = "#2ca02c", "#1f77b4", "#d62728"
+
+
+def _faces(poly: Polytope) -> list[np.ndarray]:
+    """Facets of a 3-D polytope as vertex loops (coplanar hull triangles merged)."""
+    verts = poly.vertices
+    faces = []
+    for a, b in zip(poly.A, poly.b, strict=True):
+        on = verts[np.abs(verts @ a - b) <= 1e-7 * max(1.0, poly.scale)]
+        if on.shape[0] < 3:
+            continue
+        centre = on.mean(axis=0)
+        u = on[0] - centre
+        u = u / np.linalg.norm(u) if np.linalg.norm(u) > 0 else np.cross(a, [1.0, 0.0, 0.0])
+        v = np.cross(a, u)
+        order = np.argsort(np.arctan2((on - centre) @ v, (on - centre) @ u), kind="stable")
+        faces.append(on[order])
+    return faces
+
+
+def _draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bool,
+                   label: str) -> None:
+    if poly.dimension < 3:
+        pts = poly.vertices
+        ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, lw=3, label=label)
+        return
+    faces = _faces(poly)
+    if alpha > 0:
+        ax.add_collection3d(Poly3DCollection(faces, facecolor=color, alpha=alpha,
+                                             edgecolor="none"))
+    if edges:
+        ax.add_collection3d(Line3DCollection([np.vstack([f, f[:1]]) for f in faces],
+                                             colors=color, linewidths=0.6))
+    ax.plot([], [], color=color, lw=6 if alpha > 0 else 1, alpha=max(alpha, 0.6), label=label)
+
+
+def _closed(poly2: np.ndarray) -> np.ndarray:
+    return np.vstack([poly2, poly2[:1]])
+
+
+def plot_force_sets(
+    airframe: Airframe | str | Path,
+    path: str | Path,
+    afs: Polytope | None = None,
+    s0: Polytope | None = None,
+) -> Path:
+    """Write the Fig.-3-like PNG for an airframe; returns the path.
+
+    Precomputed ``afs`` / ``s0`` polytopes may be passed to avoid recomputing them.
+    """
+    af = airframe if isinstance(airframe, Airframe) else load_airframe(airframe)
+    afs = attainable_force_set(af) if afs is None else afs
+    s0 = feasible_force_set(af) if s0 is None else s0
+    hover = hover_force(af)
+    z = s0.clamp_z(hover[2])
+    pxy = s0.slice_polygon(z)
+    pxy_afs = afs.slice_polygon(afs.clamp_z(hover[2]))
+
+    fig = Figure(figsize=(14.0, 5.6))
+    FigureCanvasAgg(fig)  # the Agg backend, without touching pyplot's global state
+    grid = fig.add_gridspec(1, 2, width_ratios=[1.1, 1.0], wspace=0.3, left=0.02, right=0.82,
+                            top=0.9, bottom=0.08)
+    ax = fig.add_subplot(grid[0], projection="3d")
+    _draw_polytope(ax, afs, GREEN, 0.18, False, f"AFS ({afs.n_facets} facets)")
+    _draw_polytope(ax, s0, BLUE, 0.0, True, f"S(0) ({s0.n_facets} facets)")
+    ring = _closed(pxy)
+    ax.add_collection3d(Poly3DCollection([np.column_stack([pxy, np.full(len(pxy), z)])],
+                                         facecolor=RED, alpha=0.45, edgecolor=RED))
+    ax.plot(ring[:, 0], ring[:, 1], np.full(len(ring), z), color=RED, lw=1.5,
+            label=f"P_xy at f_bz = {z:.2f} N")
+    ax.scatter(*hover, color="k", s=12, label="hover force")
+    lim = np.vstack([afs.vertices, s0.vertices])
+    span = float(np.max(np.ptp(lim, axis=0)))
+    mid = (lim.max(axis=0) + lim.min(axis=0)) / 2
+    for setter, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, strict=True):
+        setter(m - span / 2, m + span / 2)
+    ax.invert_zaxis()  # FRD: thrust (negative f_bz) drawn upwards
+    ax.set_xlabel("f_bx [N]")
+    ax.set_ylabel("f_by [N]")
+    ax.set_zlabel("f_bz [N]")
+    ax.set_title(f"{af.name}: attainable force set vs S(tau = 0)")
+    ax.legend(loc="upper left", bbox_to_anchor=(-0.1, 1.0), fontsize=8)
+    ax.view_init(elev=18, azim=-60)
+
+    ax2 = fig.add_subplot(grid[1])
+    a_ring = _closed(pxy_afs)
+    ax2.plot(a_ring[:, 0], a_ring[:, 1], "--", color=GREEN, lw=1.5, label="AFS slice")
+    inner = s0.inner_slice_polygon(z)
+    if len(inner) >= 3:
+        i_ring = _closed(inner)
+        ax2.plot(i_ring[:, 0], i_ring[:, 1], ":", color="k", lw=1.2,
+                 label="S(0) inner hull slice (attainable)")
+    ax2.fill(ring[:, 0], ring[:, 1], color=RED, alpha=0.3)
+    ax2.plot(ring[:, 0], ring[:, 1], "-o", color=RED, ms=3, lw=1.5,
+             label=f"P_xy: S(0) at f_bz = {z:.2f} N")
+    ax2.plot(0.0, 0.0, "k+", ms=10, label="hover (0, 0)")
+    ax2.set_aspect("equal", adjustable="datalim")
+    ax2.grid(True, alpha=0.3)
+    ax2.set_xlabel("f_bx [N]")
+    ax2.set_ylabel("f_by [N]")
+    ext = np.abs(pxy).max(axis=0)
+    ax2.set_title(f"lateral force limits at hover (m g = {-hover[2]:.2f} N): "
+                  f"|f_bx| <= {ext[0]:.2f} N, |f_by| <= {ext[1]:.2f} N", fontsize=9)
+    ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(out, dpi=110)
+    return out
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = sys.argv[1:] if argv is None else argv
+    name = args[0] if args else "paper_hexacopter"
+    out = Path(args[1]) if len(args) > 1 else Path(f"force_sets_{Path(name).stem}.png")
+    print(plot_force_sets(name, out))
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,165 @@
+/*
+ * Bounded, linearly constrained least squares for control allocation:
+ *
+ *     minimise ||A x - b||^2   subject to   lb <= x <= ub,   C x <= d
+ *
+ * A primal active-set method on the least-squares form (Haerkegaard's WLS
+ * allocation generalised to general inequalities), with a working set of
+ * fixed variables (active bounds) and active rows of C.  No heap allocation,
+ * no globals, no static mutable state: everything lives in one FpWls struct
+ * per problem instance, which holds no pointers (it may be copied with
+ * memcpy, e.g. in an FMU state snapshot).
+ *
+ * Usage:
+ *     FpWls w;                               (or a member of a model struct)
+ *     fp_wls_setup(&w, n_vars, n_rows, n_cons);
+ *     then every sample: write w.A, w.b, w.lb, w.ub, w.C, w.d (or call
+ *     fp_wls_set_data) and call fp_wls_solve(&w, max_iter, &result);
+ *     the solution is w.x.
+ *
+ * Data layout: A is n_rows x n_vars and C is n_cons x n_vars, both packed
+ * row-major with row length n_vars (element (i, j) at [i * n_vars + j]).
+ * Bounds may be -INFINITY / +INFINITY (no bound) and lb[j] == ub[j] (a fixed
+ * variable).  d[i] == +INFINITY disables row i of C.
+ *
+ * Warm start: the working set of the last solve is kept in bound_ws and
+ * cons_ws and is the starting guess of the next solve (a caller may also
+ * write them).  When that working set is still optimal for the new data the
+ * solve ends after one iteration (one factorisation).  fp_wls_reset() forgets
+ * it (cold start).
+ *
+ * Result (never NaN or inf in x):
+ *   FP_WLS_OPTIMAL     x is optimal: feasible, and the KKT multipliers are
+ *                      non-negative within a tolerance relative to the
+ *                      rounding error of the gradient.
+ *   FP_WLS_MAX_ITER    the iteration cap was hit.  If a feasible point had been
+ *                      found, x is the last (and best: the objective never
+ *                      increases in phase 2) feasible iterate; otherwise x is
+ *                      the last phase-1 iterate clamped into the bounds.
+ *                      result.max_violation tells which.
+ *   FP_WLS_INFEASIBLE  no x satisfies the constraints.  x is within the bounds
+ *                      and minimises the largest violation of the rows of
+ *                      C x <= d, each row scaled to unit norm (if the cap cut
+ *                      that search short: the best point found).  If a zero
+ *                      row of C has d < 0, x is the solution without it.  If
+ *                      the bounds cross (lb > ub), x is the previous solution
+ *                      clamped into [min(lb,ub), max(lb,ub)].
+ *   FP_WLS_BAD_INPUT   NaN anywhere in the data, inf in A, b or C, lb = +inf,
+ *                      ub = -inf, d = -inf, any finite magnitude above 1e150,
+ *                      max_iter < 1 or sizes not set up.  x is left at the
+ *                      previous solution (zero after setup) and the working
+ *                      set is unchanged.
+ *
+ * Numerics: the equality-constrained subproblems are solved by a null-space
+ * method with Householder QR (no normal equations), rank-revealing QR with
+ * column pivoting and a complete orthogonal decomposition for a rank-deficient
+ * A (minimum-norm step), so weight ratios of 1e7 and more are fine.  A feasible
+ * start comes from projecting onto the constraints with the Goldfarb-Idnani
+ * dual method; degenerate vertices are handled with Bland's rule.  See wls.c.
+ * An iteration is one factorisation of the working set: O(n^2 (n + rows)) flops.
+ */
+#ifndef FP_WLS_H
+#define FP_WLS_H
+
+#include "fp_model.h"
+
+#define FP_WLS_MAX_VARS 32 /* variables */
+#define FP_WLS_MAX_ROWS 48 /* rows of A */
+#define FP_WLS_MAX_CONS 96 /* rows of C (bounds are separate) */
+
+/* Internal: phase 1 adds one variable. */
+#define FP_WLS_NV1 (FP_WLS_MAX_VARS + 1)
+
+typedef enum {
+    FP_WLS_OPTIMAL = 0,
+    FP_WLS_MAX_ITER = 1,
+    FP_WLS_INFEASIBLE = 2,
+    FP_WLS_BAD_INPUT = 3
+} FpWlsStatus;
+
+typedef struct {
+    FpWlsStatus status;
+    int iterations;        /* factorisations in all (phase 1 included), <= max_iter */
+    int phase1_iterations; /* of which spent finding a feasible point */
+    int warm_start;        /* 1 if the solve started from a non-empty working set */
+    double objective;      /* ||A x - b||^2 at the returned x */
+    double max_violation;  /* max(0, lb - x, x - ub, C x - d) at x, in input units */
+} FpWlsResult;
+
+/* Private workspace: do not touch (it is here only so FpWls has a known size). */
+typedef struct {
+    double x[FP_WLS_NV1];
+    double p[FP_WLS_NV1];
+    double g[FP_WLS_NV1];
+    double u[FP_WLS_NV1];
+    double v[FP_WLS_NV1];
+    double qv[FP_WLS_NV1];
+    double nvec[FP_WLS_NV1];
+    double zvec[FP_WLS_NV1];
+    double rr[FP_WLS_NV1];
+    double rb[FP_WLS_NV1];
+    double mub[FP_WLS_NV1];
+    double mur[FP_WLS_MAX_CONS];
+    double r[FP_WLS_MAX_ROWS];
+    double cinv[FP_WLS_MAX_CONS];
+    double qm[FP_WLS_NV1 * FP_WLS_NV1];
+    double z[FP_WLS_NV1 * FP_WLS_NV1];
+    double az[FP_WLS_MAX_ROWS * FP_WLS_NV1];
+    double tau_m[FP_WLS_NV1];
+    double tau_a[FP_WLS_NV1];
+    double tau_c[FP_WLS_NV1];
+    int free_idx[FP_WLS_NV1];
+    int act_idx[FP_WLS_NV1];
+    int perm[FP_WLS_NV1];
+    int8_t state[FP_WLS_NV1];
+    int8_t act[FP_WLS_MAX_CONS];
+    int8_t use[FP_WLS_MAX_CONS];
+} FpWlsWork;
+
+typedef struct {
+    /* Sizes, set by fp_wls_setup. */
+    int n_vars, n_rows, n_cons;
+    /* Problem data, written by the caller (layout: see top of this file). */
+    double A[FP_WLS_MAX_ROWS * FP_WLS_MAX_VARS];
+    double b[FP_WLS_MAX_ROWS];
+    double lb[FP_WLS_MAX_VARS];
+    double ub[FP_WLS_MAX_VARS];
+    double C[FP_WLS_MAX_CONS * FP_WLS_MAX_VARS];
+    double d[FP_WLS_MAX_CONS];
+    /* Solution of the last solve (always finite). */
+    double x[FP_WLS_MAX_VARS];
+    /* Working set: bound_ws[j] = -1 at lb, +1 at ub, 0 free; cons_ws[i] = 1 active. */
+    int8_t bound_ws[FP_WLS_MAX_VARS];
+    int8_t cons_ws[FP_WLS_MAX_CONS];
+    FpWlsWork work;
+} FpWls;
+
+/*
+ * Check the sizes against the caps (1 <= n_vars <= FP_WLS_MAX_VARS,
+ * 0 <= n_rows <= FP_WLS_MAX_ROWS, 0 <= n_cons <= FP_WLS_MAX_CONS) and clear
+ * everything: A, b, C, d = 0, lb = -inf, ub = +inf, x = 0, empty working set.
+ * FP_ERROR (and w untouched) on bad sizes or w == NULL.
+ */
+FpStatus fp_wls_setup(FpWls *w, int n_vars, int n_rows, int n_cons);
+
+/*
+ * Copy problem data into w (packed row-major as above).  Any pointer may be
+ * NULL to keep the stored values; C and d are ignored when n_cons == 0.
+ */
+FpStatus fp_wls_set_data(FpWls *w, const double *A, const double *b, const double *lb,
+                         const double *ub, const double *C, const double *d);
+
+/* Forget the working set (the next solve starts cold from the previous x). */
+void fp_wls_reset(FpWls *w);
+
+/*
+ * Solve with at most max_iter iterations (factorisations).  Fills *out when
+ * out != NULL.  Returns FP_OK when optimal, FP_WARNING for FP_WLS_MAX_ITER or
+ * FP_WLS_INFEASIBLE (x is defined and usable), FP_ERROR for FP_WLS_BAD_INPUT.
+ */
+FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out);
+
+/* "optimal", "max_iter", "infeasible", "bad_input" (or "unknown"). */
+const char *fp_wls_status_name(int status);
+
+#endif

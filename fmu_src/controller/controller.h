@@ -1,0 +1,60 @@
+/* FullPoseController: the robust INDI cascade of the paper's section III with
+ * WLS guidance allocation and inner allocation, sampled at Ts. */
+#ifndef CONTROLLER_H
+#define CONTROLLER_H
+
+#include <stdint.h>
+
+#include "default_polytope.h"
+#include "fp_model.h"
+#include "multirotor.h"
+#include "wls.h"
+
+#define CTRL_N_FILTERS (15 + 3 * FP_MAX_ROTORS) /* pos vel acc euler rate | omega alpha beta */
+
+typedef struct {
+    /* parameters */
+    double Ts;
+    int32_t n_rotors;
+    double mass, inertia[3][3], g, k_t, k_d;
+    double rotor_pos[FP_MAX_ROTORS][3];
+    int32_t rotor_dir[FP_MAX_ROTORS];
+    double rotor_gamma[FP_MAX_ROTORS];
+    double alpha_min[FP_MAX_ROTORS], alpha_max[FP_MAX_ROTORS];
+    double beta_min[FP_MAX_ROTORS], beta_max[FP_MAX_ROTORS];
+    double omega_min, omega_max;
+    double filt_wn, filt_zeta;
+    double K_pos_A[3], K_pos_B[3], K_pos_C[3], K_pos_D[3];
+    double K_vel_A[3], K_vel_B[3], K_vel_C[3], K_vel_D[3];
+    double K_att_A[3], K_att_B[3], K_att_C[3], K_att_D[3];
+    double K_rate_A[3], K_rate_B[3], K_rate_C[3], K_rate_D[3];
+    double gamma_opt, W_u[5], W_v[3], euler_min[2], euler_max[2];
+    int32_t force_constraint, poly_n;
+    double poly_A[FP_POLYTOPE_MAX_FACETS][3], poly_b[FP_POLYTOPE_MAX_FACETS], poly_margin;
+    double W_nu[6], w_pref, pref_omega_scale;
+    int32_t qp_max_iter, timing;
+    /* inputs */
+    double pos_ref[3], euler_ref[3], vel_ref[3], acc_ref[3], euler_rate_ref[3];
+    double pos[3], vel[3], acc[3], euler[3], rate[3];
+    double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
+    /* outputs */
+    double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
+    double mu_c[3], f_b_ref[3], f_b_c[3];
+    int32_t feasible, guid_status, guid_iter, alloc_status, alloc_iter, sat_flags, guid_flags;
+    double acc_c[3], rate_c[3], dnu_c[6], alloc_residual[6];
+    double t_step, t_guid, t_alloc;
+    /* internal state */
+    FpRotorSet rotors;
+    double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
+    double filt[CTRL_N_FILTERS][2];        /* [value, derivative] per filtered signal */
+    double psi_raw, psi_unwrapped;         /* heading unwrapping before filtering */
+    double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
+    double inertia_inv[3][3];
+    double fz_min, fz_max;                 /* f_bz range of the polytope */
+    double poly_d[FP_POLYTOPE_MAX_FACETS]; /* offsets of the margin-scaled polytope in use */
+    FpWls guid, alloc;
+} ControllerModel;
+
+const FpModelInfo *controller_model_info(void);
+
+#endif
