@@ -53,7 +53,7 @@ class Loop:
 
     def run(self, duration, reference):
         """reference(t) -> 15 values [pos, euler, vel, acc, euler_rate]."""
-        n = int(round(duration / H))
+        n = round(duration / H)
         out = {k: np.empty((n, 3)) for k in ("pos", "euler", "mu_c", "mu_ref")}
         out["feasible"] = np.empty(n, dtype=bool)
         out["alpha"] = np.empty((n, 8))
