@@ -90,6 +90,9 @@ def core() -> ctypes.CDLL:
         "fp_effectiveness_bprime_api": [vp, dp, dp, dp],
         "fp_rotor_wrench_api": [vp, dp, dp, dp, dp, dp, dp],
         "fp_preferred_config_api": [vp, dp, dp, dp, dp, ctypes.c_char_p, i],
+        "fp_effectiveness_b2prime_api": [vp, dp, dp, dp, dp],
+        "fp_controller_state_qp": [ctypes.c_char_p, ctypes.c_long, i, ip, dp, dp, dp, dp, dp,
+                                   dp, dp],
     }
     for name, argtypes in signatures.items():
         fn = getattr(lib, name)

@@ -86,6 +86,19 @@ class RotorSet:
             raise ValueError("effectiveness B' failed")
         return out
 
+    def B_second(self, alpha: object, beta: object, omega: object) -> Array:
+        """Paper eq. (12)-(13): B''(u_a) = d(B'(lambda) F(omega))/du_a, 6 x 3n.
+
+        Columns are ordered [alpha_1, beta_1, omega_1, ..., alpha_n, beta_n, omega_n].
+        """
+        a, b, w = (_vec(x, self.n, nm) for x, nm in ((alpha, "alpha"), (beta, "beta"),
+                                                     (omega, "omega")))
+        out = np.zeros((6, 3 * self.n))
+        if core().fp_effectiveness_b2prime_api(self._buffer(), _dp(a), _dp(b), _dp(w),
+                                               _dp(out)) != 0:
+            raise ValueError("effectiveness B'' failed")
+        return out
+
     def wrench(
         self, alpha: object, beta: object, omega: object, efficiency: object = None
     ) -> tuple[Array, Array]:

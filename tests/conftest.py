@@ -96,3 +96,35 @@ Record = Callable[..., dict[str, np.ndarray]]
 def run_steps() -> Record:
     """The :func:`record` helper: ``run_steps(inst, n, ["pos", "quat"], h=0.002)``."""
     return record
+
+
+def _piqp_solve(A, b, lb, ub, C=None, d=None, eps=1e-10):
+    """min ||A x - b||^2 s.t. lb <= x <= ub, C x <= d with piqp (the independent oracle).
+
+    Returns (status, x).  Equal bounds become equality rows (piqp's interior-point box
+    needs lb < ub)."""
+    import piqp
+
+    n = A.shape[1]
+    P = np.asfortranarray(2.0 * A.T @ A)
+    c = -2.0 * A.T @ b
+    eq = lb == ub
+    Aeq = np.asfortranarray(np.eye(n)[eq]) if eq.any() else None
+    beq = lb[eq].copy() if eq.any() else None
+    lb = np.where(eq, -np.inf, lb)
+    ub = np.where(eq, np.inf, ub)
+    G = np.asfortranarray(C) if C is not None and C.size else None
+    h = np.asarray(d, dtype=float) if G is not None else None
+    solver = piqp.DenseSolver()
+    solver.settings.eps_abs = eps
+    solver.settings.eps_rel = eps
+    solver.settings.max_iter = 500
+    solver.setup(P=P, c=c, A=Aeq, b=beq, G=G, h_u=h, x_l=lb, x_u=ub)
+    status = solver.solve()
+    return status, np.array(solver.result.x)
+
+
+@pytest.fixture(scope="session")
+def piqp_solve():
+    """The piqp oracle for least-squares QPs (see _piqp_solve)."""
+    return _piqp_solve

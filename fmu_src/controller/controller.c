@@ -312,25 +312,7 @@ static void check_polytope(ControllerModel *m, Check *c) {
         c->errors++;
     }
     if (c->errors) return;
-    /* The guidance works in S(0) scaled about the hover force: the margin keeps
-     * actuator authority for attitude torques (S(0) assumes none) and absorbs the
-     * outer approximation of the polytope. */
-    {
-        double hover[3] = {0.0, 0.0, 0.0};
-        hover[2] = -m->mass * m->g;
-        for (i = 0; i < m->poly_n; i++) {
-            double ah = v3_dot(m->poly_A[i], hover);
-            if (!(ah <= m->poly_b[i] + 1e-9 * (1.0 + fabs(m->poly_b[i])))) {
-                fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-                       "parameters poly_A, poly_b: the hover force [0, 0, %.6g] N violates facet "
-                       "%d: the polytope does not describe this vehicle",
-                       hover[2], i + 1);
-                c->errors++;
-                return;
-            }
-            m->poly_d[i] = ah + m->poly_margin * (m->poly_b[i] - ah);
-        }
-    }
+    for (i = 0; i < m->poly_n; i++) m->poly_d[i] = m->poly_b[i];
     for (axis = 0; axis < 3; axis++) {
         double lo, hi;
         FpWlsStatus s1 = polytope_support(m, axis, -1.0, &lo);
@@ -354,6 +336,28 @@ static void check_polytope(ControllerModel *m, Check *c) {
             m->fz_min = lo;
             m->fz_max = hi;
         }
+    }
+    /* The guidance works in S(0) scaled about the hover force: the margin keeps
+     * actuator authority for attitude torques (S(0) assumes none) and absorbs the
+     * outer approximation of the polytope. */
+    {
+        double hover[3] = {0.0, 0.0, 0.0};
+        hover[2] = -m->mass * m->g;
+        for (i = 0; i < m->poly_n; i++) {
+            double ah = v3_dot(m->poly_A[i], hover);
+            if (!(ah <= m->poly_b[i] + 1e-9 * (1.0 + fabs(m->poly_b[i])))) {
+                fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+                       "parameters poly_A, poly_b: the hover force [0, 0, %.6g] N violates facet "
+                       "%d: the polytope does not describe this vehicle",
+                       hover[2], i + 1);
+                c->errors++;
+                return;
+            }
+            m->poly_d[i] = ah + m->poly_margin * (m->poly_b[i] - ah);
+        }
+        /* scaling about the hover force maps the f_bz range the same way */
+        m->fz_min = hover[2] + m->poly_margin * (m->fz_min - hover[2]);
+        m->fz_max = hover[2] + m->poly_margin * (m->fz_max - hover[2]);
     }
 }
 

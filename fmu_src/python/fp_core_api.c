@@ -10,6 +10,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "controller.h"
 #include "multirotor.h"
 #include "plant.h"
 #include "wls.h"
@@ -194,4 +195,45 @@ FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_
     fout[0] = res.objective;
     fout[1] = res.max_violation;
     return st;
+}
+
+/* ------------------------------------------------------------------------ */
+/* Controller introspection                                                 */
+
+FP_API int fp_effectiveness_b2prime_api(const void *rotor_set, const double *alpha,
+                                        const double *beta, const double *omega, double *b2p) {
+    return fp_effectiveness_b2prime((const FpRotorSet *)rotor_set, alpha, beta, omega, b2p);
+}
+
+/*
+ * The last guidance (which = 0) or inner-allocation (which = 1) QP of a
+ * FullPoseController, read from its serialized FMU state (fmi2SerializeFMUstate):
+ * the model struct is the tail of the serialized bytes.  dims receives
+ * [n_vars, n_rows, n_cons]; the arrays are packed row-major with row length
+ * n_vars and must hold the solver caps (FP_WLS_MAX_*).  x is the solution the
+ * controller used.  Lets benchmarks and tests replay the very problems solved.
+ */
+FP_API int fp_controller_state_qp(const unsigned char *state, long size, int which, int32_t *dims,
+                                  double *A, double *b, double *lb, double *ub, double *C,
+                                  double *d, double *x) {
+    const ControllerModel *m;
+    const FpWls *w;
+    static const size_t model_size = sizeof(ControllerModel);
+    size_t nv, nr, nc;
+    if (state == NULL || size < (long)model_size || (which != 0 && which != 1)) return FP_ERROR;
+    m = (const ControllerModel *)(const void *)(state + (size_t)size - model_size);
+    w = which == 0 ? &m->guid : &m->alloc;
+    if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows > FP_WLS_MAX_ROWS ||
+        w->n_cons > FP_WLS_MAX_CONS)
+        return FP_ERROR;
+    nv = (size_t)w->n_vars, nr = (size_t)w->n_rows, nc = (size_t)w->n_cons;
+    dims[0] = w->n_vars, dims[1] = w->n_rows, dims[2] = w->n_cons;
+    memcpy(A, w->A, nr * nv * sizeof(double));
+    memcpy(b, w->b, nr * sizeof(double));
+    memcpy(lb, w->lb, nv * sizeof(double));
+    memcpy(ub, w->ub, nv * sizeof(double));
+    memcpy(C, w->C, nc * nv * sizeof(double));
+    memcpy(d, w->d, nc * sizeof(double));
+    memcpy(x, w->x, nv * sizeof(double));
+    return FP_OK;
 }

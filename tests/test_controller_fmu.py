@@ -1,0 +1,236 @@
+"""FullPoseController FMU on its own: FMI conformance, B'' against finite
+differences, recorded QPs against piqp, bad parameters and bad inputs."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import piqp
+import pytest
+from fmpy.fmi1 import FMICallException
+from fmpy.validation import validate_fmu
+
+import plant
+from controller.qp_record import ALLOCATION, GUIDANCE, qp_from_state
+from orchestrator.fmu import FmuInstance
+
+H = 0.002
+REF = ["pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref"]
+
+
+@pytest.fixture
+def make_ctrl():
+    made = []
+
+    def make(params=None, initialize=True, pos_ref=(0.0, 0.0, 0.0)):
+        c = FmuInstance(plant.fmu_path("FullPoseController"), f"ctrl{len(made)}")
+        made.append(c)
+        if initialize:
+            c.slave.setupExperiment(startTime=0.0)
+            c.set_many(params or {})
+            c.write(c.signal("pos_ref"), pos_ref)
+            c.slave.enterInitializationMode()
+            c.slave.exitInitializationMode()
+        return c
+
+    yield make
+    for c in made:
+        c.close()
+
+
+def errors(inst):
+    return " | ".join(m for s, _, m in inst.messages if s in ("ERROR", "WARNING"))
+
+
+def test_controller_fmu_validates():
+    assert validate_fmu(str(plant.fmu_path("FullPoseController"))) == []
+
+
+@pytest.mark.parametrize("name", ["paper_hexacopter", "fixed_tilt_hexarotor", "quadrotor"])
+def test_b_second_matches_finite_differences(name):
+    rs = plant.load_airframe(name).rotor_set()
+    rng = np.random.default_rng(7)
+    n = rs.n
+    a, b, w = rng.uniform(-0.6, 0.6, n), rng.uniform(-0.6, 0.6, n), rng.uniform(60, 200, n)
+    analytic = rs.B_second(a, b, w)
+    numeric = np.zeros_like(analytic)
+    for i in range(n):
+        for k, (vec, step) in enumerate(((a, 1e-6), (b, 1e-6), (w, 1e-4))):
+            plus, minus = vec.copy(), vec.copy()
+            plus[i] += step
+            minus[i] -= step
+            args_p = [plus if v is vec else v for v in (a, b, w)]
+            args_m = [minus if v is vec else v for v in (a, b, w)]
+            fp, tp = rs.wrench(*args_p)
+            fm, tm = rs.wrench(*args_m)
+            numeric[:, 3 * i + k] = (np.r_[fp, tp] - np.r_[fm, tm]) / (2 * step)
+    np.testing.assert_allclose(analytic, numeric, rtol=1e-7, atol=1e-9)
+
+
+def test_initial_commands_hold_the_measured_actuators(make_ctrl):
+    c = make_ctrl()
+    omega = c.read(c.signal("omega"))
+    assert np.allclose(c.read(c.signal("omega_cmd")), omega)
+    assert omega[0] == pytest.approx(math.sqrt(0.6656 * 9.81 / 6 / 1.14e-4), rel=1e-9)
+
+
+def test_hover_measurement_gives_hover_command(make_ctrl):
+    c = make_ctrl()
+    before = c.read(c.signal("omega_cmd")).copy()
+    for _ in range(50):
+        c.step(H)
+    after = c.read(c.signal("omega_cmd"))
+    np.testing.assert_allclose(after, before, atol=1e-9)
+    assert c.get("guid_status") == 0 and c.get("alloc_status") == 0
+    assert c.get("feasible") is True
+
+
+def test_recorded_qps_agree_with_piqp(make_ctrl, piqp_solve):
+    c = make_ctrl(pos_ref=(0.3, -0.2, 0.1))  # a position error makes both QPs non-trivial
+    for _ in range(5):
+        c.step(H)
+    state = c.slave.serializeFMUstate(c.slave.getFMUstate())
+    for which in (GUIDANCE, ALLOCATION):
+        qp = qp_from_state(bytes(state), which)
+        status, x_piqp = piqp_solve(qp.A, qp.b, qp.lb, qp.ub, qp.C, qp.d)
+        assert status == piqp.PIQP_SOLVED
+        theirs = np.sum((qp.A @ x_piqp - qp.b) ** 2)
+        ours = np.sum((qp.A @ qp.x - qp.b) ** 2)
+        assert ours <= theirs * (1 + 1e-6) + 1e-9
+        assert np.all(qp.x >= qp.lb - 1e-9) and np.all(qp.x <= qp.ub + 1e-9)
+        if qp.C.size:
+            assert np.all(qp.C @ qp.x <= qp.d + 1e-9)
+
+
+def test_doStep_runs_whole_samples(make_ctrl):
+    a = make_ctrl(pos_ref=(1.0, 0.0, 0.0))
+    b = make_ctrl(pos_ref=(1.0, 0.0, 0.0))
+    a.step(5 * H)
+    for _ in range(5):
+        b.step(H)
+    cmd = ["omega_cmd", "alpha_cmd", "beta_cmd", "mu_c"]
+    np.testing.assert_array_equal(a.read(a.signal(cmd)), b.read(b.signal(cmd)))
+    with pytest.raises(FMICallException):
+        a.step(0.003)
+    assert "multiple of the sample time" in errors(a)
+
+
+def test_timing_is_opt_in(make_ctrl):
+    off = make_ctrl()
+    on = make_ctrl({"timing": True})
+    off.step(H)
+    on.step(H)
+    t_off = off.read(off.signal(["t_step", "t_guid", "t_alloc"]))
+    t_on = on.read(on.signal(["t_step", "t_guid", "t_alloc"]))
+    assert np.all(t_off == 0.0)
+    assert np.all(t_on > 0.0) and t_on[0] >= t_on[1]
+
+
+@pytest.mark.parametrize(
+    ("params", "name"),
+    [
+        ({"Ts": 0.0}, "Ts"),
+        ({"Ts": -0.002}, "Ts"),
+        ({"gamma_opt": 0.0}, "gamma_opt"),
+        ({"W_v[1]": -1.0}, "W_v[1]"),
+        ({"W_u[4]": 0.0}, "W_u[4]"),
+        ({"W_nu[6]": math.nan}, "W_nu[6]"),
+        ({"w_pref": 0.0}, "w_pref"),
+        ({"mass": 0.0}, "mass"),
+        ({"euler_min[1]": 0.5, "euler_max[1]": 0.2}, "euler_min[1]"),
+        ({"alpha_min[2]": 0.5, "alpha_max[2]": 0.2}, "alpha_min[2]"),
+        ({"omega_min": 300.0}, "omega_min"),
+        ({"K_pos_A[1]": 1.5}, "K_pos_A[1]"),
+        ({"qp_max_iter": 0}, "qp_max_iter"),
+        ({"poly_n": 2}, "poly_n"),
+        ({"poly_margin": 0.0}, "poly_margin"),
+        ({"force_constraint": 3}, "force_constraint"),
+        ({"inertia[1,1]": -0.004}, "inertia"),
+        ({"filt_wn": 0.0}, "filt_wn"),
+    ],
+)
+def test_bad_parameters_are_refused(make_ctrl, params, name):
+    c = make_ctrl(initialize=False)
+    c.slave.setupExperiment(startTime=0.0)
+    c.set_many(params)
+    c.slave.enterInitializationMode()
+    with pytest.raises(FMICallException) as err:
+        c.slave.exitInitializationMode()
+    assert err.value.status == 3
+    assert f"parameter {name}" in errors(c) or f"parameters {name}" in errors(c)
+
+
+def polytope_params(A, b):
+    p = {"poly_n": len(b)}
+    for i, (row, bi) in enumerate(zip(A, b, strict=True)):
+        for j in range(3):
+            p[f"poly_A[{i + 1},{j + 1}]"] = float(row[j])
+        p[f"poly_b[{i + 1}]"] = float(bi)
+    return p
+
+
+def test_empty_polytope_is_refused(make_ctrl):
+    box = np.vstack([np.eye(3), -np.eye(3)])
+    c = make_ctrl(initialize=False)
+    c.set_many(polytope_params(np.vstack([box, [[1.0, 0, 0]]]), [5, 5, 0, 5, 5, 30, -10]))
+    c.slave.setupExperiment(startTime=0.0)
+    c.slave.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        c.slave.exitInitializationMode()
+    assert "polytope is empty" in errors(c)
+
+
+def test_unbounded_polytope_is_refused(make_ctrl):
+    # no facet limits the force downwards (+z) or sideways in -x: unbounded
+    A = np.array([[1.0, 0, 0], [0, 1.0, 0], [0, -1.0, 0], [0, 0, -1.0]])
+    c = make_ctrl(initialize=False)
+    c.set_many(polytope_params(A, [5, 5, 5, 30]))
+    c.slave.setupExperiment(startTime=0.0)
+    c.slave.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        c.slave.exitInitializationMode()
+    assert "unbounded" in errors(c)
+
+
+@pytest.mark.parametrize(
+    ("signal", "index"), [("pos_ref", 2), ("euler_ref", 1), ("acc", 3), ("rate", 1),
+                          ("omega", 4), ("vel_ref", 1)])
+def test_non_finite_input_holds_the_last_command(make_ctrl, signal, index):
+    c = make_ctrl(pos_ref=(0.5, 0.0, 0.0))
+    for _ in range(3):
+        c.step(H)
+    outputs = c.signal(["omega_cmd", "alpha_cmd", "beta_cmd", "mu_c"])
+    before = c.read(outputs).copy()
+    name = f"{signal}[{index}]"
+    good = c.get(name)
+    for bad in (math.nan, math.inf):
+        c.set(name, bad)
+        c.step(H)  # fmi2Warning: fmpy does not raise
+        np.testing.assert_array_equal(c.read(outputs), before)
+        assert f"input {name}" in errors(c)
+        assert np.isfinite(c.read(outputs)).all()
+    c.set(name, good)
+    c.step(H)
+    assert not np.array_equal(c.read(outputs), before)
+
+
+def test_tunable_gain_changes_between_steps(make_ctrl):
+    c = make_ctrl(pos_ref=(0.5, 0.0, 0.0))
+    c.step(H)
+    acc_default = c.read(c.signal("acc_c")).copy()
+    c.set("K_vel_D[1]", 3.0)  # half the default velocity gain
+    c.step(H)
+    acc_half = c.read(c.signal("acc_c"))
+    assert acc_half[0] == pytest.approx(acc_default[0] / 2, rel=0.05)
+    c.set("W_v[1]", -1.0)
+    with pytest.raises(FMICallException):
+        c.step(H)
+    assert "parameter W_v[1]" in errors(c)
+
+
+def test_fixed_parameter_cannot_change_after_initialization(make_ctrl):
+    c = make_ctrl()
+    with pytest.raises(FMICallException):
+        c.set("mass", 1.0)
+    assert "fixed parameter" in errors(c)
