@@ -6,6 +6,8 @@ import argparse
 import sys
 from pathlib import Path
 
+import numpy as np
+
 from plant import AirframeError, NativeBuildMissing, fmu_path, list_airframes, load_airframe
 
 
@@ -32,8 +34,28 @@ def _cmd_airframes(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_force_set(args: argparse.Namespace) -> int:
+    from controller.force_sets import feasible_force_set, hover_force
+    from controller.plots_force_sets import plot_force_sets
+
+    af = load_airframe(args.airframe)
+    poly = feasible_force_set(af)
+    polygon = poly.slice_polygon(float(hover_force(af)[2]))
+    print(f"airframe           {af.name}")
+    print(f"S(0) facets        {len(poly.b)} (dimension {poly.dimension})")
+    print(f"f_bz range         [{poly.z_range[0]:.3f}, {poly.z_range[1]:.3f}] N")
+    if len(polygon):
+        print(f"hover lateral max  |f_x| {np.abs(polygon[:, 0]).max():.3f} N, "
+              f"|f_y| {np.abs(polygon[:, 1]).max():.3f} N (outer approximation)")
+    print(f"approximation gap  {poly.gap:.3f} N ({100 * poly.relative_gap:.1f} %)")
+    if args.plot is not None:
+        plot_force_sets(af, args.plot)
+        print(f"plot               {args.plot}")
+    return 0
+
+
 def _cmd_fmus(args: argparse.Namespace) -> int:
-    for name in ("MultirotorPlant",):
+    for name in ("MultirotorPlant", "FullPoseController"):
         print(f"{name:20s} {fmu_path(name)}")
     return 0
 
@@ -55,6 +77,12 @@ def build_parser() -> argparse.ArgumentParser:
 
     airframes = sub.add_parser("airframes", help="list the shipped airframe files")
     airframes.set_defaults(func=_cmd_airframes)
+
+    fs = sub.add_parser("force-set", help="feasible force set S(0) of an airframe (paper Fig. 3)")
+    fs.add_argument("--airframe", default="paper_hexacopter",
+                    help="shipped airframe name or TOML file (default: paper_hexacopter)")
+    fs.add_argument("--plot", type=Path, default=None, help="write the Fig.-3-like plot (PNG)")
+    fs.set_defaults(func=_cmd_force_set)
 
     fmus = sub.add_parser("fmus", help="print where the installed FMUs are")
     fmus.set_defaults(func=_cmd_fmus)
