@@ -5,6 +5,7 @@
 #include <stdio.h>
 #include <string.h>
 
+#include "fp_clock.h"
 #include "fp_math.h"
 #include "plant_vars.h"
 
@@ -506,6 +507,7 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     for (i = 0; i < 4; i++) m->rng[i] = splitmix64(&seed);
     saturate(m, &u, &m->sat_flags);
     m->sat_flags = 0;
+    m->t_step = 0.0;
     compute_outputs(m, &u);
     fp_log(logger, FP_OK, FP_LOG_MODEL, "initial state: %d rotors, omega_1 = %g rad/s",
            (int)m->n_rotors, m->x[X_OMEGA]);
@@ -551,6 +553,7 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
     PlantModel *m = (PlantModel *)model;
     Commands u;
     double ratio = h / m->h_internal, substeps = floor(ratio + 0.5), hi;
+    double t_start = m->timing ? fp_clock_seconds() : 0.0;
     long k, n;
     (void)t;
     if (substeps < 1.0 || fabs(ratio - substeps) > 1e-9 * substeps) {
@@ -572,6 +575,7 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
     hi = h / substeps;
     for (k = 0; k < n; k++) rk4_step(m, &u, m->x, hi);
     compute_outputs(m, &u);
+    if (m->timing) m->t_step = fp_clock_seconds() - t_start;
     return FP_OK;
 }
 

@@ -28,6 +28,7 @@ typedef struct {
     double omega0[FP_MAX_ROTORS], alpha0[FP_MAX_ROTORS], beta0[FP_MAX_ROTORS];
     int32_t noise_seed;
     double noise_pos, noise_vel, noise_acc, noise_att, noise_rate, noise_ang_acc;
+    int32_t timing;
     /* inputs */
     double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
     double efficiency[FP_MAX_ROTORS];
@@ -37,6 +38,7 @@ typedef struct {
     double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
     double f_b[3], tau_b[3];
     int32_t sat_flags;
+    double t_step;
     /* internal state, derived at initialization */
     double x[PLANT_NX];
     double inertia_inv[3][3];

@@ -46,6 +46,7 @@
     X(noise_att, 174, REAL, PARAM_FIXED, 1, 1, "rad", "Standard deviation of Euler-angle noise") \
     X(noise_rate, 175, REAL, PARAM_FIXED, 1, 1, "rad/s", "Standard deviation of body-rate noise") \
     X(noise_ang_acc, 176, REAL, PARAM_FIXED, 1, 1, "rad/s2", "Standard deviation of angular-acceleration noise") \
+    X(timing, 177, BOOLEAN, PARAM_FIXED, 1, 1, "", "Measure the computation time of each step (t_step); off keeps runs bit-reproducible") \
     /* inputs */                                                                                  \
     X(omega_cmd, 200, REAL, INPUT, 8, 1, "rad/s", "Commanded rotor speeds (saturated at the limits, see sat_flags)") \
     X(alpha_cmd, 210, REAL, INPUT, 8, 1, "rad", "Commanded servo angles alpha")                 \
@@ -67,6 +68,7 @@
     X(beta, 350, REAL, OUTPUT, 8, 1, "rad", "Measured servo angles beta")                       \
     X(f_b, 360, REAL, OUTPUT, 3, 1, "N", "Rotor force f_b in the body frame")                   \
     X(tau_b, 363, REAL, OUTPUT, 3, 1, "N.m", "Rotor torque tau_b in the body frame")            \
-    X(sat_flags, 370, INTEGER, OUTPUT, 1, 1, "", "Commands beyond limits in the last step: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i")
+    X(sat_flags, 370, INTEGER, OUTPUT, 1, 1, "", "Commands beyond limits in the last step: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i") \
+    X(t_step, 371, REAL, OUTPUT, 1, 1, "s", "Computation time of the last doStep (0 unless timing)")
 
 #endif

@@ -1,0 +1,80 @@
+/*
+ * Step kernel of the Python co-simulation master (orchestrator/master.py).
+ *
+ * The master builds the whole plan in Python on fmpy-loaded FMUs: connection
+ * table, value references, the recording matrix and its layout, the coupling.
+ * Running the per-step call sequence from Python costs ~0.35 us per FMI call
+ * (ctypes), as much as a third of both FMUs' own work at 500 Hz; this kernel
+ * issues the same calls, in the same order, on the same buffers, from C.  The
+ * pure-Python loop stays as the reference (tests: bit-identical results).
+ */
+#include <stddef.h>
+#include <stdint.h>
+
+#include "fmi2FunctionTypes.h"
+
+#if defined(_WIN32)
+#define FP_API __declspec(dllexport)
+#else
+#define FP_API __attribute__((visibility("default")))
+#endif
+
+/* Any function pointer; cast to the FMI type before calling (C allows that). */
+typedef void (*FpFn)(void);
+
+enum { F_C_SET, F_C_STEP, F_C_GET, F_C_GETI, F_C_GETB, F_P_SET, F_P_STEP, F_P_GET, F_P_GETI };
+enum { V_C_IN, V_C_OUT, V_C_INT, V_C_BOOL, V_P_IN, V_P_CMD, V_P_DIST, V_P_OUT, V_P_INT, V_COUNT };
+enum { O_REF, O_PLANT, O_DIST, O_CTRL, O_CINT, O_CBOOL, O_PINT, O_COUNT };
+
+/*
+ * Steps k = first .. last-1 of a run: the controller samples [r_k, y_k] (row k),
+ * its outputs go to row k; the plant integrates with [dist_k, u_k] (Gauss-Seidel)
+ * or u_{k-1} (Jacobi; row -1 is the spare row `spare`), its outputs go to row
+ * k+1.  Offsets are in elements of their matrix.  Returns 0, or the first FMI
+ * status above fmi2Warning with *failed_step set to its step.
+ */
+FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
+                          const unsigned int *const vrs[V_COUNT], const size_t counts[V_COUNT],
+                          double *data, long stride, int32_t *ints, long istride, double *spare,
+                          const long offsets[O_COUNT], double h, int jacobi, long first, long last,
+                          long *failed_step) {
+    fmi2SetRealTYPE *c_set = (fmi2SetRealTYPE *)fns[F_C_SET];
+    fmi2DoStepTYPE *c_step = (fmi2DoStepTYPE *)fns[F_C_STEP];
+    fmi2GetRealTYPE *c_get = (fmi2GetRealTYPE *)fns[F_C_GET];
+    fmi2GetIntegerTYPE *c_geti = (fmi2GetIntegerTYPE *)fns[F_C_GETI];
+    fmi2GetBooleanTYPE *c_getb = (fmi2GetBooleanTYPE *)fns[F_C_GETB];
+    fmi2SetRealTYPE *p_set = (fmi2SetRealTYPE *)fns[F_P_SET];
+    fmi2DoStepTYPE *p_step = (fmi2DoStepTYPE *)fns[F_P_STEP];
+    fmi2GetRealTYPE *p_get = (fmi2GetRealTYPE *)fns[F_P_GET];
+    fmi2GetIntegerTYPE *p_geti = (fmi2GetIntegerTYPE *)fns[F_P_GETI];
+    if (fns == NULL || comps == NULL || vrs == NULL || counts == NULL || data == NULL ||
+        ints == NULL || spare == NULL || offsets == NULL || failed_step == NULL)
+        return (int)fmi2Error;
+    fmi2Component cc = comps[0], pc = comps[1];
+    long k;
+    for (k = first; k < last; k++) {
+        double *row = data + k * stride;
+        int32_t *irow = ints + k * istride;
+        double t = (double)k * h;
+        int s = (int)c_set(cc, vrs[V_C_IN], counts[V_C_IN], row + offsets[O_REF]);
+        s |= (int)c_step(cc, t, h, fmi2True);
+        s |= (int)c_get(cc, vrs[V_C_OUT], counts[V_C_OUT], row + offsets[O_CTRL]);
+        s |= (int)c_geti(cc, vrs[V_C_INT], counts[V_C_INT], irow + offsets[O_CINT]);
+        s |= (int)c_getb(cc, vrs[V_C_BOOL], counts[V_C_BOOL], irow + offsets[O_CBOOL]);
+        if (jacobi) {
+            const double *prev = (k > 0 ? row - stride : spare) + offsets[O_CTRL];
+            s |= (int)p_set(pc, vrs[V_P_CMD], counts[V_P_CMD], prev);
+            s |= (int)p_set(pc, vrs[V_P_DIST], counts[V_P_DIST], row + offsets[O_DIST]);
+        } else {
+            s |= (int)p_set(pc, vrs[V_P_IN], counts[V_P_IN], row + offsets[O_DIST]);
+        }
+        s |= (int)p_step(pc, t, h, fmi2True);
+        s |= (int)p_get(pc, vrs[V_P_OUT], counts[V_P_OUT], row + stride + offsets[O_PLANT]);
+        s |= (int)p_geti(pc, vrs[V_P_INT], counts[V_P_INT], irow + istride + offsets[O_PINT]);
+        if (s > (int)fmi2Warning) { /* statuses OR together: > 1 iff one was > 1 */
+            *failed_step = k;
+            return s;
+        }
+    }
+    return 0;
+}

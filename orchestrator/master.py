@@ -1,0 +1,406 @@
+"""The co-simulation master: plant and controller FMUs at a fixed step.
+
+fmpy extracts, loads, instantiates and initializes both FMUs; the stepping loop
+then calls the very same FMI functions of the loaded libraries with value
+references and buffers prepared once per run, reading and writing the
+recording matrix in place (no per-step lists, no copies):
+
+* the references and disturbances of the whole run are sampled up front into
+  their columns;
+* the plant's outputs are recorded in an order whose first part is exactly the
+  controller's measured inputs, and the controller's outputs in an order whose
+  first part is the plant's command inputs, so each connection is one
+  ``fmi2SetReal`` reading straight from the recording.
+
+Coupling (the order is a modelling choice, documented here and in the result):
+
+* ``gauss-seidel`` (default): at t_k the controller samples y_k and computes
+  u_k; the plant then integrates [t_k, t_k+1] with u_k (zero computational delay,
+  as a sampled controller on a real vehicle with a fast processor).
+* ``jacobi``: both FMUs step in parallel from t_k; the plant integrates with
+  u_{k-1}, the command of the previous sample (one-sample delay).
+
+Runs are deterministic: the same scenario gives bit-identical results (unless
+the controller's self-timing outputs are switched on).
+"""
+
+from __future__ import annotations
+
+import ctypes
+import sys
+import time
+from collections.abc import Callable
+from dataclasses import dataclass
+from functools import cache
+from importlib import resources
+from pathlib import Path
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from orchestrator.fmu import FmuInstance
+from orchestrator.results import RunResult
+from plant import Airframe, fmu_path
+
+if TYPE_CHECKING:
+    from orchestrator.scenario import Scenario
+
+REF_INPUTS = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref")
+DIST_INPUTS = ("f_d", "tau_d", "a_d", "efficiency")
+COUPLINGS = ("gauss-seidel", "jacobi")
+ENGINES = ("native", "python")
+
+_c_int, _vp, _sz, _dbl = ctypes.c_int, ctypes.c_void_p, ctypes.c_size_t, ctypes.c_double
+_ARRAY_FN = ctypes.CFUNCTYPE(_c_int, _vp, _vp, _sz, _vp)
+_STEP_FN = ctypes.CFUNCTYPE(_c_int, _vp, _dbl, _dbl, _c_int)
+
+
+class RunError(RuntimeError):
+    """An FMU refused a call during the run; the message carries its log."""
+
+
+@dataclass
+class _Group:
+    """Variables of one FMU read/written with one call, bound to a recording block."""
+
+    names: list[str]
+    refs: ctypes.Array[ctypes.c_uint]
+    column: int  # first column of the block in its matrix
+
+
+class _Fmu:
+    """Raw FMI entry points of an fmpy-loaded FMU, typed for pointer arithmetic."""
+
+    def __init__(self, inst: FmuInstance) -> None:
+        self.inst = inst
+        dll = inst.slave.dll
+        self.comp = inst.slave.component
+        self.get_real = _ARRAY_FN(("fmi2GetReal", dll))
+        self.set_real = _ARRAY_FN(("fmi2SetReal", dll))
+        self.get_int = _ARRAY_FN(("fmi2GetInteger", dll))
+        self.get_bool = _ARRAY_FN(("fmi2GetBoolean", dll))
+        self.do_step = _STEP_FN(("fmi2DoStep", dll))
+
+    def outputs(self, kind: str) -> list[str]:
+        return [v.name for v in self.inst.md.modelVariables
+                if v.causality == "output" and v.type == kind]
+
+    def inputs(self) -> list[str]:
+        return [v.name for v in self.inst.md.modelVariables if v.causality == "input"]
+
+    def refs(self, names: list[str]) -> ctypes.Array[ctypes.c_uint]:
+        return (ctypes.c_uint * len(names))(*[self.inst.vr(n) for n in names])
+
+
+@cache
+def _polytope_parameters(source: str, mtime: float) -> dict[str, float | int]:
+    from controller.force_sets import feasible_force_set
+    from plant import load_airframe
+
+    poly = feasible_force_set(load_airframe(source))
+    params: dict[str, float | int] = {"poly_n": len(poly.b)}
+    for i in range(len(poly.b)):
+        for j in range(3):
+            params[f"poly_A[{i + 1},{j + 1}]"] = float(poly.A[i, j])
+        params[f"poly_b[{i + 1}]"] = float(poly.b[i])
+    return params
+
+
+def controller_parameters(airframe: Airframe, controller: FmuInstance) -> dict[str, float | int]:
+    """The controller's airframe model and feasible-force polytope for an airframe.
+
+    Names shared with the plant come from the airframe file; the polytope is the
+    airframe's S(0), except for the shipped paper hexacopter, whose S(0) is the
+    FMU's built-in default (a test keeps the two identical).
+    """
+    params = {k: v for k, v in airframe.fmu_parameters().items()
+              if k in controller.variables and controller.variables[k].causality == "parameter"}
+    source = Path(str(airframe.source))
+    shipped = Path(str(resources.files("plant").joinpath("airframes", "paper_hexacopter.toml")))
+    if source.read_bytes() != shipped.read_bytes():
+        params.update(_polytope_parameters(str(source.resolve()), source.stat().st_mtime))
+    return params
+
+
+def plant_parameters(scenario: Scenario, refs0: dict[str, np.ndarray]) -> dict[str, object]:
+    """Airframe values, the initial pose at the reference's start, then the overrides."""
+    params: dict[str, object] = dict(scenario.airframe.fmu_parameters())
+    for i in range(3):
+        params[f"pos0[{i + 1}]"] = float(refs0["pos_ref"][0, i])
+        params[f"euler0[{i + 1}]"] = float(refs0["euler_ref"][0, i])
+        params[f"vel0[{i + 1}]"] = float(refs0["vel_ref"][0, i])
+    params.update(scenario.plant_parameters)
+    return params
+
+
+class CoSimulation:
+    """One run of a scenario: ``CoSimulation(scenario).run() -> RunResult``."""
+
+    def __init__(self, scenario: Scenario, *, timing: bool = False,
+                 progress: bool | None = None, engine: str = "native") -> None:
+        if scenario.coupling not in COUPLINGS:
+            raise ValueError(f"coupling must be one of {COUPLINGS}, got {scenario.coupling!r}")
+        if engine not in ENGINES:
+            raise ValueError(f"engine must be one of {ENGINES}, got {engine!r}")
+        self.scenario = scenario
+        self.engine = engine
+        self.timing = timing
+        self.progress = progress
+
+    def run(self, on_chunk: Callable[[int, int], None] | None = None) -> RunResult:
+        sc = self.scenario
+        h = sc.step
+        n = round(sc.duration / h)
+        times = np.arange(n + 1, dtype=float) * h
+        refs = sc.references(times)
+        dists = sc.disturbances(times)
+        plant_inst = FmuInstance(fmu_path("MultirotorPlant"), "plant")
+        ctrl_inst = FmuInstance(fmu_path("FullPoseController"), "controller")
+        try:
+            return self._run(plant_inst, ctrl_inst, times, refs, dists, on_chunk)
+        finally:
+            plant_inst.close()
+            ctrl_inst.close()
+
+    # -- setup ---------------------------------------------------------------
+
+    def _run(self, plant_inst: FmuInstance, ctrl_inst: FmuInstance, times: np.ndarray,
+             refs: dict[str, np.ndarray], dists: dict[str, np.ndarray],
+             on_chunk: Callable[[int, int], None] | None) -> RunResult:
+        sc = self.scenario
+        plant, ctrl = _Fmu(plant_inst), _Fmu(ctrl_inst)
+        rows = times.size
+
+        # connection table by matching names
+        p_real_out = plant.outputs("Real")
+        c_real_out = ctrl.outputs("Real")
+        c_inputs, p_inputs = ctrl.inputs(), plant.inputs()
+        measured = [v for v in c_inputs if v in set(p_real_out)]
+        commands = [v for v in p_inputs if v in set(c_real_out)]
+        ref_names = [v for g in REF_INPUTS for v in ctrl_inst.expand(g)]
+        dist_names = [v for g in DIST_INPUTS for v in plant_inst.expand(g)]
+        unconnected = ([f"controller.{v}" for v in c_inputs
+                        if v not in measured and v not in ref_names]
+                       + [f"plant.{v}" for v in p_inputs
+                          if v not in commands and v not in dist_names])
+        if unconnected:
+            raise RunError(f"inputs left unconnected: {', '.join(unconnected)}")
+
+        # recording layout: time | ref | plant (measured first) | dist | ctrl (commands first),
+        # so that [ref, measured] and [dist, commands] are contiguous: one call each
+        plant_order = measured + [v for v in p_real_out if v not in measured]
+        ctrl_order = commands + [v for v in c_real_out if v not in commands]
+        columns = (["time"] + [f"ref.{v}" for v in ref_names] + [f"plant.{v}" for v in plant_order]
+                   + [f"dist.{v}" for v in dist_names] + [f"ctrl.{v}" for v in ctrl_order])
+        c_ref = 1
+        c_plant = c_ref + len(ref_names)
+        c_dist = c_plant + len(plant_order)
+        c_ctrl = c_dist + len(dist_names)
+        data = np.zeros((rows + 1, len(columns)))  # one spare row: Jacobi's u_{-1}
+        data[:rows, 0] = times
+        col = c_ref
+        for g in REF_INPUTS:
+            data[:rows, col:col + 3] = refs[g]
+            col += 3
+        col = c_dist
+        for g in DIST_INPUTS:
+            width = len(plant_inst.expand(g))
+            data[:rows, col:col + width] = dists[g][:, :width]
+            col += width
+        p_ints = plant.outputs("Integer")
+        c_ints = ctrl.outputs("Integer")
+        c_bools = ctrl.outputs("Boolean")
+        ints = np.zeros((rows + 1, len(p_ints) + len(c_ints) + len(c_bools)), dtype=np.int32)
+
+        # initialization: plant at the start pose, controller from y_0 and r_0
+        refs0 = {k: v[:1] for k, v in refs.items()}
+        p_params = plant_parameters(sc, refs0)
+        p_params["timing"] = self.timing
+        plant_inst.initialize(parameters=p_params)
+        ctrl_inst.slave.setupExperiment(startTime=0.0)
+        ctrl_params: dict[str, object] = dict(controller_parameters(sc.airframe, ctrl_inst))
+        ctrl_params["timing"] = self.timing
+        ctrl_params.update(sc.controller_parameters)
+        ctrl_inst.set_many(ctrl_params)  # type: ignore[arg-type]
+        ctrl_inst.slave.enterInitializationMode()
+        ctrl_inst.write(ctrl_inst.signal(measured), plant_inst.read(plant_inst.signal(measured)))
+        ctrl_inst.write(ctrl_inst.signal(ref_names), data[0, c_ref:c_plant])
+        ctrl_inst.slave.exitInitializationMode()
+
+        groups = {
+            "p_out": plant.refs(plant_order), "c_out": ctrl.refs(ctrl_order),
+            "c_in": ctrl.refs(ref_names + measured), "p_in": plant.refs(dist_names + commands),
+            "p_cmd": plant.refs(commands), "p_dist": plant.refs(dist_names),
+            "p_int": plant.refs(p_ints), "c_int": ctrl.refs(c_ints), "c_bool": ctrl.refs(c_bools),
+        }
+        # row 0 (and the Jacobi spare row: the controller's initial outputs)
+        base = data.ctypes.data
+        ibase = ints.ctypes.data
+        stride, istride = data.strides[0], ints.strides[0]
+        plant.get_real(plant.comp, groups["p_out"], len(plant_order), base + 8 * c_plant)
+        plant.get_int(plant.comp, groups["p_int"], len(p_ints), ibase)
+        spare_row = base + rows * stride
+        ctrl.get_real(ctrl.comp, groups["c_out"], len(ctrl_order), spare_row + 8 * c_ctrl)
+
+        wall = self._loop(plant, ctrl, groups, rows, len(measured), len(commands),
+                                    (c_ref, c_plant, c_dist, c_ctrl),
+                                    (len(ref_names), len(plant_order), len(dist_names),
+                                     len(ctrl_order)),
+                                    (len(p_ints), len(c_ints), len(c_bools)),
+                                    base, stride, ibase, istride, on_chunk)
+
+        # the FMUs' own compute time, measured inside them (only with timing on)
+        fmu_time = None
+        if self.timing:
+            fmu_time = {"plant": float(data[1:rows, columns.index("plant.t_step")].sum()),
+                        "controller": float(data[:rows, columns.index("ctrl.t_step")].sum())}
+        warnings = [m for s, _, m in plant_inst.messages + ctrl_inst.messages if s == "WARNING"]
+        int_columns = ([f"plant.{v}" for v in p_ints] + [f"ctrl.{v}" for v in c_ints]
+                       + [f"ctrl.{v}" for v in c_bools])
+        full = np.hstack([data[:rows], ints[:rows].astype(float)])
+        meta = {
+            "scenario": sc.name,
+            "scenario_source": str(sc.source),
+            "airframe": sc.airframe.name,
+            "airframe_source": str(sc.airframe.source),
+            "n_rotors": sc.airframe.n_rotors,
+            "alpha_limits": [float(x) for x in sc.airframe.alpha_limits[0]],
+            "beta_limits": [float(x) for x in sc.airframe.beta_limits[0]],
+            "omega_max": sc.airframe.omega_max,
+            "step": sc.step,
+            "duration": float(times[-1]),
+            "coupling": sc.coupling,
+            "wall_time": wall,
+            "fmu_time": fmu_time,
+            "timing": self.timing,
+            "warnings": len(warnings),
+            "first_warnings": warnings[:5],
+            "plant_parameters": {k: v for k, v in sc.plant_parameters.items()},
+            "controller_parameters": {k: v for k, v in sc.controller_parameters.items()},
+        }
+        return RunResult(columns=columns + int_columns, data=full, meta=meta)
+
+    # -- the loop ------------------------------------------------------------
+
+    def _loop(self, plant: _Fmu, ctrl: _Fmu, g: dict[str, ctypes.Array[ctypes.c_uint]], rows: int,
+              n_meas: int, n_cmd: int, cols: tuple[int, int, int, int],
+              widths: tuple[int, int, int, int], iwidths: tuple[int, int, int], base: int,
+              stride: int, ibase: int, istride: int,
+              on_chunk: Callable[[int, int], None] | None) -> float:
+        c_ref, c_plant, c_dist, c_ctrl = (8 * c for c in cols)
+        n_ref, n_pout, n_dist, n_cout = widths
+        n_cin, n_pin = n_ref + n_meas, n_dist + n_cmd
+        n_pint, n_cint, n_cbool = iwidths
+        o_cint, o_cbool = 4 * n_pint, 4 * (n_pint + n_cint)
+        h = self.scenario.step
+        jacobi = self.scenario.coupling == "jacobi"
+        spare = base + rows * stride
+        pc, cc = plant.comp, ctrl.comp
+        p_set, p_get, p_geti, p_step = plant.set_real, plant.get_real, plant.get_int, plant.do_step
+        c_set, c_get, c_geti, c_getb, c_step = (ctrl.set_real, ctrl.get_real, ctrl.get_int,
+                                                ctrl.get_bool, ctrl.do_step)
+        gp_out, gc_out, gc_in, gp_in = g["p_out"], g["c_out"], g["c_in"], g["p_in"]
+        gp_cmd, gp_dist, gp_int, gc_int, gc_bool = (g["p_cmd"], g["p_dist"], g["p_int"],
+                                                    g["c_int"], g["c_bool"])
+        show = self.progress if self.progress is not None else sys.stderr.isatty()
+        bar = None
+        if show and rows * h > 5.0:
+            from tqdm import tqdm
+
+            bar = tqdm(total=rows - 1, unit="step", desc=self.scenario.name, leave=False)
+        last = rows - 1  # steps; the last row only records the controller's answer
+        native = self._native_kernel(plant, ctrl, g, cols, widths, iwidths, n_cin, n_pin,
+                                     base, stride, ibase, istride, spare, h, jacobi)
+        start = time.perf_counter()
+        for first in range(0, last, 500):
+            if native is not None:
+                native(first, min(first + 500, last))
+                if bar is not None:
+                    bar.update(min(first + 500, last) - first)
+                if on_chunk is not None:
+                    on_chunk(min(first + 500, last), last)
+                continue
+            # the hot loop: nine FMI calls per step on buffers prepared once
+            for k in range(first, min(first + 500, last)):
+                row = base + k * stride
+                irow = ibase + k * istride
+                t = k * h
+                a = c_set(cc, gc_in, n_cin, row + c_ref)  # controller samples [r_k, y_k]
+                a |= c_step(cc, t, h, 1)
+                a |= c_get(cc, gc_out, n_cout, row + c_ctrl)
+                a |= c_geti(cc, gc_int, n_cint, irow + o_cint)
+                a |= c_getb(cc, gc_bool, n_cbool, irow + o_cbool)
+                if jacobi:  # plant integrates with u_{k-1}
+                    a |= p_set(pc, gp_cmd, n_cmd, (row - stride if k else spare) + c_ctrl)
+                    a |= p_set(pc, gp_dist, n_dist, row + c_dist)
+                else:  # plant integrates with u_k: [dist_k, u_k] in one call
+                    a |= p_set(pc, gp_in, n_pin, row + c_dist)
+                a |= p_step(pc, t, h, 1)
+                a |= p_get(pc, gp_out, n_pout, row + stride + c_plant)  # y_{k+1}
+                a |= p_geti(pc, gp_int, n_pint, irow + istride)
+                if a > 1:  # statuses: 0 ok, 1 warning; anything else stops the run
+                    self._fail((plant, ctrl), t)
+            if bar is not None:
+                bar.update(min(first + 500, last) - first)
+            if on_chunk is not None:
+                on_chunk(min(first + 500, last), last)
+        row, irow = base + last * stride, ibase + last * istride
+        a = c_set(cc, gc_in, n_cin, row + c_ref)
+        a |= c_step(cc, last * h, h, 1)
+        a |= c_get(cc, gc_out, n_cout, row + c_ctrl)
+        a |= c_geti(cc, gc_int, n_cint, irow + o_cint)
+        a |= c_getb(cc, gc_bool, n_cbool, irow + o_cbool)
+        if a > 1:
+            self._fail((plant, ctrl), last * h)
+        wall = time.perf_counter() - start
+        if bar is not None:
+            bar.close()
+        return wall
+
+    def _native_kernel(self, plant: _Fmu, ctrl: _Fmu, g: dict[str, ctypes.Array[ctypes.c_uint]],
+                       cols: tuple[int, int, int, int], widths: tuple[int, int, int, int],
+                       iwidths: tuple[int, int, int], n_cin: int, n_pin: int, base: int,
+                       stride: int, ibase: int, istride: int, spare: int, h: float,
+                       jacobi: bool) -> Callable[[int, int], None] | None:
+        """The same call sequence run by fp_cosim_steps (libfullpose_core), or None."""
+        if self.engine != "native":
+            return None
+        from plant._native import core
+
+        lib = core()
+        vp = ctypes.c_void_p
+
+        def fn(f: _Fmu, name: str) -> int | None:
+            return ctypes.cast(getattr(f.inst.slave.dll, name), vp).value
+
+        fns = (vp * 9)(fn(ctrl, "fmi2SetReal"), fn(ctrl, "fmi2DoStep"), fn(ctrl, "fmi2GetReal"),
+                       fn(ctrl, "fmi2GetInteger"), fn(ctrl, "fmi2GetBoolean"),
+                       fn(plant, "fmi2SetReal"), fn(plant, "fmi2DoStep"),
+                       fn(plant, "fmi2GetReal"), fn(plant, "fmi2GetInteger"))
+        comps = (vp * 2)(ctrl.comp, plant.comp)
+        order = ["c_in", "c_out", "c_int", "c_bool", "p_in", "p_cmd", "p_dist", "p_out", "p_int"]
+        vrs = (vp * 9)(*[ctypes.addressof(g[k]) for k in order])
+        counts = (ctypes.c_size_t * 9)(*[len(g[k]) for k in order])
+        n_pint, n_cint, _ = iwidths
+        c_ref, c_plant, c_dist, c_ctrl = cols
+        offsets = (ctypes.c_long * 7)(c_ref, c_plant, c_dist, c_ctrl, n_pint, n_pint + n_cint, 0)
+        failed = ctypes.c_long(-1)
+        args = (fns, comps, vrs, counts, base, stride // 8, ibase, istride // 4, spare)
+
+        def run_chunk(first: int, last: int) -> None:
+            if lib.fp_cosim_steps(*args, offsets, h, int(jacobi), first, last,
+                                  ctypes.byref(failed)):
+                self._fail((plant, ctrl), failed.value * h)
+
+        return run_chunk
+
+    def _fail(self, fmus: tuple[_Fmu, _Fmu], t: float) -> None:
+        msgs = [f"{f.inst.md.modelName}: {m}" for f in fmus for s, _, m in f.inst.messages
+                if s in ("ERROR", "FATAL", "DISCARD")]
+        raise RunError(f"the co-simulation failed at t = {t:.3f} s: "
+                       + ("; ".join(msgs[-3:]) or "an FMU call returned an error"))
+
+
+def run(scenario: Scenario, *, timing: bool = False, progress: bool | None = None) -> RunResult:
+    """Run a scenario and return every exchanged signal at every step."""
+    return CoSimulation(scenario, timing=timing, progress=progress).run()
