@@ -26,6 +26,53 @@ def _cmd_hover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_run(args: argparse.Namespace) -> int:
+    from orchestrator.runner import prepare, run_scenario
+
+    scenario = prepare(args.scenario, args.duration, args.set)
+    out = args.out if args.out is not None else Path("results") / scenario.name
+    print(f"running {scenario.name} ({scenario.duration:g} s, airframe {scenario.airframe.name}, "
+          f"{scenario.coupling}) -> {out}")
+    output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
+                          csv=not args.no_csv, engine=args.engine)
+    m = output.metrics
+    meta = output.result.meta
+    pos = m.get("position_error") or {}
+    print(f"max position error  {pos.get('max', float('nan')):.4f} m "
+          f"(RMS {pos.get('rms', float('nan')):.4f} m)")
+    print(f"real-time factor    {meta['duration'] / meta['wall_time']:.0f}x "
+          f"({meta['wall_time']:.2f} s wall)")
+    for line in output.paper:
+        print(line)
+    print(f"wrote               {', '.join(f.name for f in output.files)}")
+    return 0
+
+
+def _cmd_scenarios(args: argparse.Namespace) -> int:
+    from orchestrator.scenario import list_scenarios
+
+    for sc in list_scenarios():
+        print(f"{sc.name:30s} {sc.duration:6g} s  {sc.airframe.name:22s} {sc.description}")
+    return 0
+
+
+def _cmd_check(args: argparse.Namespace) -> int:
+    from orchestrator.scenario import check_scenario
+
+    sc = check_scenario(args.file)
+    print(f"{args.file}: OK ({sc.name}, {sc.duration:g} s, airframe {sc.airframe.name})")
+    return 0
+
+
+def _cmd_export_ssp(args: argparse.Namespace) -> int:
+    from orchestrator.ssp import export_ssp
+
+    path = export_ssp(args.output, airframe=args.airframe, pos0=tuple(args.pos0),
+                      stop_time=args.stop_time)
+    print(f"wrote {path}")
+    return 0
+
+
 def _cmd_airframes(args: argparse.Namespace) -> int:
     for name in list_airframes():
         af = load_airframe(name)
@@ -67,6 +114,36 @@ def build_parser() -> argparse.ArgumentParser:
     )
     sub = parser.add_subparsers(dest="command", metavar="COMMAND")
 
+    run = sub.add_parser("run", help="run a scenario: results, metrics and the paper's figures")
+    run.add_argument("scenario", help="shipped scenario name or TOML file")
+    run.add_argument("--out", type=Path, default=None,
+                     help="output directory (default: results/NAME)")
+    run.add_argument("--duration", type=float, default=None, help="override the duration (s)")
+    run.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
+                     help="override a parameter, e.g. controller.K_pos_D[1]=3 (repeatable)")
+    run.add_argument("--no-timing", action="store_true",
+                     help="do not measure FMU compute times (runs become bit-reproducible)")
+    run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
+    run.add_argument("--no-csv", action="store_true", help="skip results.csv (keep .npz)")
+    run.add_argument("--engine", choices=("native", "python"), default="native",
+                     help="step loop: C kernel (default) or the pure-Python reference")
+    run.set_defaults(func=_cmd_run)
+
+    scen = sub.add_parser("scenarios", help="list the shipped scenarios")
+    scen.set_defaults(func=_cmd_scenarios)
+
+    check = sub.add_parser("check", help="validate a scenario file (runs nothing)")
+    check.add_argument("file", help="scenario TOML file or shipped name")
+    check.set_defaults(func=_cmd_check)
+
+    ssp = sub.add_parser("export-ssp", help="export the closed loop as an SSP archive")
+    ssp.add_argument("output", type=Path, help="archive to write (.ssp)")
+    ssp.add_argument("--airframe", default="paper_hexacopter")
+    ssp.add_argument("--pos0", type=float, nargs=3, default=[0.0, 0.0, -3.0],
+                     metavar=("X", "Y", "Z"), help="hover position (m, NED)")
+    ssp.add_argument("--stop-time", type=float, default=10.0)
+    ssp.set_defaults(func=_cmd_export_ssp)
+
     hover = sub.add_parser("hover", help="simulate the plant FMU hovering at trim (open loop)")
     hover.add_argument("--airframe", default="paper_hexacopter",
                        help="shipped airframe name or TOML file (default: paper_hexacopter)")
@@ -97,7 +174,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     try:
         return int(args.func(args))
-    except (AirframeError, NativeBuildMissing, ValueError) as e:
+    except (AirframeError, NativeBuildMissing, ValueError, RuntimeError) as e:
         print(f"fullpose: error: {e}", file=sys.stderr)
         return 2
 

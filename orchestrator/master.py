@@ -401,6 +401,7 @@ class CoSimulation:
                        + ("; ".join(msgs[-3:]) or "an FMU call returned an error"))
 
 
-def run(scenario: Scenario, *, timing: bool = False, progress: bool | None = None) -> RunResult:
+def run(scenario: Scenario, *, timing: bool = False, progress: bool | None = None,
+        engine: str = "native") -> RunResult:
     """Run a scenario and return every exchanged signal at every step."""
-    return CoSimulation(scenario, timing=timing, progress=progress).run()
+    return CoSimulation(scenario, timing=timing, progress=progress, engine=engine).run()

@@ -156,7 +156,8 @@ def test_model_description(plant_fmu):
     sat = variables["sat_flags"]
     assert sat.causality == "output" and sat.type == "Integer"
     assert "sat_flags" in outputs
-    assert len(outputs) == len(expected) + 1
+    assert variables["t_step"].unit == "s" and "t_step" in outputs  # opt-in self-timing
+    assert len(outputs) == len(expected) + 2
 
     # every unit used is defined; the physical variables all carry one
     for v in md.modelVariables:

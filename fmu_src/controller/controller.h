@@ -10,7 +10,7 @@
 #include "multirotor.h"
 #include "wls.h"
 
-#define CTRL_N_FILTERS (15 + 3 * FP_MAX_ROTORS) /* pos vel acc euler rate | omega alpha beta */
+#define CTRL_N_FILTERS (24 + 3 * FP_MAX_ROTORS) /* measurements, pos/vel/euler refs, actuators */
 
 typedef struct {
     /* parameters */
@@ -48,6 +48,7 @@ typedef struct {
     double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
     double filt[CTRL_N_FILTERS][2];        /* [value, derivative] per filtered signal */
     double psi_raw, psi_unwrapped;         /* heading unwrapping before filtering */
+    double psi_ref_raw, psi_ref_unwrapped; /* the same for the heading reference */
     double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
     double inertia_inv[3][3];
     double fz_min, fz_max;                 /* f_bz range of the polytope */

@@ -1,0 +1,305 @@
+"""Metrics of a recorded run (the JSON summary) and the paper's claims beside ours.
+
+:func:`compute_metrics` reduces a :class:`~orchestrator.results.RunResult` to a plain dict
+(str keys; float, int, str, None, lists and dicts of these; never NaN or inf), which the caller
+writes as JSON.  Every sample (row) has the same weight: rows are equally spaced communication
+points.  A value that cannot be computed (signal not recorded, timing not measured, wall time
+unknown) is ``None``; so is a statistic whose samples are not all finite (the run diverged),
+and ``nonfinite_rows`` then counts the rows with a non-finite position or attitude.
+
+Keys (units in brackets)
+------------------------
+``scenario``, ``airframe``
+    Names from ``result.meta`` (None when absent).
+``n_samples`` [-], ``step`` [s], ``duration`` [s]
+    Rows recorded, communication step and simulated time (meta, else from ``time``).
+``nonfinite_rows`` [-]
+    Rows where ``plant.pos`` or ``plant.euler`` is not finite.
+``position_error`` [m]
+    e = ``plant.pos`` - ``ref.pos_ref`` (world NED).  ``max`` and ``rms`` of the norm |e|;
+    per axis ``x``, ``y``, ``z``: ``{"max": max |e_i|, "rms": sqrt(mean(e_i^2))}``.
+``attitude_error_vs_mu_c``, ``attitude_error_vs_mu_ref`` [deg]
+    e = ``plant.euler`` - ``ctrl.mu_c`` (resp. ``ref.euler_ref``), each component wrapped to
+    [-180, 180) deg.  Per axis ``phi``, ``theta``, ``psi``: ``{"max": max |e_i|, "rms": ...}``;
+    ``max_axis``: the largest of the three per-axis maxima (how the paper reads its plots);
+    overall ``max`` and ``rms`` of the norm of the wrapped Euler-error vector.
+``infeasible_fraction`` [-]
+    Fraction of samples where the reference pose was infeasible: 1 - mean(``ctrl.feasible``).
+``saturation`` [-]
+    From ``ctrl.sat_flags`` (bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i; only rotors
+    1..``n_rotors`` count).  ``any_motor`` / ``any_alpha`` / ``any_beta`` / ``any``: fraction of
+    samples with at least one such flag set; ``motor`` / ``alpha`` / ``beta``: fraction of
+    actuator-samples at a limit (set bits / (n_samples * n_rotors)).
+``guidance_qp``, ``allocation_qp``
+    ``iter_mean`` [-] and ``iter_max`` [-] of ``ctrl.guid_iter`` / ``ctrl.alloc_iter``;
+    ``status_counts``: samples per status ``optimal`` (0), ``max_iter`` (1), ``infeasible``
+    (2), ``bad_input`` (3) (and ``other`` when an unknown code occurs).
+``timing`` [s]
+    For ``t_guid``, ``t_alloc`` and ``t_step`` (controller computation times measured inside
+    the FMU): ``{"mean", "p99", "max"}`` over all samples, or None when the column is all zero
+    (the run did not measure it).
+``wall_time`` [s]
+    Wall-clock time of the co-simulation loop (meta), or None.
+``real_time_factor`` [-]
+    ``duration / wall_time``: simulated seconds per wall-clock second (> 1: faster than real
+    time), or None.
+``master_overhead_fraction`` [-]
+    ``(wall_time - fmu_time.plant - fmu_time.controller) / wall_time``: share of the wall time
+    spent outside the two FMUs (the Python master), or None when fmu_time is not recorded.
+
+:func:`compare_with_paper` states the quantitative claims of the paper's Section IV for the
+paper's three scenarios next to our values.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Mapping
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from orchestrator.results import RunResult
+
+STATUS_NAMES = ("optimal", "max_iter", "infeasible", "bad_input")
+"""Names of the QP status codes 0..3 (controller outputs guid_status and alloc_status)."""
+
+POSITION_AXES = ("x", "y", "z")
+EULER_AXES = ("phi", "theta", "psi")
+
+PAPER_MAX_POSITION_ERROR = 0.02
+"""m, scenario 1 (hovering with varying orientations), Sec. IV-A / Fig. 4."""
+PAPER_MAX_ATTITUDE_ERROR = 0.6
+"""deg, scenario 2 (translating with minimal orientation), Sec. IV-B / Fig. 7."""
+PAPER_MAX_GUIDANCE_TIME = 2.5e-4
+"""s, scenario 3 (full pose with disturbances), Sec. IV-C / Fig. 8 (MATLAB lsqlin, i7-12th)."""
+
+
+def _num(x: float | np.floating | np.integer) -> float | None:
+    """A plain float, or None when not finite (JSON has no NaN/inf)."""
+    v = float(x)
+    return v if math.isfinite(v) else None
+
+
+def _opt(result: RunResult, name: str) -> np.ndarray | None:
+    return result.get(name) if result.has(name) else None
+
+
+def wrap_deg(angle: np.ndarray) -> np.ndarray:
+    """Angles in degrees wrapped to [-180, 180)."""
+    return (np.asarray(angle, dtype=float) + 180.0) % 360.0 - 180.0
+
+
+def _rms(x: np.ndarray, axis: int | None = None) -> np.ndarray:
+    return np.sqrt(np.mean(np.square(x), axis=axis))
+
+
+def _error_stats(err: np.ndarray, axes: tuple[str, ...]) -> dict[str, Any]:
+    """max/RMS of the norm of err (n, k) and per column of its absolute values."""
+    norm = np.linalg.norm(err, axis=1)
+    out: dict[str, Any] = {"max": _num(np.max(norm)), "rms": _num(_rms(norm))}
+    per_max = np.max(np.abs(err), axis=0)
+    per_rms = _rms(err, axis=0)
+    for i, name in enumerate(axes):
+        out[name] = {"max": _num(per_max[i]), "rms": _num(per_rms[i])}
+    return out
+
+
+def _n_rotors(result: RunResult) -> int:
+    n = result.meta.get("n_rotors")
+    if n is not None:
+        return int(n)
+    for name in ("ctrl.omega_cmd", "plant.omega"):
+        if result.has(name):
+            return int(np.atleast_2d(result.get(name).T).shape[0])
+    return 8
+
+
+def saturation_fractions(flags: np.ndarray, n_rotors: int) -> dict[str, float | None]:
+    """Saturation fractions of a sat_flags column (see the module docstring)."""
+    f = np.asarray(flags, dtype=float)
+    if f.size == 0:
+        return {k: None for k in
+                ("any_motor", "any_alpha", "any_beta", "any", "motor", "alpha", "beta")}
+    bits = np.rint(f).astype(np.int64)
+    rotors = np.arange(n_rotors)
+    out: dict[str, float | None] = {}
+    sets = {}
+    for kind, shift in (("motor", 0), ("alpha", 8), ("beta", 16)):
+        on = (bits[:, None] >> (rotors + shift)[None, :]) & 1  # (n, n_rotors)
+        sets[kind] = on
+        out[f"any_{kind}"] = float(np.mean(np.any(on, axis=1)))
+    out["any"] = float(np.mean(np.any(np.hstack(list(sets.values())), axis=1)))
+    for kind, on in sets.items():
+        out[kind] = float(np.mean(on)) if on.size else 0.0
+    return out
+
+
+def _qp_stats(result: RunResult, prefix: str) -> dict[str, Any] | None:
+    iters, status = _opt(result, f"ctrl.{prefix}_iter"), _opt(result, f"ctrl.{prefix}_status")
+    if iters is None and status is None:
+        return None
+    out: dict[str, Any] = {"iter_mean": None, "iter_max": None, "status_counts": None}
+    if iters is not None and iters.size:
+        out["iter_mean"] = _num(np.mean(iters))
+        out["iter_max"] = int(np.max(iters)) if np.all(np.isfinite(iters)) else None
+    if status is not None:
+        codes = np.rint(status).astype(np.int64)
+        counts = {name: int(np.sum(codes == k)) for k, name in enumerate(STATUS_NAMES)}
+        other = int(codes.size - sum(counts.values()))
+        if other:
+            counts["other"] = other
+        out["status_counts"] = counts
+    return out
+
+
+def _timing(result: RunResult) -> dict[str, dict[str, float | None] | None]:
+    out: dict[str, dict[str, float | None] | None] = {}
+    for name in ("t_guid", "t_alloc", "t_step"):
+        t = _opt(result, f"ctrl.{name}")
+        if t is None or t.size == 0 or not np.any(t != 0.0):
+            out[name] = None
+            continue
+        out[name] = {"mean": _num(np.mean(t)), "p99": _num(np.percentile(t, 99.0)),
+                     "max": _num(np.max(t))}
+    return out
+
+
+def _duration(result: RunResult) -> float | None:
+    if result.meta.get("duration") is not None:
+        return float(result.meta["duration"])
+    t = result.time
+    return float(t[-1] - t[0]) if t.size else None
+
+
+def compute_metrics(result: RunResult) -> dict[str, Any]:
+    """The metrics summary of a run (see the module docstring for every key and unit)."""
+    meta = result.meta
+    t = result.time
+    step = meta.get("step")
+    if step is None and t.size > 1:
+        step = float(t[1] - t[0])
+    duration = _duration(result)
+    m: dict[str, Any] = {
+        "scenario": meta.get("scenario"),
+        "airframe": meta.get("airframe"),
+        "n_samples": int(t.size),
+        "step": None if step is None else _num(step),
+        "duration": None if duration is None else _num(duration),
+    }
+
+    pos, pos_ref = _opt(result, "plant.pos"), _opt(result, "ref.pos_ref")
+    euler = _opt(result, "plant.euler")
+    bad = np.zeros(t.size, dtype=bool)
+    for sig in (pos, euler):
+        if sig is not None:
+            bad |= ~np.all(np.isfinite(np.atleast_2d(sig.T).T), axis=1)
+    m["nonfinite_rows"] = int(np.sum(bad))
+
+    m["position_error"] = None
+    if pos is not None and pos_ref is not None and t.size:
+        m["position_error"] = _error_stats(pos - pos_ref, POSITION_AXES)
+
+    for key, ref_name in (("attitude_error_vs_mu_c", "ctrl.mu_c"),
+                          ("attitude_error_vs_mu_ref", "ref.euler_ref")):
+        ref = _opt(result, ref_name)
+        m[key] = None
+        if euler is not None and ref is not None and t.size:
+            err = wrap_deg(np.degrees(euler - ref))
+            stats = _error_stats(err, EULER_AXES)
+            per_axis = [stats[a]["max"] for a in EULER_AXES]
+            stats["max_axis"] = None if None in per_axis else max(per_axis)
+            m[key] = stats
+
+    feasible = _opt(result, "ctrl.feasible")
+    m["infeasible_fraction"] = (None if feasible is None or feasible.size == 0
+                                else _num(1.0 - np.mean(feasible)))
+
+    flags = _opt(result, "ctrl.sat_flags")
+    m["saturation"] = None if flags is None else saturation_fractions(flags, _n_rotors(result))
+
+    m["guidance_qp"] = _qp_stats(result, "guid")
+    m["allocation_qp"] = _qp_stats(result, "alloc")
+    m["timing"] = _timing(result)
+
+    wall = meta.get("wall_time")
+    wall = float(wall) if wall is not None else None
+    m["wall_time"] = None if wall is None else _num(wall)
+    m["real_time_factor"] = None
+    m["master_overhead_fraction"] = None
+    if wall is not None and wall > 0.0:
+        if duration is not None:
+            m["real_time_factor"] = _num(duration / wall)
+        fmu_time = meta.get("fmu_time")
+        if isinstance(fmu_time, Mapping) and "plant" in fmu_time and "controller" in fmu_time:
+            inside = float(fmu_time["plant"]) + float(fmu_time["controller"])
+            m["master_overhead_fraction"] = _num((wall - inside) / wall)
+    return m
+
+
+# ---------------------------------------------------------------------------
+# The paper's claims
+
+
+def _dig(metrics: Mapping[str, Any], *keys: str) -> Any:
+    cur: Any = metrics
+    for k in keys:
+        if not isinstance(cur, Mapping) or cur.get(k) is None:
+            return None
+        cur = cur[k]
+    return cur
+
+
+def _claim(what: str, paper: str, ours: float | None, limit: float, fmt: str,
+           unit: str, missing: str = "not recorded") -> str:
+    if ours is None:
+        return f"{what}: paper {paper}; ours: {missing}"
+    verdict = "meets the claim" if ours <= limit else "EXCEEDS the claim"
+    return f"{what}: paper {paper}; ours {ours:{fmt}} {unit} ({verdict})"
+
+
+def compare_with_paper(metrics: Mapping[str, Any], scenario_name: str) -> list[str]:
+    """Lines stating the paper's claims (Section IV) next to our metrics for its scenarios.
+
+    ``scenario_name`` is the scenario's name or file path; scenarios other than the paper's
+    three (``hover_varying_orientation``, ``translation_frequency_sweep``,
+    ``full_pose_with_disturbances``) give an empty list.
+    """
+    name = Path(str(scenario_name)).stem
+    lines: list[str] = []
+    if name == "hover_varying_orientation":
+        lines.append(_claim(
+            "Scenario 1 (Fig. 4) max position error", f"<= {PAPER_MAX_POSITION_ERROR} m",
+            _dig(metrics, "position_error", "max"), PAPER_MAX_POSITION_ERROR, ".4f", "m"))
+        inf = _dig(metrics, "infeasible_fraction")
+        sat_a = _dig(metrics, "saturation", "any_alpha")
+        sat_b = _dig(metrics, "saturation", "any_beta")
+        lines.append(
+            "Scenario 1 (Figs. 4-5) mu_ref infeasible and servos at +-40 deg for "
+            "20 s <= t <= 30 s (qualitative); ours: infeasible "
+            + ("n/a" if inf is None else f"{100 * inf:.1f} %") + " of the time, alpha at a "
+            "limit " + ("n/a" if sat_a is None else f"{100 * sat_a:.1f} %") + ", beta at a "
+            "limit " + ("n/a" if sat_b is None else f"{100 * sat_b:.1f} %"))
+    elif name == "translation_frequency_sweep":
+        lines.append(_claim(
+            "Scenario 2 (Fig. 7) max attitude error |mu_m - mu_ref| per axis",
+            f"within +-{PAPER_MAX_ATTITUDE_ERROR} deg",
+            _dig(metrics, "attitude_error_vs_mu_ref", "max_axis"), PAPER_MAX_ATTITUDE_ERROR,
+            ".3f", "deg"))
+        lines.append(_claim(
+            "Scenario 2 (Fig. 7) max attitude error |mu_m - mu_c| per axis (for reference)",
+            f"within +-{PAPER_MAX_ATTITUDE_ERROR} deg",
+            _dig(metrics, "attitude_error_vs_mu_c", "max_axis"), PAPER_MAX_ATTITUDE_ERROR,
+            ".3f", "deg"))
+    elif name == "full_pose_with_disturbances":
+        lines.append(_claim(
+            "Scenario 3 (Fig. 8) max guidance allocation solve time",
+            f"{PAPER_MAX_GUIDANCE_TIME:.1e} s (MATLAB lsqlin, Intel i7 12th gen)",
+            _dig(metrics, "timing", "t_guid", "max"), PAPER_MAX_GUIDANCE_TIME, ".3e", "s",
+            missing="not measured (run with the controller parameter timing = true)"))
+        alloc = _dig(metrics, "timing", "t_alloc", "max")
+        if alloc is not None:
+            lines.append(f"Scenario 3 inner allocation solve time (no claim in the paper): "
+                         f"ours max {alloc:.3e} s")
+    return lines

@@ -1,0 +1,543 @@
+"""PNG plots of a recorded run, reproducing the paper's Figs. 3-10.
+
+:func:`plot_run` writes, into ``out_dir``:
+
+``tracking.png`` (Figs. 4, 7, 9)
+    Position x, y, z (reference vs measured, world NED) and attitude phi, theta, psi
+    (mu_ref, mu_c, mu_m in degrees) with the intervals where mu_ref is infeasible
+    (``ctrl.feasible == 0``) shaded; a bottom row with the position error norm and the
+    attitude error mu_m - mu_c per axis.
+``actuators.png`` (Figs. 5, 10)
+    Commanded servo angles alpha_i, beta_i (deg) with the servo limits dashed, and commanded
+    rotor speeds omega_i (rpm) with the speed limit dashed.
+``forces.png`` (Fig. 6)
+    f_b_ref vs f_b_c per body axis over time, and both force trajectories in 3-D against
+    the attainable force set (AFS, green) and S(tau = 0) (blue edges), drawn with
+    :mod:`controller.plots_force_sets`'s helpers.
+``disturbance_timing.png`` (Fig. 8)
+    The disturbance acceleration a_d on top (and f_d, tau_d, rotor efficiency when they are
+    not at their defaults), and below the guidance and allocation QP computation times on a
+    log scale when the run measured them (else the QP iteration counts).
+``force_set.png`` (Fig. 3)
+    :func:`controller.plots_force_sets.plot_force_sets` for the run's airframe (optional).
+
+Only matplotlib's object API and the Agg canvas are used (no pyplot): plotting works headless
+and from threads.  Long runs are decimated for drawing by :func:`envelope`, which keeps each
+bucket's minimum and maximum sample, so spikes (error extrema, saturation) stay visible while a
+line has at most ``MAX_POINTS`` points.
+"""
+
+from __future__ import annotations
+
+import math
+import warnings
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.figure import Figure
+
+from orchestrator.metrics import wrap_deg
+from orchestrator.results import RunResult
+
+if TYPE_CHECKING:
+    from controller.force_sets import Polytope
+    from plant.airframe import Airframe
+
+MAX_POINTS = 4000
+"""At most this many points per drawn line (a min/max pair per bucket)."""
+
+DPI = 100
+RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
+AXIS_COLORS = ("#1f77b4", "#d62728", "#2ca02c")
+REF_COLOR, CMD_COLOR, MEAS_COLOR = "k", "#ff7f0e", "#1f77b4"
+INFEASIBLE_COLOR = "#d62728"
+
+
+# ---------------------------------------------------------------------------
+# Decimation
+
+
+def envelope_indices(y: np.ndarray, max_points: int = MAX_POINTS) -> np.ndarray:
+    """Sorted row indices that keep the min and max of every bucket of ``y`` (1-D).
+
+    With n <= max_points all indices are returned.  Otherwise the rows are cut into
+    max_points // 2 buckets and each contributes its minimum and maximum sample (in time
+    order), plus the first and last rows; the global extrema are always kept.  Non-finite
+    values are kept where they fall (argmin/argmax pick the first NaN of a bucket).
+    """
+    v = np.asarray(y, dtype=float).reshape(-1)
+    n = v.size
+    if n <= max(max_points, 2):
+        return np.arange(n)
+    size = math.ceil(n / max(max_points // 2, 1))
+    n_buckets = math.ceil(n / size)
+    padded = np.concatenate([v, np.full(n_buckets * size - n, v[-1])]).reshape(n_buckets, size)
+    base = np.arange(n_buckets) * size
+    lo = np.minimum(base + np.argmin(padded, axis=1), n - 1)
+    hi = np.minimum(base + np.argmax(padded, axis=1), n - 1)
+    return np.unique(np.concatenate([[0], lo, hi, [n - 1]]))
+
+
+def envelope(t: np.ndarray, y: np.ndarray,
+             max_points: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
+    """(t, y) decimated for drawing, keeping each bucket's extrema (:func:`envelope_indices`)."""
+    idx = envelope_indices(y, max_points)
+    return np.asarray(t)[idx], np.asarray(y).reshape(-1)[idx]
+
+
+def _line(ax: Axes, t: np.ndarray, y: np.ndarray, **kw: Any) -> None:
+    td, yd = envelope(t, y)
+    ax.plot(td, yd, **kw)
+
+
+def false_intervals(t: np.ndarray, ok: np.ndarray,
+                    min_gap: float = 0.0) -> list[tuple[float, float]]:
+    """[start, end) time intervals where ``ok`` is 0 (a sample covers [t_k, t_k+1)).
+
+    Intervals separated by less than ``min_gap`` are merged (keeps chattering flags cheap to
+    draw).
+    """
+    bad = np.asarray(ok, dtype=float) == 0.0
+    if t.size == 0 or not np.any(bad):
+        return []
+    dt = float(t[-1] - t[-2]) if t.size > 1 else 0.0
+    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    t_end = np.append(t, t[-1] + dt)
+    out: list[tuple[float, float]] = []
+    for s, e in zip(starts, ends, strict=True):
+        a, b = float(t_end[s]), float(t_end[e])
+        if out and a - out[-1][1] < min_gap:
+            out[-1] = (out[-1][0], b)
+        else:
+            out.append((a, b))
+    return out
+
+
+def _shade(ax: Axes, intervals: list[tuple[float, float]], label: str | None) -> None:
+    """One filled polygon (axes-height bands) for all intervals."""
+    if not intervals:
+        return
+    xs, ys = [], []
+    for a, b in intervals:
+        xs += [a, a, b, b]
+        ys += [0.0, 1.0, 1.0, 0.0]
+    ax.fill(xs, ys, color=INFEASIBLE_COLOR, alpha=0.12, lw=0,
+            transform=ax.get_xaxis_transform(), label=label)
+
+
+# ---------------------------------------------------------------------------
+# Helpers
+
+
+def _opt(result: RunResult, name: str) -> np.ndarray | None:
+    return result.get(name) if result.has(name) else None
+
+
+def _cols(a: np.ndarray) -> np.ndarray:
+    """A signal as (n, k) (scalar signals become one column)."""
+    return a.reshape(a.shape[0], -1)
+
+
+def _n_rotors(result: RunResult) -> int:
+    n = result.meta.get("n_rotors")
+    if n is not None:
+        return int(n)
+    for name in ("ctrl.omega_cmd", "plant.omega"):
+        if result.has(name):
+            return _cols(result.get(name)).shape[1]
+    return 0
+
+
+def _new_figure(width: float, height: float) -> Figure:
+    fig = Figure(figsize=(width, height), layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig
+
+
+def _title(result: RunResult, what: str) -> str:
+    scenario = result.meta.get("scenario")
+    airframe = result.meta.get("airframe")
+    parts = [what] + [str(p) for p in (scenario, airframe) if p]
+    return " - ".join(parts)
+
+
+def _save(fig: Figure, path: Path) -> Path:
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fig.savefig(path, dpi=DPI)
+    return path
+
+
+def _finish_time_axis(ax: Axes, t: np.ndarray) -> None:
+    if t.size > 1:
+        ax.set_xlim(float(t[0]), float(t[-1]))
+    ax.grid(True, alpha=0.3)
+
+
+# ---------------------------------------------------------------------------
+# Figures
+
+
+def plot_tracking(result: RunResult, path: Path) -> Path:
+    """Figs. 4/7/9: position and attitude tracking, with the errors in a bottom row."""
+    t = result.time
+    fig = _new_figure(13.0, 10.0)
+    axs = fig.subplots(4, 2, sharex=True)
+    pos, pos_ref = _opt(result, "plant.pos"), _opt(result, "ref.pos_ref")
+    for i, name in enumerate(("x", "y", "z")):
+        ax = axs[i, 0]
+        if pos_ref is not None:
+            _line(ax, t, pos_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="reference")
+        if pos is not None:
+            _line(ax, t, pos[:, i], color=MEAS_COLOR, lw=1.0, label="measured")
+        ax.set_ylabel(f"{name} [m]" + (" (NED, down)" if name == "z" else ""))
+        _finish_time_axis(ax, t)
+    axs[0, 0].set_title("position (world NED)")
+    axs[0, 0].legend(loc="upper right", fontsize=8)
+
+    feasible = _opt(result, "ctrl.feasible")
+    span = float(t[-1] - t[0]) if t.size > 1 else 0.0
+    bands = [] if feasible is None else false_intervals(t, feasible, min_gap=span / 1000.0)
+    mu_ref, mu_c = _opt(result, "ref.euler_ref"), _opt(result, "ctrl.mu_c")
+    mu_m = _opt(result, "plant.euler")
+    for i, name in enumerate(("phi", "theta", "psi")):
+        ax = axs[i, 1]
+        _shade(ax, bands, "mu_ref infeasible" if i == 0 else None)
+        if mu_ref is not None:
+            _line(ax, t, np.degrees(mu_ref[:, i]), color=REF_COLOR, ls="--", lw=1.0,
+                  label="mu_ref")
+        if mu_c is not None:
+            _line(ax, t, np.degrees(mu_c[:, i]), color=CMD_COLOR, lw=1.2, label="mu_c")
+        if mu_m is not None:
+            _line(ax, t, np.degrees(mu_m[:, i]), color=MEAS_COLOR, lw=0.9, ls=":",
+                  label="mu_m")
+        ax.set_ylabel(f"{name} [deg]")
+        _finish_time_axis(ax, t)
+    axs[0, 1].set_title("attitude")
+    axs[0, 1].legend(loc="upper right", fontsize=8)
+
+    ax = axs[3, 0]
+    if pos is not None and pos_ref is not None:
+        err = np.linalg.norm(pos - pos_ref, axis=1)
+        _line(ax, t, err, color=MEAS_COLOR, lw=1.0)
+        if err.size and np.all(np.isfinite(err)):
+            k = int(np.argmax(err))
+            ax.plot(t[k], err[k], "v", color=INFEASIBLE_COLOR, ms=5,
+                    label=f"max {err[k]:.4f} m at {t[k]:.2f} s")
+            ax.legend(loc="upper right", fontsize=8)
+    ax.set_ylabel("|pos - pos_ref| [m]")
+    ax.set_xlabel("time [s]")
+    _finish_time_axis(ax, t)
+    ax = axs[3, 1]
+    if mu_m is not None and mu_c is not None:
+        err_att = wrap_deg(np.degrees(mu_m - mu_c))
+        for i, name in enumerate(("phi", "theta", "psi")):
+            _line(ax, t, err_att[:, i], color=AXIS_COLORS[i], lw=0.9, label=name)
+        ax.legend(loc="upper right", fontsize=8, ncols=3)
+    ax.set_ylabel("mu_m - mu_c [deg]")
+    ax.set_xlabel("time [s]")
+    _finish_time_axis(ax, t)
+    fig.suptitle(_title(result, "full-pose tracking"))
+    return _save(fig, path)
+
+
+def _limits(result: RunResult, airframe: Airframe | None) -> dict[str, tuple[float, float]]:
+    """Servo limits (rad) and speed limits (rad/s) from meta, else the airframe."""
+    out: dict[str, tuple[float, float]] = {}
+    meta = result.meta
+    for key, attr in (("alpha", "alpha_limits"), ("beta", "beta_limits")):
+        if meta.get(attr) is not None:
+            lo, hi = meta[attr]
+            out[key] = (float(lo), float(hi))
+        elif airframe is not None:
+            lims = getattr(airframe, attr)
+            out[key] = (float(lims[0][0]), float(lims[0][1]))
+    lo = float(airframe.omega_min) if airframe is not None else 0.0
+    if meta.get("omega_max") is not None:
+        out["omega"] = (lo, float(meta["omega_max"]))
+    elif airframe is not None:
+        out["omega"] = (lo, float(airframe.omega_max))
+    return out
+
+
+def plot_actuators(result: RunResult, path: Path, airframe: Airframe | None = None) -> Path:
+    """Figs. 5/10: commanded servo angles and rotor speeds with their limits."""
+    t = result.time
+    n = _n_rotors(result)
+    lims = _limits(result, airframe)
+    fig = _new_figure(12.0, 9.0)
+    axs = fig.subplots(3, 1, sharex=True)
+    groups = (("alpha", "alpha", np.degrees(1.0), "deg"), ("beta", "beta", np.degrees(1.0), "deg"),
+              ("omega", "omega", RPM_PER_RAD_S, "rpm"))
+    for ax, (key, sym, scale, unit) in zip(axs, groups, strict=True):
+        sig = _opt(result, f"ctrl.{key}_cmd")
+        what = "commanded"
+        if sig is None:
+            sig, what = _opt(result, f"plant.{key}"), "measured"
+        if sig is not None:
+            sig = _cols(sig)
+            for i in range(min(n, sig.shape[1])):
+                _line(ax, t, scale * sig[:, i], lw=0.9, label=f"{sym}_{i + 1}")
+        if key in lims:
+            lo, hi = lims[key]
+            for j, v in enumerate((lo, hi) if key != "omega" or lo > 0 else (hi,)):
+                ax.axhline(scale * v, color="k", ls="--", lw=1.0,
+                           label="limit" if j == 0 else None)
+        ax.set_ylabel(f"{sym} ({what}) [{unit}]")
+        ax.legend(loc="upper right", fontsize=7, ncols=min(n + 1, 9))
+        _finish_time_axis(ax, t)
+    axs[-1].set_xlabel("time [s]")
+    fig.suptitle(_title(result, "actuator inputs"))
+    return _save(fig, path)
+
+
+def _sample_3d(points: np.ndarray, max_points: int = 1500) -> np.ndarray:
+    """Row indices: a uniform subsample plus each coordinate's extrema."""
+    n = points.shape[0]
+    if n <= max_points:
+        return np.arange(n)
+    stride = math.ceil(n / max_points)
+    extra = np.concatenate([np.argmin(points, axis=0), np.argmax(points, axis=0)])
+    return np.unique(np.concatenate([np.arange(0, n, stride), extra, [n - 1]]))
+
+
+def plot_forces(result: RunResult, path: Path, afs: Polytope | None = None,
+                s0: Polytope | None = None) -> Path:
+    """Fig. 6: f_b_ref vs f_b_c over time, in 3-D against the AFS and S(0), and in the
+    lateral plane against the slices P_xy of S(0) at the run's f_bz range."""
+    t = result.time
+    f_ref, f_c = _opt(result, "ctrl.f_b_ref"), _opt(result, "ctrl.f_b_c")
+    fig = _new_figure(15.0, 10.0)
+    grid = fig.add_gridspec(6, 2, width_ratios=[1.25, 1.0])
+    axes_t = [fig.add_subplot(grid[2 * i:2 * i + 2, 0]) for i in range(3)]
+    for i, (ax, name) in enumerate(zip(axes_t, ("f_bx", "f_by", "f_bz"), strict=True)):
+        if i:
+            ax.sharex(axes_t[0])
+        if f_ref is not None:
+            _line(ax, t, f_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="f_b_ref")
+        if f_c is not None:
+            _line(ax, t, f_c[:, i], color=CMD_COLOR, lw=1.0, label="f_b_c")
+        ax.set_ylabel(f"{name} [N]")
+        _finish_time_axis(ax, t)
+    axes_t[0].set_title("body force (FRD) over time")
+    axes_t[0].legend(loc="upper right", fontsize=8)
+    axes_t[-1].set_xlabel("time [s]")
+
+    trajectories = []
+    for sig, color, label in ((f_ref, REF_COLOR, "f_b_ref"), (f_c, CMD_COLOR, "f_b_c")):
+        if sig is None:
+            continue
+        finite = sig[np.all(np.isfinite(sig), axis=1)]
+        if finite.size:
+            trajectories.append((finite[_sample_3d(finite)], color, label))
+    _forces_3d(fig.add_subplot(grid[0:3, 1], projection="3d"), trajectories, afs, s0)
+    _forces_lateral(fig.add_subplot(grid[3:6, 1]), trajectories, afs, s0)
+    fig.suptitle(_title(result, "reference vs commanded body force"))
+    return _save(fig, path)
+
+
+def _forces_3d(ax3: Any, trajectories: list[tuple[np.ndarray, str, str]],
+               afs: Polytope | None, s0: Polytope | None) -> None:
+    bounds = []
+    if afs is not None or s0 is not None:
+        from controller.plots_force_sets import BLUE, GREEN, _draw_polytope
+
+        if afs is not None:
+            _draw_polytope(ax3, afs, GREEN, 0.12, False, "attainable force set")
+            bounds.append(afs.vertices)
+        if s0 is not None:
+            _draw_polytope(ax3, s0, BLUE, 0.0, True, "S(tau = 0)")
+            bounds.append(s0.vertices)
+    for pts, color, label in trajectories:
+        ax3.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, lw=0.6, alpha=0.8)
+        ax3.scatter(pts[:, 0], pts[:, 1], pts[:, 2], color=color, s=2, label=label,
+                    depthshade=False)
+        bounds.append(pts)
+    if bounds:
+        lim = np.vstack(bounds)
+        span = float(np.max(np.ptp(lim, axis=0))) or 1.0
+        mid = (lim.max(axis=0) + lim.min(axis=0)) / 2
+        for setter, m in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), mid, strict=True):
+            setter(m - span / 2, m + span / 2)
+    ax3.invert_zaxis()  # FRD: thrust (negative f_bz) drawn upwards
+    ax3.set_xlabel("f_bx [N]")
+    ax3.set_ylabel("f_by [N]")
+    ax3.set_zlabel("f_bz [N]")
+    ax3.view_init(elev=18, azim=-60)
+    ax3.set_box_aspect((1.0, 1.0, 1.0), zoom=0.85)  # room for the axis labels
+    ax3.legend(loc="upper left", fontsize=8)
+    ax3.set_title("forces vs the attainable force set" if afs is not None
+                  else "forces (force sets unavailable)", fontsize=10)
+
+
+def _forces_lateral(ax: Axes, trajectories: list[tuple[np.ndarray, str, str]],
+                    afs: Polytope | None, s0: Polytope | None) -> None:
+    """(f_bx, f_by) of the forces, with P_xy = S(0) sliced at the min/median/max f_bz."""
+    for pts, color, label in trajectories:
+        ax.plot(pts[:, 0], pts[:, 1], ".", color=color, ms=1.5, label=label)
+    if s0 is not None and trajectories:
+        from controller.force_sets import EmptyForceSetError
+        from controller.plots_force_sets import GREEN, RED
+
+        fz = trajectories[0][0][:, 2]
+        levels = np.unique(np.round(np.percentile(fz, [0.0, 50.0, 100.0]), 6))
+        styles = ("-", "--", ":")
+        for k, z in enumerate(levels[::-1]):  # least thrust (largest f_bz) first
+            try:
+                ring = s0.slice_polygon(float(z))
+            except EmptyForceSetError:
+                continue
+            ring = np.vstack([ring, ring[:1]])
+            ax.plot(ring[:, 0], ring[:, 1], styles[k % 3], color=RED, lw=1.3,
+                    label=f"P_xy: S(0) at f_bz = {s0.clamp_z(float(z)):.2f} N")
+        if afs is not None:
+            z = float(np.median(fz))
+            try:
+                ring = afs.slice_polygon(z)
+                ring = np.vstack([ring, ring[:1]])
+                ax.plot(ring[:, 0], ring[:, 1], "-", color=GREEN, lw=1.0, alpha=0.8,
+                        label=f"AFS at f_bz = {afs.clamp_z(z):.2f} N")
+            except EmptyForceSetError:
+                pass
+    ax.set_aspect("equal", adjustable="datalim")
+    ax.grid(True, alpha=0.3)
+    ax.set_xlabel("f_bx [N]")
+    ax.set_ylabel("f_by [N]")
+    ax.set_title("lateral forces vs the lateral force limits P_xy", fontsize=10)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, markerscale=4)
+
+
+def _nonzero(sig: np.ndarray | None, default: float = 0.0) -> bool:
+    return sig is not None and bool(np.any(sig != default))
+
+
+def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
+    """Fig. 8: disturbances on top, QP computation times (or iterations) below."""
+    t = result.time
+    n = _n_rotors(result)
+    a_d = _opt(result, "dist.a_d")
+    f_d, tau_d = _opt(result, "dist.f_d"), _opt(result, "dist.tau_d")
+    eff = _opt(result, "dist.efficiency")
+    if eff is not None:
+        eff = _cols(eff)[:, :n]
+    panels: list[tuple[str, np.ndarray | None, str]] = [("a_d", a_d, "m/s^2")]
+    if _nonzero(f_d):
+        panels.append(("f_d", f_d, "N"))
+    if _nonzero(tau_d):
+        panels.append(("tau_d", tau_d, "N m"))
+    show_eff = eff is not None and eff.size > 0 and _nonzero(eff, 1.0)
+    timing = {k: _opt(result, f"ctrl.{k}") for k in ("t_guid", "t_alloc")}
+    measured = any(_nonzero(v) for v in timing.values())
+    rows = len(panels) + int(show_eff) + 1
+    fig = _new_figure(12.0, 2.6 * rows + 0.6)
+    axs = np.atleast_1d(fig.subplots(rows, 1, sharex=True))
+    for ax, (name, sig, unit) in zip(axs, panels, strict=False):
+        if sig is not None:
+            for i, axis in enumerate(("x", "y", "z")):
+                _line(ax, t, sig[:, i], color=AXIS_COLORS[i], lw=1.0, label=f"{name} {axis}")
+            ax.legend(loc="upper right", fontsize=8, ncols=3)
+        frame = "body FRD" if name == "tau_d" else "world NED"
+        ax.set_ylabel(f"{name} [{unit}]\n({frame})")
+        _finish_time_axis(ax, t)
+    axs[0].set_title("disturbances")
+    k = len(panels)
+    if show_eff and eff is not None:
+        ax = axs[k]
+        for i in range(eff.shape[1]):
+            _line(ax, t, eff[:, i], lw=1.0, label=f"rotor {i + 1}")
+        ax.set_ylabel("rotor efficiency [-]")
+        ax.legend(loc="lower right", fontsize=7, ncols=min(eff.shape[1], 8))
+        _finish_time_axis(ax, t)
+        k += 1
+    ax = axs[k]
+    if measured:
+        for (name, sig), color, label in zip(timing.items(), (CMD_COLOR, MEAS_COLOR),
+                                             ("guidance QP", "allocation QP"), strict=True):
+            if sig is None or not _nonzero(sig):
+                continue
+            # zeros (samples without a solve) are masked by the log scale
+            _line(ax, t, sig, color=color, lw=0.8, label=f"{label} ({name})")
+        from orchestrator.metrics import PAPER_MAX_GUIDANCE_TIME
+
+        ax.axhline(PAPER_MAX_GUIDANCE_TIME, color="k", ls="--", lw=1.0,
+                   label="paper's max guidance time (MATLAB)")
+        ax.set_yscale("log")
+        ax.set_ylabel("computation time [s]")
+        ax.set_title("QP computation times")
+    else:
+        for name, color, label in (("guid_iter", CMD_COLOR, "guidance QP"),
+                                   ("alloc_iter", MEAS_COLOR, "allocation QP")):
+            sig = _opt(result, f"ctrl.{name}")
+            if sig is not None:
+                _line(ax, t, sig, color=color, lw=0.8, label=label)
+        ax.set_ylabel("iterations [-]")
+        ax.set_title("QP iterations (computation times not measured: controller timing off)")
+    ax.legend(loc="upper right", fontsize=8)
+    ax.set_xlabel("time [s]")
+    _finish_time_axis(ax, t)
+    fig.suptitle(_title(result, "disturbances and guidance computation"))
+    return _save(fig, path)
+
+
+# ---------------------------------------------------------------------------
+# Entry point
+
+
+def resolve_airframe(result: RunResult,
+                     airframe: Airframe | str | Path | None = None) -> Airframe | None:
+    """The run's airframe: the argument, else meta ``airframe_source``, else ``airframe``.
+
+    Returns None (with a warning) when none of them loads.
+    """
+    from plant.airframe import Airframe, load_airframe
+
+    if isinstance(airframe, Airframe):
+        return airframe
+    candidates = [airframe, result.meta.get("airframe_source"), result.meta.get("airframe")]
+    errors = []
+    for c in candidates:
+        if c is None:
+            continue
+        try:
+            return load_airframe(c)
+        except Exception as exc:  # unknown name, unreadable file: try the next candidate
+            errors.append(f"{c}: {exc}")
+    if errors:
+        warnings.warn("no airframe for the force-set plots: " + "; ".join(errors),
+                      stacklevel=3)
+    return None
+
+
+def plot_run(result: RunResult, out_dir: Path, force_set_png: bool = True,
+             airframe: Airframe | str | Path | None = None) -> list[Path]:
+    """Write the run's PNG figures into ``out_dir``; returns their paths (in order).
+
+    ``tracking.png``, ``actuators.png``, ``forces.png``, ``disturbance_timing.png`` always;
+    ``force_set.png`` when ``force_set_png`` and the airframe is known.  The force sets
+    (AFS and S(0)) are computed once for both force figures.  See the module docstring.
+    """
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    af = resolve_airframe(result, airframe)
+    afs = s0 = None
+    if af is not None:
+        from controller.force_sets import attainable_force_set, feasible_force_set
+
+        try:
+            afs, s0 = attainable_force_set(af), feasible_force_set(af)
+        except Exception as exc:  # an airframe whose sets cannot be built still gets plots
+            warnings.warn(f"force sets of {af.name} unavailable: {exc}", stacklevel=2)
+    paths = [
+        plot_tracking(result, out / "tracking.png"),
+        plot_actuators(result, out / "actuators.png", af),
+        plot_forces(result, out / "forces.png", afs, s0),
+        plot_disturbance_timing(result, out / "disturbance_timing.png"),
+    ]
+    if force_set_png and af is not None and afs is not None and s0 is not None:
+        from controller.plots_force_sets import plot_force_sets
+
+        paths.append(plot_force_sets(af, out / "force_set.png", afs=afs, s0=s0))
+    return paths
