@@ -1,0 +1,386 @@
+"""Export the closed loop (plant FMU + controller FMU) as an SSP 1.0 archive.
+
+    export_ssp(Path("hover.ssp"))                     # paper hexacopter hovering at [0, 0, -3]
+    export_ssp(Path("quad.ssp"), airframe="quadrotor")
+
+Archive layout (zip, entries in this order, all timestamps 1980-01-01 00:00:00)::
+
+    SystemStructure.ssd                 system "ClosedLoop": both components, their connectors,
+                                        the connections, one ParameterBinding per component
+    resources/FullPoseController.fmu    the installed FMUs, byte for byte (stored, not
+    resources/MultirotorPlant.fmu       recompressed)
+    resources/FullPoseController.ssv    one SSV parameter set per component, bare FMU variable
+    resources/MultirotorPlant.ssv       names (the binding sits on the component)
+
+Connections are derived by name from the two modelDescriptions (:func:`connection_table`):
+every controller input named like a plant output (pos, vel, acc, euler, rate, omega, alpha,
+beta) and every plant input named like a controller output (omega_cmd, alpha_cmd, beta_cmd).
+The SSD declares a connector for every connected input and for every output of both FMUs
+(so that a runner records them), nothing else: parameters are set through the SSVs, and the
+unconnected inputs (the controller's references, the plant's disturbances and efficiencies)
+get start values from the SSVs (SSP 1.0 allows parameter bindings to give "start values of
+other variables").  The plant starts at hover trim (``init_trim = true``) at ``pos0``; the
+controller's reference is that hover point; the controller's measurement inputs and the
+plant's command inputs get the plant's initial outputs / trim as start values, so the loop is
+consistent at t = 0 for a runner that initialises inputs from start values.
+
+The step size (SSP 1.0 has no element for it) is written as a ``ssc:Annotation`` of type
+``org.fullpose.fixedStepMaster`` in the ``DefaultExperiment``, next to start and stop time.
+
+What fmpy's SSP runner (``fmpy.ssp.simulation.simulate_ssp``, fmpy 0.3.x) does, read from its
+source, and how this module deals with it:
+
+* It validates the SSD (and each SSV it reads) against the bundled SSP 1.0 XML Schema 1.0
+  files, namespaces ``http://ssp-standard.org/SSP1/...``: the files written here validate.
+* It *reads* ParameterBindings (SSV files in the archive) but never *applies* them: only its
+  ``parameter_set`` argument is applied, with hierarchical names (``MultirotorPlant.mass``),
+  to every component after ``setupExperiment`` and before ``enterInitializationMode``.
+  :func:`parameter_set` builds that argument from the archive itself (through fmpy's own
+  ``read_ssd``/``read_ssv``), so run ``simulate_ssp(path, parameter_set=parameter_set(path))``.
+  Without it the FMUs keep their modelDescription defaults (paper hexacopter hovering at the
+  origin), not the exported airframe and hover point.
+* It applies Boolean parameters as ``value != 0.0``: an SSV string ``"false"`` would become
+  true.  :func:`parameter_set` converts values to Python bool/int/float by the SSV type, which
+  avoids that (the only Boolean written is ``init_trim = true`` anyway).
+* It ignores DefaultExperiment, annotations and connector types: pass ``stop_time`` and
+  ``step_size`` explicitly (its default step is stop_time / 100).
+* It steps all components with the same inputs and then copies outputs to inputs (Jacobi:
+  one-step delay in both directions), and it sets every declared *input* connector from its
+  connection at every step, starting from 0.0 at the first step (input start values are not
+  used for connected inputs).  So in the first step the plant gets zero commands (its motors
+  spin down by ~10 % for 2 ms) and the controller zero measurements (the vehicle seems to be
+  at the origin, at rest, rotors stopped), whose commands the plant then applies in the
+  second step.  The start-up dip that follows grows with the distance of ``pos0`` from the
+  origin (2 ms steps, measured): 1.24 mm peak near t = 0.37 s at [0, 0, -3] (paper
+  hexacopter and quadrotor alike; 4 um left at t = 2 s), 13 mm (hexacopter) / 18 mm
+  (quadrotor) at [1, -2, -5], 31 mm at [0, 0, -10]; it always dies out.  When the t = 0
+  inputs are the SSV start values instead (what the archive describes), the same archive
+  holds the hover to ~1e-15 m (tests/test_ssp.py shows both).
+* Unconnected inputs must not be declared as connectors: they would be forced to 0.0 every
+  step (pos_ref = 0 would fly the vehicle to the origin), and its connection resolution fails
+  for an input connector without a connection.  Left undeclared, they keep the start values
+  the SSV gives them (applied through ``parameter_set``).
+* Its result is a NumPy structured array: a ``time`` column (the start of each step) and one
+  column per declared connector, named ``<component>.<variable>``, e.g.
+  ``MultirotorPlant.pos[3]``, holding the value after that step.
+"""
+
+from __future__ import annotations
+
+import io
+import logging
+import math
+import zipfile
+from collections.abc import Iterable, Mapping, Sequence
+from pathlib import Path
+
+from fmpy import read_model_description
+from fmpy.model_description import ModelDescription
+from fmpy.ssp.ssd import Parameter, ParameterSet, System, read_ssd
+from lxml import etree
+
+from controller.force_sets import feasible_force_set
+from orchestrator.fmu import FmuInstance
+from plant import fmu_path, load_airframe
+
+log = logging.getLogger(__name__)
+
+PLANT = "MultirotorPlant"
+CONTROLLER = "FullPoseController"
+SYSTEM = "ClosedLoop"
+SSD_NAME = "SystemStructure.ssd"
+
+NS_SSD = "http://ssp-standard.org/SSP1/SystemStructureDescription"
+NS_SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
+NS_SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
+NS_FP = "urn:fullpose:ssp:annotations"
+STEP_ANNOTATION = "org.fullpose.fixedStepMaster"
+
+# fixed zip metadata: the same inputs give the same bytes
+_ZIP_DATE = (1980, 1, 1, 0, 0, 0)
+_REFERENCES = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref")
+_PLANT_ONLY = ("tau_motor", "tau_servo")
+
+Connection = tuple[str, str, str, str]
+Value = float | int | bool
+
+
+def _variables(md: ModelDescription, causality: str) -> list[tuple[str, str]]:
+    return [(v.name, v.type) for v in md.modelVariables if v.causality == causality]
+
+
+def _connect(src: str, src_md: ModelDescription, dst: str,
+             dst_md: ModelDescription) -> tuple[list[Connection], list[str]]:
+    outputs = dict(_variables(src_md, "output"))
+    made: list[Connection] = []
+    loose: list[str] = []
+    for name, typ in _variables(dst_md, "input"):
+        if name not in outputs:
+            loose.append(name)
+        elif outputs[name] != typ:
+            raise ValueError(f"{src}.{name} is {outputs[name]} but {dst}.{name} is {typ}")
+        else:
+            made.append((src, name, dst, name))
+    return made, loose
+
+
+def connection_table(plant_md: ModelDescription,
+                     controller_md: ModelDescription) -> list[Connection]:
+    """(from component, from variable, to component, to variable), matched by name.
+
+    Plant outputs to controller inputs first, then controller outputs to plant inputs, each
+    in the order of the receiving FMU's modelDescription.  Inputs without a same-named output
+    on the other side are logged (INFO); :func:`unconnected_inputs` returns them.
+    """
+    to_ctrl, loose_c = _connect(PLANT, plant_md, CONTROLLER, controller_md)
+    to_plant, loose_p = _connect(CONTROLLER, controller_md, PLANT, plant_md)
+    if loose_c:
+        log.info("unconnected %s inputs: %s", CONTROLLER, ", ".join(loose_c))
+    if loose_p:
+        log.info("unconnected %s inputs: %s", PLANT, ", ".join(loose_p))
+    return to_ctrl + to_plant
+
+
+def unconnected_inputs(plant_md: ModelDescription,
+                       controller_md: ModelDescription) -> dict[str, list[str]]:
+    """Inputs of each component that :func:`connection_table` leaves unconnected."""
+    return {
+        PLANT: _connect(CONTROLLER, controller_md, PLANT, plant_md)[1],
+        CONTROLLER: _connect(PLANT, plant_md, CONTROLLER, controller_md)[1],
+    }
+
+
+# -- parameter values -------------------------------------------------------------------------
+
+
+def _typed(md: ModelDescription, values: Mapping[str, Value]) -> list[tuple[str, str, Value]]:
+    """(name, FMI type, value) in modelDescription order; unknown names are an error."""
+    types = {v.name: v.type for v in md.modelVariables}
+    unknown = sorted(set(values) - set(types))
+    if unknown:
+        raise ValueError(f"{md.modelName} has no variables {unknown}")
+    out: list[tuple[str, str, Value]] = []
+    for v in md.modelVariables:
+        if v.name not in values:
+            continue
+        value = values[v.name]
+        if v.type == "Real":
+            x = float(value)
+            if not math.isfinite(x):
+                raise ValueError(f"{md.modelName}.{v.name} = {x} is not finite")
+            out.append((v.name, "Real", x))
+        elif v.type == "Integer":
+            out.append((v.name, "Integer", int(value)))
+        elif v.type == "Boolean":
+            out.append((v.name, "Boolean", bool(value)))
+        else:
+            raise ValueError(f"{md.modelName}.{v.name}: type {v.type} is not exported")
+    return out
+
+
+def _initial_outputs(params: Mapping[str, Value], names: Iterable[str]) -> dict[str, float]:
+    """The plant's outputs after initialization with ``params`` (its trim at pos0)."""
+    with FmuInstance(fmu_path(PLANT), PLANT) as fmu:
+        fmu.initialize(parameters=params)
+        return {n: float(fmu.get(n)) for n in names}
+
+
+def component_parameters(airframe: str | Path = "paper_hexacopter",
+                         pos0: Sequence[float] = (0.0, 0.0, -3.0),
+                         connections: Iterable[Connection] = (),
+                         ) -> dict[str, dict[str, Value]]:
+    """Start values per component (by FMU variable name) for a hover at ``pos0``.
+
+    Plant: the airframe, ``pos0``, ``init_trim = true`` and, for its connected command inputs,
+    the trim it initialises to.  Controller: the same airframe parameters (without the
+    actuator time constants), the airframe's feasible force set S(0) (``poly_n``,
+    ``poly_A``, ``poly_b``), the hover reference (pos_ref = pos0, everything else 0) and, for
+    its connected measurement inputs, the plant's initial outputs.
+    """
+    p0 = [float(x) for x in pos0]
+    if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
+        raise ValueError(f"pos0 must be 3 finite numbers, got {pos0!r}")
+    af = load_airframe(airframe)
+    plant: dict[str, Value] = dict(af.fmu_parameters())
+    plant.update({f"pos0[{i + 1}]": x for i, x in enumerate(p0)})
+    plant["init_trim"] = True
+    ctrl: dict[str, Value] = {k: v for k, v in af.fmu_parameters().items()
+                              if k not in _PLANT_ONLY}
+    poly = feasible_force_set(af)
+    ctrl["poly_n"] = len(poly.b)
+    for i in range(len(poly.b)):
+        for j in range(3):
+            ctrl[f"poly_A[{i + 1},{j + 1}]"] = float(poly.A[i, j])
+        ctrl[f"poly_b[{i + 1}]"] = float(poly.b[i])
+    for ref in _REFERENCES:
+        for i in range(3):
+            ctrl[f"{ref}[{i + 1}]"] = p0[i] if ref == "pos_ref" else 0.0
+    conns = list(connections)
+    measured = [fv for fc, fv, _, _ in conns if fc == PLANT]
+    commanded = [tv for _, _, tc, tv in conns if tc == PLANT]
+    # the plant's trim: its measured actuator states are what the commands must be
+    trim_of = {n: n.replace("_cmd[", "[") for n in commanded}
+    y0 = _initial_outputs(plant, sorted(set(measured) | set(trim_of.values())))
+    ctrl.update({n: y0[n] for n in measured})
+    plant.update({n: y0[trim_of[n]] for n in commanded})
+    return {PLANT: plant, CONTROLLER: ctrl}
+
+
+# -- XML ---------------------------------------------------------------------------------------
+
+
+def _q(ns: str, tag: str) -> str:
+    return f"{{{ns}}}{tag}"
+
+
+def _num(x: float) -> str:
+    return repr(float(x))
+
+
+def _xml(root: etree._Element) -> bytes:
+    return etree.tostring(root, xml_declaration=True, encoding="UTF-8", pretty_print=True)
+
+
+def ssv_document(name: str, values: Sequence[tuple[str, str, Value]]) -> bytes:
+    """An SSV 1.0 ParameterSet with the given (name, type, value) entries, in that order."""
+    root = etree.Element(_q(NS_SSV, "ParameterSet"), nsmap={"ssv": NS_SSV},
+                         version="1.0", name=name)
+    params = etree.SubElement(root, _q(NS_SSV, "Parameters"))
+    for var, typ, value in values:
+        p = etree.SubElement(params, _q(NS_SSV, "Parameter"), name=var)
+        if typ == "Real":
+            text = _num(float(value))
+        elif typ == "Integer":
+            text = str(int(value))
+        else:
+            text = "true" if value else "false"
+        etree.SubElement(p, _q(NS_SSV, typ), value=text)
+    return _xml(root)
+
+
+def ssd_document(name: str, mds: Mapping[str, ModelDescription],
+                 connections: Sequence[Connection], ssv: Mapping[str, str],
+                 step: float, stop_time: float) -> bytes:
+    """The SystemStructure.ssd (SSP 1.0) of the components ``mds`` (name -> modelDescription)."""
+    root = etree.Element(_q(NS_SSD, "SystemStructureDescription"),
+                         nsmap={"ssd": NS_SSD, "ssc": NS_SSC}, version="1.0", name=name,
+                         generationTool="fullpose orchestrator.ssp")
+    system = etree.SubElement(root, _q(NS_SSD, "System"), name=SYSTEM,
+                              description="Multirotor plant flown by the full-pose controller")
+    elements = etree.SubElement(system, _q(NS_SSD, "Elements"))
+    connected_inputs = {(tc, tv) for _, _, tc, tv in connections}
+    for comp, md in mds.items():
+        el = etree.SubElement(elements, _q(NS_SSD, "Component"), name=comp,
+                              type="application/x-fmu-sharedlibrary",
+                              source=f"resources/{comp}.fmu")
+        conns = etree.SubElement(el, _q(NS_SSD, "Connectors"))
+        for v in md.modelVariables:
+            if v.causality == "output" or (
+                    v.causality == "input" and (comp, v.name) in connected_inputs):
+                c = etree.SubElement(conns, _q(NS_SSD, "Connector"), name=v.name,
+                                     kind=v.causality)
+                if v.type in ("Real", "Integer", "Boolean", "String"):
+                    etree.SubElement(c, _q(NS_SSC, v.type))  # optional: for readers
+        if comp in ssv:
+            bindings = etree.SubElement(el, _q(NS_SSD, "ParameterBindings"))
+            etree.SubElement(bindings, _q(NS_SSD, "ParameterBinding"),
+                             type="application/x-ssp-parameter-set", source=ssv[comp])
+    links = etree.SubElement(system, _q(NS_SSD, "Connections"))
+    for fc, fv, tc, tv in connections:
+        etree.SubElement(links, _q(NS_SSD, "Connection"), startElement=fc, startConnector=fv,
+                         endElement=tc, endConnector=tv)
+    exp = etree.SubElement(root, _q(NS_SSD, "DefaultExperiment"), startTime=_num(0.0),
+                           stopTime=_num(stop_time))
+    notes = etree.SubElement(exp, _q(NS_SSD, "Annotations"))
+    note = etree.SubElement(notes, _q(NS_SSC, "Annotation"), type=STEP_ANNOTATION)
+    etree.SubElement(note, _q(NS_FP, "FixedStepMaster"), nsmap={"fp": NS_FP},
+                     stepSize=_num(step))
+    return _xml(root)
+
+
+# -- archive -----------------------------------------------------------------------------------
+
+
+def _add(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> None:
+    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE)
+    info.compress_type = compress
+    info.create_system = 3  # unix, whatever the host
+    info.external_attr = 0o644 << 16
+    zf.writestr(info, data)
+
+
+def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
+               pos0: Sequence[float] = (0.0, 0.0, -3.0), step: float = 0.002,
+               stop_time: float = 10.0) -> Path:
+    """Write the closed loop hovering at ``pos0`` as an SSP 1.0 archive; returns its path.
+
+    ``path`` gets the ``.ssp`` suffix if it has another one.  ``step`` and ``stop_time`` are
+    recorded in the SSD's DefaultExperiment (runners may ignore them: pass them to the runner).
+    The output is deterministic: the same inputs (and installed FMUs) give identical bytes.
+    """
+    if not (math.isfinite(step) and step > 0):
+        raise ValueError(f"step must be positive, got {step}")
+    if not (math.isfinite(stop_time) and stop_time > 0):
+        raise ValueError(f"stop_time must be positive, got {stop_time}")
+    path = Path(path)
+    if path.suffix != ".ssp":
+        path = path.with_suffix(".ssp")
+    fmus = {PLANT: Path(fmu_path(PLANT)), CONTROLLER: Path(fmu_path(CONTROLLER))}
+    mds = {comp: read_model_description(str(p)) for comp, p in fmus.items()}
+    connections = connection_table(mds[PLANT], mds[CONTROLLER])
+    values = component_parameters(airframe, pos0, connections)
+    af_name = load_airframe(airframe).name
+    ssv_files = {comp: f"resources/{comp}.ssv" for comp in fmus}
+    entries: dict[str, tuple[bytes, int]] = {}
+    for comp, md in mds.items():
+        doc = ssv_document(f"{comp} ({af_name})", _typed(md, values[comp]))
+        entries[ssv_files[comp]] = (doc, zipfile.ZIP_DEFLATED)
+        entries[f"resources/{comp}.fmu"] = (fmus[comp].read_bytes(), zipfile.ZIP_STORED)
+    ssd = ssd_document(f"fullpose_{af_name}_hover", mds, connections, ssv_files, step, stop_time)
+    buf = io.BytesIO()
+    with zipfile.ZipFile(buf, "w") as zf:
+        _add(zf, SSD_NAME, ssd, zipfile.ZIP_DEFLATED)
+        for name in sorted(entries):
+            data, compress = entries[name]
+            _add(zf, name, data, compress)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    path.write_bytes(buf.getvalue())
+    return path
+
+
+def parameter_set(ssp_path: str | Path) -> ParameterSet:
+    """fmpy's ``parameter_set`` for ``simulate_ssp`` from the archive's own ParameterBindings.
+
+    Read with fmpy's ``read_ssd`` (which validates the SSD and each SSV); names are made
+    hierarchical (``<component>.<variable>``, after the binding's prefix, SSP 1.0 semantics)
+    and values typed (bool/int/float), since fmpy applies Booleans as ``value != 0.0``.
+    Later bindings override earlier ones, as the standard says.
+    """
+    ssd = read_ssd(str(ssp_path))
+    merged: dict[str, Parameter] = {}
+
+    def walk(element: object, here: str) -> None:
+        for binding in getattr(element, "parameterBindings", []):
+            prefix = binding.prefix or ""
+            for pset in binding.parameterValues:
+                for p in pset.parameters:
+                    full = here + prefix + p.name
+                    merged[full] = Parameter(name=full, type=p.type, value=_parse(p),
+                                             unit=p.unit)
+        if isinstance(element, System):
+            for child in element.elements:
+                walk(child, f"{here}{child.name}.")
+
+    walk(ssd.system, "")
+    return ParameterSet(name=ssd.name, parameters=list(merged.values()))
+
+
+def _parse(p: object) -> Value | str:
+    typ, text = getattr(p, "type", None), str(getattr(p, "value", ""))
+    if typ == "Real":
+        return float(text)
+    if typ == "Integer":
+        return int(text)
+    if typ == "Boolean":
+        return text.strip() in ("true", "1")
+    return text
