@@ -11,9 +11,11 @@
     Commanded servo angles alpha_i, beta_i (deg) with the servo limits dashed, and commanded
     rotor speeds omega_i (rpm) with the speed limit dashed.
 ``forces.png`` (Fig. 6)
-    f_b_ref vs f_b_c per body axis over time, and both force trajectories in 3-D against
-    the attainable force set (AFS, green) and S(tau = 0) (blue edges), drawn with
-    :mod:`controller.plots_force_sets`'s helpers.
+    f_b_ref vs f_b_c per body axis over time; both force trajectories in 3-D against the
+    attainable force set (AFS, green) and S(tau = 0) (blue edges), drawn with
+    :mod:`controller.plots_force_sets`'s helpers; and their lateral components (f_bx, f_by)
+    against the lateral force limits P_xy (S(0) sliced at the run's smallest, median and
+    largest f_bz) and the AFS slice at the median f_bz.
 ``disturbance_timing.png`` (Fig. 8)
     The disturbance acceleration a_d on top (and f_d, tau_d, rotor efficiency when they are
     not at their defaults), and below the guidance and allocation QP computation times on a
@@ -30,6 +32,7 @@ line has at most ``MAX_POINTS`` points.
 from __future__ import annotations
 
 import math
+import threading
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -268,7 +271,7 @@ def plot_actuators(result: RunResult, path: Path, airframe: Airframe | None = No
     t = result.time
     n = _n_rotors(result)
     lims = _limits(result, airframe)
-    fig = _new_figure(12.0, 9.0)
+    fig = _new_figure(13.0, 9.0)
     axs = fig.subplots(3, 1, sharex=True)
     groups = (("alpha", "alpha", np.degrees(1.0), "deg"), ("beta", "beta", np.degrees(1.0), "deg"),
               ("omega", "omega", RPM_PER_RAD_S, "rpm"))
@@ -287,7 +290,7 @@ def plot_actuators(result: RunResult, path: Path, airframe: Airframe | None = No
                 ax.axhline(scale * v, color="k", ls="--", lw=1.0,
                            label="limit" if j == 0 else None)
         ax.set_ylabel(f"{sym} ({what}) [{unit}]")
-        ax.legend(loc="upper right", fontsize=7, ncols=min(n + 1, 9))
+        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=7)
         _finish_time_axis(ax, t)
     axs[-1].set_xlabel("time [s]")
     fig.suptitle(_title(result, "actuator inputs"))
@@ -333,10 +336,12 @@ def plot_forces(result: RunResult, path: Path, afs: Polytope | None = None,
         finite = sig[np.all(np.isfinite(sig), axis=1)]
         if finite.size:
             trajectories.append((finite[_sample_3d(finite)], color, label))
-    _forces_3d(fig.add_subplot(grid[0:3, 1], projection="3d"), trajectories, afs, s0)
-    _forces_lateral(fig.add_subplot(grid[3:6, 1]), trajectories, afs, s0)
-    fig.suptitle(_title(result, "reference vs commanded body force"))
-    return _save(fig, path)
+    # mplot3d's autoscaling of the empty legend-proxy lines can overflow harmlessly
+    with np.errstate(over="ignore", invalid="ignore"):
+        _forces_3d(fig.add_subplot(grid[0:3, 1], projection="3d"), trajectories, afs, s0)
+        _forces_lateral(fig.add_subplot(grid[3:6, 1]), trajectories, afs, s0)
+        fig.suptitle(_title(result, "reference vs commanded body force"))
+        return _save(fig, path)
 
 
 def _forces_3d(ax3: Any, trajectories: list[tuple[np.ndarray, str, str]],
@@ -511,23 +516,46 @@ def resolve_airframe(result: RunResult,
     return None
 
 
+_SET_CACHE: dict[tuple[object, ...], tuple[Polytope, Polytope]] = {}
+_SET_LOCK = threading.Lock()
+_SET_CACHE_SIZE = 8
+
+
+def force_sets(airframe: Airframe) -> tuple[Polytope, Polytope]:
+    """(AFS, S(0)) of an airframe, computed once per process for equal airframe parameters
+    (about 1.5 s each time otherwise; plotting several runs of one airframe reuses them)."""
+    from controller.force_sets import attainable_force_set, feasible_force_set
+
+    key = (airframe.name, *sorted(airframe.fmu_parameters().items()))
+    with _SET_LOCK:
+        hit = _SET_CACHE.get(key)
+    if hit is not None:
+        return hit
+    sets = attainable_force_set(airframe), feasible_force_set(airframe)
+    with _SET_LOCK:
+        if len(_SET_CACHE) >= _SET_CACHE_SIZE:
+            _SET_CACHE.pop(next(iter(_SET_CACHE)))
+        _SET_CACHE[key] = sets
+    return sets
+
+
 def plot_run(result: RunResult, out_dir: Path, force_set_png: bool = True,
              airframe: Airframe | str | Path | None = None) -> list[Path]:
     """Write the run's PNG figures into ``out_dir``; returns their paths (in order).
 
     ``tracking.png``, ``actuators.png``, ``forces.png``, ``disturbance_timing.png`` always;
     ``force_set.png`` when ``force_set_png`` and the airframe is known.  The force sets
-    (AFS and S(0)) are computed once for both force figures.  See the module docstring.
+    (AFS and S(0)) are computed once for both force figures (and cached per process, see
+    :func:`force_sets`); an unknown airframe or failing force sets give a warning and the
+    force figures without the sets.  See the module docstring.
     """
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     af = resolve_airframe(result, airframe)
     afs = s0 = None
     if af is not None:
-        from controller.force_sets import attainable_force_set, feasible_force_set
-
         try:
-            afs, s0 = attainable_force_set(af), feasible_force_set(af)
+            afs, s0 = force_sets(af)
         except Exception as exc:  # an airframe whose sets cannot be built still gets plots
             warnings.warn(f"force sets of {af.name} unavailable: {exc}", stacklevel=2)
     paths = [

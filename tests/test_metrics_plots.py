@@ -19,7 +19,14 @@ from orchestrator.metrics import (
     saturation_fractions,
     wrap_deg,
 )
-from orchestrator.plots import envelope, envelope_indices, false_intervals, plot_run
+from orchestrator.plots import (
+    envelope,
+    envelope_indices,
+    false_intervals,
+    force_sets,
+    plot_run,
+    resolve_airframe,
+)
 from orchestrator.results import RunResult
 
 STEP = 0.002
@@ -365,6 +372,10 @@ def test_plot_run_all_figures(big_result: RunResult, tmp_path: Path):
         _check_png(p)
     # generous bound (machines here are noisy); the design target is ~10 s
     assert elapsed < 25.0, elapsed
+    af = resolve_airframe(big_result)
+    assert af is not None and af.name == "paper_hexacopter"
+    afs, s0 = force_sets(af)
+    assert force_sets(af)[0] is afs and force_sets(af)[1] is s0  # cached per process
     m = compute_metrics(big_result)
     json.dumps(m, allow_nan=False)
     err_z = big_result.get("plant.pos")[:, 2] - big_result.get("ref.pos_ref")[:, 2]
