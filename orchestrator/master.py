@@ -133,6 +133,185 @@ def plant_parameters(scenario: Scenario, refs0: dict[str, np.ndarray]) -> dict[s
     return params
 
 
+class _Plan:
+    """Everything a run's stepping needs, prepared once: FMUs, connections, the
+    recording matrices and their layout, value-reference arrays, call runners."""
+
+    def __init__(self, plant_inst: FmuInstance, ctrl_inst: FmuInstance, rows: int) -> None:
+        self.plant_inst, self.ctrl_inst = plant_inst, ctrl_inst
+        plant, ctrl = _Fmu(plant_inst), _Fmu(ctrl_inst)
+        self.plant, self.ctrl = plant, ctrl
+        self.rows = rows
+        # connection table by matching names
+        p_real_out, c_real_out = plant.outputs("Real"), ctrl.outputs("Real")
+        c_inputs, p_inputs = ctrl.inputs(), plant.inputs()
+        self.measured = [v for v in c_inputs if v in set(p_real_out)]
+        self.commands = [v for v in p_inputs if v in set(c_real_out)]
+        self.ref_names = [v for g in REF_INPUTS for v in ctrl_inst.expand(g)]
+        self.dist_names = [v for g in DIST_INPUTS for v in plant_inst.expand(g)]
+        unconnected = ([f"controller.{v}" for v in c_inputs
+                        if v not in self.measured and v not in self.ref_names]
+                       + [f"plant.{v}" for v in p_inputs
+                          if v not in self.commands and v not in self.dist_names])
+        if unconnected:
+            raise RunError(f"inputs left unconnected: {', '.join(unconnected)}")
+        # recording layout: time | ref | plant (measured first) | dist | ctrl (commands first),
+        # so that [ref, measured] and [dist, commands] are contiguous: one call each
+        self.plant_order = self.measured + [v for v in p_real_out if v not in self.measured]
+        self.ctrl_order = self.commands + [v for v in c_real_out if v not in self.commands]
+        self.columns = (["time"] + [f"ref.{v}" for v in self.ref_names]
+                        + [f"plant.{v}" for v in self.plant_order]
+                        + [f"dist.{v}" for v in self.dist_names]
+                        + [f"ctrl.{v}" for v in self.ctrl_order])
+        self.c_ref = 1
+        self.c_plant = self.c_ref + len(self.ref_names)
+        self.c_dist = self.c_plant + len(self.plant_order)
+        self.c_ctrl = self.c_dist + len(self.dist_names)
+        self.p_ints, self.c_ints = plant.outputs("Integer"), ctrl.outputs("Integer")
+        self.c_bools = ctrl.outputs("Boolean")
+        self.int_columns = ([f"plant.{v}" for v in self.p_ints]
+                            + [f"ctrl.{v}" for v in self.c_ints]
+                            + [f"ctrl.{v}" for v in self.c_bools])
+        self.data = np.zeros((rows + 1, len(self.columns)))  # spare row: Jacobi's u_{-1}
+        self.ints = np.zeros((rows + 1, len(self.int_columns)), dtype=np.int32)
+        self.g = {
+            "c_in": ctrl.refs(self.ref_names + self.measured),
+            "c_out": ctrl.refs(self.ctrl_order), "c_int": ctrl.refs(self.c_ints),
+            "c_bool": ctrl.refs(self.c_bools),
+            "p_in": plant.refs(self.dist_names + self.commands),
+            "p_cmd": plant.refs(self.commands), "p_dist": plant.refs(self.dist_names),
+            "p_out": plant.refs(self.plant_order), "p_int": plant.refs(self.p_ints),
+        }
+
+    @classmethod
+    def build(cls, plant_inst: FmuInstance, ctrl_inst: FmuInstance, rows: int,
+              plant_params: dict[str, object], ctrl_params: dict[str, object],
+              ref0: np.ndarray) -> _Plan:
+        """Plan and initialize: the plant at its start pose, the controller from y_0, r_0."""
+        plan = cls(plant_inst, ctrl_inst, rows)
+        plant_inst.initialize(parameters=plant_params)  # type: ignore[arg-type]
+        ctrl_inst.slave.setupExperiment(startTime=0.0)
+        ctrl_inst.set_many(ctrl_params)  # type: ignore[arg-type]
+        ctrl_inst.slave.enterInitializationMode()
+        ctrl_inst.write(ctrl_inst.signal(plan.measured),
+                        plant_inst.read(plant_inst.signal(plan.measured)))
+        ctrl_inst.write(ctrl_inst.signal(plan.ref_names), ref0)
+        ctrl_inst.slave.exitInitializationMode()
+        plan.data[0, plan.c_ref:plan.c_plant] = ref0
+        plan.record_initial(0)
+        return plan
+
+    def row_address(self, k: int) -> tuple[int, int]:
+        return (self.data.ctypes.data + k * self.data.strides[0],
+                self.ints.ctypes.data + k * self.ints.strides[0])
+
+    def record_initial(self, k: int) -> None:
+        """Plant outputs into row k; the controller's current outputs into the spare row."""
+        row, irow = self.row_address(k)
+        plant, ctrl, g = self.plant, self.ctrl, self.g
+        plant.get_real(plant.comp, g["p_out"], len(g["p_out"]), row + 8 * self.c_plant)
+        plant.get_int(plant.comp, g["p_int"], len(g["p_int"]), irow)
+        spare, _ = self.row_address(self.rows)
+        ctrl.get_real(ctrl.comp, g["c_out"], len(g["c_out"]), spare + 8 * self.c_ctrl)
+
+    def final_sample(self, k: int, t: float, h: float) -> None:
+        """The controller's answer to the last row (the plant does not step again)."""
+        row, irow = self.row_address(k)
+        ctrl, g = self.ctrl, self.g
+        n_pint, n_cint = len(self.p_ints), len(self.c_ints)
+        a = ctrl.set_real(ctrl.comp, g["c_in"], len(g["c_in"]), row + 8 * self.c_ref)
+        a |= ctrl.do_step(ctrl.comp, t, h, 1)
+        a |= ctrl.get_real(ctrl.comp, g["c_out"], len(g["c_out"]), row + 8 * self.c_ctrl)
+        a |= ctrl.get_int(ctrl.comp, g["c_int"], n_cint, irow + 4 * n_pint)
+        a |= ctrl.get_bool(ctrl.comp, g["c_bool"], len(self.c_bools),
+                           irow + 4 * (n_pint + n_cint))
+        if a > 1:
+            self.fail(t)
+
+    def python_runner(self, h: float, jacobi: bool) -> Callable[[int, int, float], None]:
+        """Steps [first, last) from Python: nine FMI calls per step on the prepared buffers."""
+        plant, ctrl, g = self.plant, self.ctrl, self.g
+        base, ibase = self.row_address(0)
+        stride, istride = self.data.strides[0], self.ints.strides[0]
+        spare, _ = self.row_address(self.rows)
+        c_ref, c_plant, c_dist, c_ctrl = (8 * c for c in (self.c_ref, self.c_plant, self.c_dist,
+                                                         self.c_ctrl))
+        n_cin, n_cout, n_pin, n_pout = (len(g[k]) for k in ("c_in", "c_out", "p_in", "p_out"))
+        n_cmd, n_dist = len(g["p_cmd"]), len(g["p_dist"])
+        n_pint, n_cint, n_cbool = len(self.p_ints), len(self.c_ints), len(self.c_bools)
+        o_cint, o_cbool = 4 * n_pint, 4 * (n_pint + n_cint)
+        pc, cc = plant.comp, ctrl.comp
+        p_set, p_get, p_geti, p_step = plant.set_real, plant.get_real, plant.get_int, plant.do_step
+        c_set, c_get, c_geti, c_getb, c_step = (ctrl.set_real, ctrl.get_real, ctrl.get_int,
+                                                ctrl.get_bool, ctrl.do_step)
+        gc_in, gc_out, gc_int, gc_bool = g["c_in"], g["c_out"], g["c_int"], g["c_bool"]
+        gp_in, gp_cmd, gp_dist, gp_out, gp_int = (g["p_in"], g["p_cmd"], g["p_dist"], g["p_out"],
+                                                  g["p_int"])
+
+        def steps(first: int, last: int, t0: float) -> None:
+            for k in range(first, last):
+                row = base + k * stride
+                irow = ibase + k * istride
+                t = t0 + k * h
+                a = c_set(cc, gc_in, n_cin, row + c_ref)  # controller samples [r_k, y_k]
+                a |= c_step(cc, t, h, 1)
+                a |= c_get(cc, gc_out, n_cout, row + c_ctrl)
+                a |= c_geti(cc, gc_int, n_cint, irow + o_cint)
+                a |= c_getb(cc, gc_bool, n_cbool, irow + o_cbool)
+                if jacobi:  # plant integrates with u_{k-1}
+                    a |= p_set(pc, gp_cmd, n_cmd, (row - stride if k else spare) + c_ctrl)
+                    a |= p_set(pc, gp_dist, n_dist, row + c_dist)
+                else:  # plant integrates with u_k: [dist_k, u_k] in one call
+                    a |= p_set(pc, gp_in, n_pin, row + c_dist)
+                a |= p_step(pc, t, h, 1)
+                a |= p_get(pc, gp_out, n_pout, row + stride + c_plant)  # y_{k+1}
+                a |= p_geti(pc, gp_int, n_pint, irow + istride)
+                if a > 1:  # statuses: 0 ok, 1 warning; anything else stops the run
+                    self.fail(t)
+
+        return steps
+
+    def native_runner(self, h: float, jacobi: bool) -> Callable[[int, int, float], None]:
+        """The same call sequence run by fp_cosim_steps (libfullpose_core)."""
+        from plant._native import core
+
+        lib = core()
+        vp = ctypes.c_void_p
+
+        def fn(f: _Fmu, name: str) -> int | None:
+            return ctypes.cast(getattr(f.inst.slave.dll, name), vp).value
+
+        plant, ctrl, g = self.plant, self.ctrl, self.g
+        fns = (vp * 9)(fn(ctrl, "fmi2SetReal"), fn(ctrl, "fmi2DoStep"), fn(ctrl, "fmi2GetReal"),
+                       fn(ctrl, "fmi2GetInteger"), fn(ctrl, "fmi2GetBoolean"),
+                       fn(plant, "fmi2SetReal"), fn(plant, "fmi2DoStep"),
+                       fn(plant, "fmi2GetReal"), fn(plant, "fmi2GetInteger"))
+        comps = (vp * 2)(ctrl.comp, plant.comp)
+        order = ["c_in", "c_out", "c_int", "c_bool", "p_in", "p_cmd", "p_dist", "p_out", "p_int"]
+        vrs = (vp * 9)(*[ctypes.addressof(g[k]) for k in order])
+        counts = (ctypes.c_size_t * 9)(*[len(g[k]) for k in order])
+        n_pint, n_cint = len(self.p_ints), len(self.c_ints)
+        offsets = (ctypes.c_long * 7)(self.c_ref, self.c_plant, self.c_dist, self.c_ctrl,
+                                      n_pint, n_pint + n_cint, 0)
+        failed = ctypes.c_long(-1)
+        base, ibase = self.row_address(0)
+        spare, _ = self.row_address(self.rows)
+        args = (fns, comps, vrs, counts, base, self.data.strides[0] // 8, ibase,
+                self.ints.strides[0] // 4, spare, offsets)
+
+        def steps(first: int, last: int, t0: float) -> None:
+            if lib.fp_cosim_steps(*args, t0, h, int(jacobi), first, last, ctypes.byref(failed)):
+                self.fail(t0 + failed.value * h)
+
+        return steps
+
+    def fail(self, t: float) -> None:
+        msgs = [f"{f.inst.md.modelName}: {m}" for f in (self.plant, self.ctrl)
+                for s, _, m in f.inst.messages if s in ("ERROR", "FATAL", "DISCARD")]
+        raise RunError(f"the co-simulation failed at t = {t:.3f} s: "
+                       + ("; ".join(msgs[-3:]) or "an FMU call returned an error"))
+
+
 class CoSimulation:
     """One run of a scenario: ``CoSimulation(scenario).run() -> RunResult``."""
 
@@ -168,96 +347,30 @@ class CoSimulation:
              refs: dict[str, np.ndarray], dists: dict[str, np.ndarray],
              on_chunk: Callable[[int, int], None] | None) -> RunResult:
         sc = self.scenario
-        plant, ctrl = _Fmu(plant_inst), _Fmu(ctrl_inst)
         rows = times.size
-
-        # connection table by matching names
-        p_real_out = plant.outputs("Real")
-        c_real_out = ctrl.outputs("Real")
-        c_inputs, p_inputs = ctrl.inputs(), plant.inputs()
-        measured = [v for v in c_inputs if v in set(p_real_out)]
-        commands = [v for v in p_inputs if v in set(c_real_out)]
-        ref_names = [v for g in REF_INPUTS for v in ctrl_inst.expand(g)]
-        dist_names = [v for g in DIST_INPUTS for v in plant_inst.expand(g)]
-        unconnected = ([f"controller.{v}" for v in c_inputs
-                        if v not in measured and v not in ref_names]
-                       + [f"plant.{v}" for v in p_inputs
-                          if v not in commands and v not in dist_names])
-        if unconnected:
-            raise RunError(f"inputs left unconnected: {', '.join(unconnected)}")
-
-        # recording layout: time | ref | plant (measured first) | dist | ctrl (commands first),
-        # so that [ref, measured] and [dist, commands] are contiguous: one call each
-        plant_order = measured + [v for v in p_real_out if v not in measured]
-        ctrl_order = commands + [v for v in c_real_out if v not in commands]
-        columns = (["time"] + [f"ref.{v}" for v in ref_names] + [f"plant.{v}" for v in plant_order]
-                   + [f"dist.{v}" for v in dist_names] + [f"ctrl.{v}" for v in ctrl_order])
-        c_ref = 1
-        c_plant = c_ref + len(ref_names)
-        c_dist = c_plant + len(plant_order)
-        c_ctrl = c_dist + len(dist_names)
-        data = np.zeros((rows + 1, len(columns)))  # one spare row: Jacobi's u_{-1}
-        data[:rows, 0] = times
-        col = c_ref
-        for g in REF_INPUTS:
-            data[:rows, col:col + 3] = refs[g]
-            col += 3
-        col = c_dist
-        for g in DIST_INPUTS:
-            width = len(plant_inst.expand(g))
-            data[:rows, col:col + width] = dists[g][:, :width]
-            col += width
-        p_ints = plant.outputs("Integer")
-        c_ints = ctrl.outputs("Integer")
-        c_bools = ctrl.outputs("Boolean")
-        ints = np.zeros((rows + 1, len(p_ints) + len(c_ints) + len(c_bools)), dtype=np.int32)
-
-        # initialization: plant at the start pose, controller from y_0 and r_0
         refs0 = {k: v[:1] for k, v in refs.items()}
         p_params = plant_parameters(sc, refs0)
         p_params["timing"] = self.timing
-        plant_inst.initialize(parameters=p_params)
-        ctrl_inst.slave.setupExperiment(startTime=0.0)
-        ctrl_params: dict[str, object] = dict(controller_parameters(sc.airframe, ctrl_inst))
-        ctrl_params["timing"] = self.timing
-        ctrl_params.update(sc.controller_parameters)
-        ctrl_inst.set_many(ctrl_params)  # type: ignore[arg-type]
-        ctrl_inst.slave.enterInitializationMode()
-        ctrl_inst.write(ctrl_inst.signal(measured), plant_inst.read(plant_inst.signal(measured)))
-        ctrl_inst.write(ctrl_inst.signal(ref_names), data[0, c_ref:c_plant])
-        ctrl_inst.slave.exitInitializationMode()
+        c_params: dict[str, object] = dict(controller_parameters(sc.airframe, ctrl_inst))
+        c_params["timing"] = self.timing
+        c_params.update(sc.controller_parameters)
+        plan = _Plan.build(plant_inst, ctrl_inst, rows, p_params, c_params,
+                           np.concatenate([refs[g][0] for g in REF_INPUTS]))
+        data = plan.data
+        data[:rows, 0] = times
+        data[:rows, plan.c_ref:plan.c_plant] = np.hstack([refs[g] for g in REF_INPUTS])
+        data[:rows, plan.c_dist:plan.c_ctrl] = np.hstack(
+            [dists[g][:, :len(plant_inst.expand(g))] for g in DIST_INPUTS])
+        wall = self._loop(plan, 0, rows - 1, 0.0, on_chunk)
+        plan.final_sample(rows - 1, (rows - 1) * sc.step, sc.step)
 
-        groups = {
-            "p_out": plant.refs(plant_order), "c_out": ctrl.refs(ctrl_order),
-            "c_in": ctrl.refs(ref_names + measured), "p_in": plant.refs(dist_names + commands),
-            "p_cmd": plant.refs(commands), "p_dist": plant.refs(dist_names),
-            "p_int": plant.refs(p_ints), "c_int": ctrl.refs(c_ints), "c_bool": ctrl.refs(c_bools),
-        }
-        # row 0 (and the Jacobi spare row: the controller's initial outputs)
-        base = data.ctypes.data
-        ibase = ints.ctypes.data
-        stride, istride = data.strides[0], ints.strides[0]
-        plant.get_real(plant.comp, groups["p_out"], len(plant_order), base + 8 * c_plant)
-        plant.get_int(plant.comp, groups["p_int"], len(p_ints), ibase)
-        spare_row = base + rows * stride
-        ctrl.get_real(ctrl.comp, groups["c_out"], len(ctrl_order), spare_row + 8 * c_ctrl)
-
-        wall = self._loop(plant, ctrl, groups, rows, len(measured), len(commands),
-                                    (c_ref, c_plant, c_dist, c_ctrl),
-                                    (len(ref_names), len(plant_order), len(dist_names),
-                                     len(ctrl_order)),
-                                    (len(p_ints), len(c_ints), len(c_bools)),
-                                    base, stride, ibase, istride, on_chunk)
-
-        # the FMUs' own compute time, measured inside them (only with timing on)
-        fmu_time = None
+        columns = plan.columns
+        fmu_time = None  # the FMUs' own compute time, measured inside them (timing on)
         if self.timing:
             fmu_time = {"plant": float(data[1:rows, columns.index("plant.t_step")].sum()),
                         "controller": float(data[:rows, columns.index("ctrl.t_step")].sum())}
         warnings = [m for s, _, m in plant_inst.messages + ctrl_inst.messages if s == "WARNING"]
-        int_columns = ([f"plant.{v}" for v in p_ints] + [f"ctrl.{v}" for v in c_ints]
-                       + [f"ctrl.{v}" for v in c_bools])
-        full = np.hstack([data[:rows], ints[:rows].astype(float)])
+        full = np.hstack([data[:rows], plan.ints[:rows].astype(float)])
         meta = {
             "scenario": sc.name,
             "scenario_source": str(sc.source),
@@ -270,135 +383,45 @@ class CoSimulation:
             "step": sc.step,
             "duration": float(times[-1]),
             "coupling": sc.coupling,
+            "engine": self.engine,
             "wall_time": wall,
             "fmu_time": fmu_time,
             "timing": self.timing,
             "warnings": len(warnings),
             "first_warnings": warnings[:5],
-            "plant_parameters": {k: v for k, v in sc.plant_parameters.items()},
-            "controller_parameters": {k: v for k, v in sc.controller_parameters.items()},
+            "plant_parameters": dict(sc.plant_parameters),
+            "controller_parameters": dict(sc.controller_parameters),
         }
-        return RunResult(columns=columns + int_columns, data=full, meta=meta)
+        return RunResult(columns=columns + plan.int_columns, data=full, meta=meta)
 
     # -- the loop ------------------------------------------------------------
 
-    def _loop(self, plant: _Fmu, ctrl: _Fmu, g: dict[str, ctypes.Array[ctypes.c_uint]], rows: int,
-              n_meas: int, n_cmd: int, cols: tuple[int, int, int, int],
-              widths: tuple[int, int, int, int], iwidths: tuple[int, int, int], base: int,
-              stride: int, ibase: int, istride: int,
+    def _loop(self, plan: _Plan, first: int, last: int, t0: float,
               on_chunk: Callable[[int, int], None] | None) -> float:
-        c_ref, c_plant, c_dist, c_ctrl = (8 * c for c in cols)
-        n_ref, n_pout, n_dist, n_cout = widths
-        n_cin, n_pin = n_ref + n_meas, n_dist + n_cmd
-        n_pint, n_cint, n_cbool = iwidths
-        o_cint, o_cbool = 4 * n_pint, 4 * (n_pint + n_cint)
+        """Steps first .. last-1 (rows of plan.data); returns the wall time."""
         h = self.scenario.step
         jacobi = self.scenario.coupling == "jacobi"
-        spare = base + rows * stride
-        pc, cc = plant.comp, ctrl.comp
-        p_set, p_get, p_geti, p_step = plant.set_real, plant.get_real, plant.get_int, plant.do_step
-        c_set, c_get, c_geti, c_getb, c_step = (ctrl.set_real, ctrl.get_real, ctrl.get_int,
-                                                ctrl.get_bool, ctrl.do_step)
-        gp_out, gc_out, gc_in, gp_in = g["p_out"], g["c_out"], g["c_in"], g["p_in"]
-        gp_cmd, gp_dist, gp_int, gc_int, gc_bool = (g["p_cmd"], g["p_dist"], g["p_int"],
-                                                    g["c_int"], g["c_bool"])
+        runner = plan.native_runner(h, jacobi) if self.engine == "native" else None
+        if runner is None:
+            runner = plan.python_runner(h, jacobi)
         show = self.progress if self.progress is not None else sys.stderr.isatty()
         bar = None
-        if show and rows * h > 5.0:
+        if show and (last - first) * h > 5.0:
             from tqdm import tqdm
 
-            bar = tqdm(total=rows - 1, unit="step", desc=self.scenario.name, leave=False)
-        last = rows - 1  # steps; the last row only records the controller's answer
-        native = self._native_kernel(plant, ctrl, g, cols, widths, iwidths, n_cin, n_pin,
-                                     base, stride, ibase, istride, spare, h, jacobi)
+            bar = tqdm(total=last - first, unit="step", desc=self.scenario.name, leave=False)
         start = time.perf_counter()
-        for first in range(0, last, 500):
-            if native is not None:
-                native(first, min(first + 500, last))
-                if bar is not None:
-                    bar.update(min(first + 500, last) - first)
-                if on_chunk is not None:
-                    on_chunk(min(first + 500, last), last)
-                continue
-            # the hot loop: nine FMI calls per step on buffers prepared once
-            for k in range(first, min(first + 500, last)):
-                row = base + k * stride
-                irow = ibase + k * istride
-                t = k * h
-                a = c_set(cc, gc_in, n_cin, row + c_ref)  # controller samples [r_k, y_k]
-                a |= c_step(cc, t, h, 1)
-                a |= c_get(cc, gc_out, n_cout, row + c_ctrl)
-                a |= c_geti(cc, gc_int, n_cint, irow + o_cint)
-                a |= c_getb(cc, gc_bool, n_cbool, irow + o_cbool)
-                if jacobi:  # plant integrates with u_{k-1}
-                    a |= p_set(pc, gp_cmd, n_cmd, (row - stride if k else spare) + c_ctrl)
-                    a |= p_set(pc, gp_dist, n_dist, row + c_dist)
-                else:  # plant integrates with u_k: [dist_k, u_k] in one call
-                    a |= p_set(pc, gp_in, n_pin, row + c_dist)
-                a |= p_step(pc, t, h, 1)
-                a |= p_get(pc, gp_out, n_pout, row + stride + c_plant)  # y_{k+1}
-                a |= p_geti(pc, gp_int, n_pint, irow + istride)
-                if a > 1:  # statuses: 0 ok, 1 warning; anything else stops the run
-                    self._fail((plant, ctrl), t)
+        for k in range(first, last, 500):
+            stop = min(k + 500, last)
+            runner(k, stop, t0)
             if bar is not None:
-                bar.update(min(first + 500, last) - first)
+                bar.update(stop - k)
             if on_chunk is not None:
-                on_chunk(min(first + 500, last), last)
-        row, irow = base + last * stride, ibase + last * istride
-        a = c_set(cc, gc_in, n_cin, row + c_ref)
-        a |= c_step(cc, last * h, h, 1)
-        a |= c_get(cc, gc_out, n_cout, row + c_ctrl)
-        a |= c_geti(cc, gc_int, n_cint, irow + o_cint)
-        a |= c_getb(cc, gc_bool, n_cbool, irow + o_cbool)
-        if a > 1:
-            self._fail((plant, ctrl), last * h)
+                on_chunk(stop, last)
         wall = time.perf_counter() - start
         if bar is not None:
             bar.close()
         return wall
-
-    def _native_kernel(self, plant: _Fmu, ctrl: _Fmu, g: dict[str, ctypes.Array[ctypes.c_uint]],
-                       cols: tuple[int, int, int, int], widths: tuple[int, int, int, int],
-                       iwidths: tuple[int, int, int], n_cin: int, n_pin: int, base: int,
-                       stride: int, ibase: int, istride: int, spare: int, h: float,
-                       jacobi: bool) -> Callable[[int, int], None] | None:
-        """The same call sequence run by fp_cosim_steps (libfullpose_core), or None."""
-        if self.engine != "native":
-            return None
-        from plant._native import core
-
-        lib = core()
-        vp = ctypes.c_void_p
-
-        def fn(f: _Fmu, name: str) -> int | None:
-            return ctypes.cast(getattr(f.inst.slave.dll, name), vp).value
-
-        fns = (vp * 9)(fn(ctrl, "fmi2SetReal"), fn(ctrl, "fmi2DoStep"), fn(ctrl, "fmi2GetReal"),
-                       fn(ctrl, "fmi2GetInteger"), fn(ctrl, "fmi2GetBoolean"),
-                       fn(plant, "fmi2SetReal"), fn(plant, "fmi2DoStep"),
-                       fn(plant, "fmi2GetReal"), fn(plant, "fmi2GetInteger"))
-        comps = (vp * 2)(ctrl.comp, plant.comp)
-        order = ["c_in", "c_out", "c_int", "c_bool", "p_in", "p_cmd", "p_dist", "p_out", "p_int"]
-        vrs = (vp * 9)(*[ctypes.addressof(g[k]) for k in order])
-        counts = (ctypes.c_size_t * 9)(*[len(g[k]) for k in order])
-        n_pint, n_cint, _ = iwidths
-        c_ref, c_plant, c_dist, c_ctrl = cols
-        offsets = (ctypes.c_long * 7)(c_ref, c_plant, c_dist, c_ctrl, n_pint, n_pint + n_cint, 0)
-        failed = ctypes.c_long(-1)
-        args = (fns, comps, vrs, counts, base, stride // 8, ibase, istride // 4, spare)
-
-        def run_chunk(first: int, last: int) -> None:
-            if lib.fp_cosim_steps(*args, offsets, h, int(jacobi), first, last,
-                                  ctypes.byref(failed)):
-                self._fail((plant, ctrl), failed.value * h)
-
-        return run_chunk
-
-    def _fail(self, fmus: tuple[_Fmu, _Fmu], t: float) -> None:
-        msgs = [f"{f.inst.md.modelName}: {m}" for f in fmus for s, _, m in f.inst.messages
-                if s in ("ERROR", "FATAL", "DISCARD")]
-        raise RunError(f"the co-simulation failed at t = {t:.3f} s: "
-                       + ("; ".join(msgs[-3:]) or "an FMU call returned an error"))
 
 
 def run(scenario: Scenario, *, timing: bool = False, progress: bool | None = None,

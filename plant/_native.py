@@ -91,8 +91,8 @@ def core() -> ctypes.CDLL:
         "fp_rotor_wrench_api": [vp, dp, dp, dp, dp, dp, dp],
         "fp_preferred_config_api": [vp, dp, dp, dp, dp, ctypes.c_char_p, i],
         "fp_effectiveness_b2prime_api": [vp, dp, dp, dp, dp],
-        "fp_cosim_steps": [vp, vp, vp, vp, vp, ctypes.c_long, vp, ctypes.c_long, vp, vp, d, i,
-                           ctypes.c_long, ctypes.c_long, ctypes.POINTER(ctypes.c_long)],
+        "fp_cosim_steps": [vp, vp, vp, vp, vp, ctypes.c_long, vp, ctypes.c_long, vp, vp, d, d,
+                           i, ctypes.c_long, ctypes.c_long, ctypes.POINTER(ctypes.c_long)],
         "fp_controller_state_qp": [ctypes.c_char_p, ctypes.c_long, i, ip, dp, dp, dp, dp, dp,
                                    dp, dp],
     }

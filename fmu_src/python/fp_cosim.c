@@ -27,7 +27,7 @@ enum { V_C_IN, V_C_OUT, V_C_INT, V_C_BOOL, V_P_IN, V_P_CMD, V_P_DIST, V_P_OUT, V
 enum { O_REF, O_PLANT, O_DIST, O_CTRL, O_CINT, O_CBOOL, O_PINT, O_COUNT };
 
 /*
- * Steps k = first .. last-1 of a run: the controller samples [r_k, y_k] (row k),
+ * Steps k = first .. last-1 of a run (time t0 + k h): the controller samples [r_k, y_k] (row k),
  * its outputs go to row k; the plant integrates with [dist_k, u_k] (Gauss-Seidel)
  * or u_{k-1} (Jacobi; row -1 is the spare row `spare`), its outputs go to row
  * k+1.  Offsets are in elements of their matrix.  Returns 0, or the first FMI
@@ -36,8 +36,8 @@ enum { O_REF, O_PLANT, O_DIST, O_CTRL, O_CINT, O_CBOOL, O_PINT, O_COUNT };
 FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
                           const unsigned int *const vrs[V_COUNT], const size_t counts[V_COUNT],
                           double *data, long stride, int32_t *ints, long istride, double *spare,
-                          const long offsets[O_COUNT], double h, int jacobi, long first, long last,
-                          long *failed_step) {
+                          const long offsets[O_COUNT], double t0, double h, int jacobi,
+                          long first, long last, long *failed_step) {
     fmi2SetRealTYPE *c_set = (fmi2SetRealTYPE *)fns[F_C_SET];
     fmi2DoStepTYPE *c_step = (fmi2DoStepTYPE *)fns[F_C_STEP];
     fmi2GetRealTYPE *c_get = (fmi2GetRealTYPE *)fns[F_C_GET];
@@ -55,7 +55,7 @@ FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
     for (k = first; k < last; k++) {
         double *row = data + k * stride;
         int32_t *irow = ints + k * istride;
-        double t = (double)k * h;
+        double t = t0 + (double)k * h;
         int s = (int)c_set(cc, vrs[V_C_IN], counts[V_C_IN], row + offsets[O_REF]);
         s |= (int)c_step(cc, t, h, fmi2True);
         s |= (int)c_get(cc, vrs[V_C_OUT], counts[V_C_OUT], row + offsets[O_CTRL]);
