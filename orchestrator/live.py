@@ -61,7 +61,7 @@ class LiveSession:
             c_params["timing"] = timing
             c_params.update(controller_parameters_ or {})
             self.reference = np.concatenate([np.asarray(pos0, float), np.asarray(euler0, float),
-                                             np.zeros(9)])
+                                             np.zeros(9), np.ones(8)])  # + rotor_health
             self.plan = _Plan.build(self.plant_inst, self.ctrl_inst, chunk + 1, p_params,
                                     c_params, self.reference)
             widths = [len(self.plant_inst.expand(g)) for g in DIST_INPUTS]
@@ -90,14 +90,17 @@ class LiveSession:
     # -- inputs --------------------------------------------------------------
 
     def set_reference(self, **values: Sequence[float]) -> None:
-        """Any of ``pos_ref``, ``euler_ref``, ``vel_ref``, ``acc_ref``, ``euler_rate_ref``."""
+        """Any of ``pos_ref``, ``euler_ref``, ``vel_ref``, ``acc_ref``, ``euler_rate_ref``
+        (3 values) and ``rotor_health`` (8 values, 0..1: what the controller knows)."""
         for name, value in values.items():
             if name not in self._ref_slices:
                 raise KeyError(f"unknown reference {name!r} (one of {', '.join(REF_INPUTS)})")
+            sl = self._ref_slices[name]
             v = np.asarray(value, dtype=float)
-            if v.shape != (3,) or not np.all(np.isfinite(v)):
-                raise ValueError(f"{name} must be 3 finite numbers, got {value!r}")
-            self.reference[self._ref_slices[name]] = v
+            if v.shape != (sl.stop - sl.start,) or not np.all(np.isfinite(v)):
+                raise ValueError(f"{name} must be {sl.stop - sl.start} finite numbers, "
+                                 f"got {value!r}")
+            self.reference[sl] = v
 
     def set_disturbance(self, **values: Sequence[float]) -> None:
         """Any of ``f_d``, ``tau_d``, ``a_d`` (3 values) and ``efficiency`` (8)."""

@@ -45,7 +45,7 @@ from plant import Airframe, fmu_path
 if TYPE_CHECKING:
     from orchestrator.scenario import Scenario
 
-REF_INPUTS = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref")
+REF_INPUTS = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref", "rotor_health")
 DIST_INPUTS = ("f_d", "tau_d", "a_d", "efficiency")
 COUPLINGS = ("gauss-seidel", "jacobi")
 ENGINES = ("native", "python")
@@ -106,12 +106,14 @@ def _polytope_parameters(source: str, mtime: float) -> dict[str, float | int]:
     return params
 
 
-def controller_parameters(airframe: Airframe, controller: FmuInstance) -> dict[str, float | int]:
-    """The controller's airframe model and feasible-force polytope for an airframe.
+def controller_parameters(airframe: Airframe, controller: FmuInstance,
+                          failures: bool = False) -> dict[str, float | int]:
+    """The controller's airframe model and feasible-force polytopes for an airframe.
 
     Names shared with the plant come from the airframe file; the polytope is the
-    airframe's S(0), except for the shipped paper hexacopter, whose S(0) is the
-    FMU's built-in default (a test keeps the two identical).
+    airframe's S(0), and with ``failures`` also S(0) after each single-rotor loss,
+    except for the shipped paper hexacopter, whose sets are the FMU's built-in
+    defaults (tests keep them identical).
     """
     params = {k: v for k, v in airframe.fmu_parameters().items()
               if k in controller.variables and controller.variables[k].causality == "parameter"}
@@ -119,7 +121,17 @@ def controller_parameters(airframe: Airframe, controller: FmuInstance) -> dict[s
     shipped = Path(str(resources.files("plant").joinpath("airframes", "paper_hexacopter.toml")))
     if source.read_bytes() != shipped.read_bytes():
         params.update(_polytope_parameters(str(source.resolve()), source.stat().st_mtime))
+        if failures:
+            params.update(_failure_parameters(str(source.resolve()), source.stat().st_mtime))
     return params
+
+
+@cache
+def _failure_parameters(source: str, mtime: float) -> dict[str, float | int]:
+    from controller.failures import failure_parameters
+    from plant import load_airframe
+
+    return failure_parameters(load_airframe(source))
 
 
 def plant_parameters(scenario: Scenario, refs0: dict[str, np.ndarray]) -> dict[str, object]:
@@ -332,6 +344,7 @@ class CoSimulation:
         n = round(sc.duration / h)
         times = np.arange(n + 1, dtype=float) * h
         refs = sc.references(times)
+        refs["rotor_health"] = sc.health(times)
         dists = sc.disturbances(times)
         plant_inst = FmuInstance(fmu_path("MultirotorPlant"), "plant")
         ctrl_inst = FmuInstance(fmu_path("FullPoseController"), "controller")
@@ -351,7 +364,8 @@ class CoSimulation:
         refs0 = {k: v[:1] for k, v in refs.items()}
         p_params = plant_parameters(sc, refs0)
         p_params["timing"] = self.timing
-        c_params: dict[str, object] = dict(controller_parameters(sc.airframe, ctrl_inst))
+        c_params: dict[str, object] = dict(controller_parameters(sc.airframe, ctrl_inst,
+                                                                 failures=bool(sc.faults)))
         c_params["timing"] = self.timing
         c_params.update(sc.controller_parameters)
         plan = _Plan.build(plant_inst, ctrl_inst, rows, p_params, c_params,

@@ -470,6 +470,13 @@ def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
         ax.axhline(PAPER_MAX_GUIDANCE_TIME, color="k", ls="--", lw=1.0,
                    label="paper's max guidance time (MATLAB)")
         ax.set_yscale("log")
+        # limits from the positive samples: zeros (no solve in that sample) would make
+        # matplotlib's log autoscale fail
+        positive = [sig[sig > 0] for sig in timing.values() if sig is not None and _nonzero(sig)]
+        if positive:
+            lo = min(float(p.min()) for p in positive)
+            hi = max(max(float(p.max()) for p in positive), PAPER_MAX_GUIDANCE_TIME)
+            ax.set_ylim(lo / 2, hi * 2)
         ax.set_ylabel("computation time [s]")
         ax.set_title("QP computation times")
     else:

@@ -106,7 +106,7 @@ ATTITUDE_AXES = ("roll", "pitch", "yaw")
 DISTURBANCES = {"force": "f_d", "torque": "tau_d", "acceleration": "a_d"}
 _REL_TOL = 1e-9
 _TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "reference",
-             "disturbance", "fault", "plant", "controller")
+             "disturbance", "fault", "fault_detection", "plant", "controller")
 
 ParamValue = float | int | bool
 Vec3 = tuple[Signal, Signal, Signal]
@@ -138,6 +138,7 @@ class Scenario:
     torque: Vec3 = (ZERO, ZERO, ZERO)  # tau_d, N m, body FRD
     acceleration: Vec3 = (ZERO, ZERO, ZERO)  # a_d, m/s^2, world NED
     faults: tuple[Fault, ...] = ()
+    fault_detection: float | None = 0.0  # delay (s) until the controller knows; None: never
     plant_parameters: dict[str, ParamValue] = field(default_factory=dict)
     controller_parameters: dict[str, ParamValue] = field(default_factory=dict)
 
@@ -185,6 +186,15 @@ class Scenario:
         for fault in sorted(self.faults, key=lambda f: f.time):
             eff[tt >= fault.time, fault.rotor - 1] = fault.efficiency
         return eff
+
+    def health(self, t: ArrayLike) -> np.ndarray:
+        """What the controller is told of the rotors (``rotor_health``, (len(t), 8)): the
+        efficiencies delayed by ``fault_detection`` seconds, or all 1 when it is None
+        (the controller is never told: no reconfiguration)."""
+        tt = _column_times(t)
+        if self.fault_detection is None:
+            return np.ones((len(tt), MAX_ROTORS))
+        return self.efficiency(tt - self.fault_detection)
 
     def initial_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """(position, Euler angles) to start from: the reference at t = 0, unless the
@@ -526,6 +536,20 @@ def _faults(top: FieldReader, n_rotors: int) -> tuple[Fault, ...]:
     return tuple(faults)
 
 
+def _fault_detection(top: FieldReader) -> float | None:
+    """``fault_detection``: "immediate" (default), "none", or a delay in seconds."""
+    raw = top.raw("fault_detection")
+    if raw is None or raw == "immediate":
+        return 0.0
+    if raw == "none":
+        return None
+    if isinstance(raw, (int, float)) and not isinstance(raw, bool) and math.isfinite(raw) \
+            and raw >= 0:
+        return float(raw)
+    raise top.fail("fault_detection", f'expected "immediate", "none" or a delay in seconds '
+                   f">= 0, got {raw!r}")
+
+
 def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
                    default_name: str | None = None,
                    base_dir: Path | None = None) -> Scenario:
@@ -563,6 +587,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         disturbance.reject_unknown(lambda _k: " (expected force, torque or acceleration)")
 
     faults = _faults(top, airframe.n_rotors)
+    detection = _fault_detection(top)
     plant_p = _overrides(top, "plant", PLANT_FMU)
     ctrl_p = _overrides(top, "controller", CONTROLLER_FMU)
     _check_timing(source, step, duration, plant_p, ctrl_p)
@@ -578,6 +603,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         position=position,
         attitude=attitude,
         faults=faults,
+        fault_detection=detection,
         plant_parameters=plant_p,
         controller_parameters=ctrl_p,
         **dist,

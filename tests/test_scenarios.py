@@ -181,11 +181,17 @@ def test_parser_number_table_and_array():
 def test_shipped_scenarios_listed_and_valid():
     names = scenario_names()
     assert names == sorted(["full_pose_with_disturbances", "hover", "hover_varying_orientation",
-                            "position_step", "translation_frequency_sweep"])
+                            "position_step", "translation_frequency_sweep",
+                            "quadrotor_translation", "quadrotor_hover_attitude",
+                            "fixed_tilt_translation", "fixed_tilt_hover_attitude",
+                            "rotor_failure_hover", "rotor_failure_no_reconfiguration"])
     loaded = list_scenarios()
     assert [s.name for s in loaded] == names
     for sc in loaded:
-        assert sc.airframe.name == "paper_hexacopter"
+        expected = ("quadrotor" if sc.name.startswith("quadrotor_") else
+                    "fixed_tilt_hexarotor" if sc.name.startswith("fixed_tilt_") else
+                    "paper_hexacopter")
+        assert sc.airframe.name == expected
         assert sc.step == 0.002 and sc.coupling == "gauss-seidel"
         assert Path(sc.source).name == f"{sc.name}.toml"
         assert sc.description

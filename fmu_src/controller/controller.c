@@ -35,6 +35,7 @@
                      name##_size);
 CONTROLLER_VARIABLES(CTRL_CHECK)
 FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS == 64, polytope_cap_matches_table);
+FP_STATIC_ASSERT(FP_FAIL_POLYTOPE_FACETS * FP_MAX_ROTORS == 256, fail_polytope_cap_matches_table);
 FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS <= FP_WLS_MAX_CONS, polytope_fits_qp);
 FP_STATIC_ASSERT(3 * FP_MAX_ROTORS <= FP_WLS_MAX_VARS, allocation_fits_qp);
 FP_STATIC_ASSERT(6 + 3 * FP_MAX_ROTORS <= FP_WLS_MAX_ROWS, allocation_rows_fit_qp);
@@ -112,6 +113,17 @@ static void controller_set_defaults(void *model) {
         m->poly_A[i][1] = fp_default_polytope_A[3 * i + 1];
         m->poly_A[i][2] = fp_default_polytope_A[3 * i + 2];
         m->poly_b[i] = fp_default_polytope_b[i];
+    }
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        int k, base = i * FP_FAIL_POLYTOPE_FACETS;
+        m->fail_poly_n[i] = fp_default_fail_n[i];
+        m->rotor_health[i] = 1.0;
+        for (k = 0; k < fp_default_fail_n[i]; k++) {
+            m->fail_poly_A[base + k][0] = fp_default_fail_A[3 * (base + k)];
+            m->fail_poly_A[base + k][1] = fp_default_fail_A[3 * (base + k) + 1];
+            m->fail_poly_A[base + k][2] = fp_default_fail_A[3 * (base + k) + 2];
+            m->fail_poly_b[base + k] = fp_default_fail_b[base + k];
+        }
     }
     m->poly_margin = 0.9;
     m->W_nu[0] = m->W_nu[1] = m->W_nu[2] = 1.0;
@@ -262,12 +274,13 @@ static void check_tunables(ControllerModel *m, Check *c) {
     }
 }
 
-/* Support of the polytope along +-e_axis, found with the WLS solver as
+/* Support of the polytope {A f <= d} along +-e_axis, found with the WLS solver as
  * min (e.f - target)^2 + eps |f|^2: infeasible -> empty; huge -> unbounded. */
-static FpWlsStatus polytope_support(ControllerModel *m, int axis, double sign, double *value) {
+static FpWlsStatus polytope_support(ControllerModel *m, const double (*A)[3], const double *d,
+                                    int n, int axis, double sign, double *value) {
     FpWls *w = &m->guid; /* borrowed before the guidance QP is set up */
     FpWlsResult r;
-    int i, n = m->poly_n;
+    int i;
     const double far = 1e9;
     fp_wls_setup(w, 3, 4, n);
     for (i = 0; i < 3; i++) {
@@ -276,18 +289,75 @@ static FpWlsStatus polytope_support(ControllerModel *m, int axis, double sign, d
     }
     w->b[0] = far;
     for (i = 0; i < n; i++) {
-        w->C[3 * i] = m->poly_A[i][0];
-        w->C[3 * i + 1] = m->poly_A[i][1];
-        w->C[3 * i + 2] = m->poly_A[i][2];
-        w->d[i] = m->poly_d[i];
+        w->C[3 * i] = A[i][0];
+        w->C[3 * i + 1] = A[i][1];
+        w->C[3 * i + 2] = A[i][2];
+        w->d[i] = d[i];
     }
     fp_wls_solve(w, 200, &r);
     *value = sign * w->x[axis];
     return r.status;
 }
 
-static void check_polytope(ControllerModel *m, Check *c) {
+/* Facets finite with non-zero normals, the set non-empty and bounded; its f_bz range.
+ * Returns 0 or logs an error naming the parameters and returns 1. */
+static int check_facets(ControllerModel *m, Check *c, const char *name, const double (*A)[3],
+                        const double *b, int n, double *fz_min, double *fz_max) {
     int i, axis;
+    for (i = 0; i < n; i++) {
+        double norm = sqrt(v3_dot(A[i], A[i]));
+        if (!isfinite(norm) || !isfinite(b[i]) || !(norm > 1e-9)) {
+            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+                   "parameters %s: facet %d must be finite with a non-zero normal", name, i + 1);
+            c->errors++;
+            return 1;
+        }
+    }
+    for (axis = 0; axis < 3; axis++) {
+        double lo, hi;
+        FpWlsStatus s1 = polytope_support(m, A, b, n, axis, -1.0, &lo);
+        FpWlsStatus s2 = polytope_support(m, A, b, n, axis, 1.0, &hi);
+        if (s1 == FP_WLS_INFEASIBLE || s2 == FP_WLS_INFEASIBLE) {
+            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+                   "parameters %s: the feasible-force polytope is empty", name);
+            c->errors++;
+            return 1;
+        }
+        lo = -lo;
+        if (s1 != FP_WLS_OPTIMAL || s2 != FP_WLS_OPTIMAL || hi > 1e6 || lo < -1e6) {
+            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+                   "parameters %s: the feasible-force polytope is unbounded along body axis %d",
+                   name, axis + 1);
+            c->errors++;
+            return 1;
+        }
+        if (axis == 2) {
+            *fz_min = lo;
+            *fz_max = hi;
+        }
+    }
+    return 0;
+}
+
+/* Offsets d of {A f <= b} scaled by the margin about the hover force; 0 when the
+ * hover force is outside the set (d = b then). */
+static int scale_about_hover(const ControllerModel *m, const double (*A)[3], const double *b,
+                             int n, double *d) {
+    double hover[3] = {0.0, 0.0, 0.0};
+    int i, inside = 1;
+    hover[2] = -m->mass * m->g;
+    for (i = 0; i < n; i++)
+        if (!(v3_dot(A[i], hover) <= b[i] + 1e-9 * (1.0 + fabs(b[i])))) inside = 0;
+    for (i = 0; i < n; i++) {
+        double ah = v3_dot(A[i], hover);
+        d[i] = inside ? ah + m->poly_margin * (b[i] - ah) : b[i];
+    }
+    return inside;
+}
+
+static void check_polytope(ControllerModel *m, Check *c) {
+    int i;
+    double unused_lo, unused_hi;
     if (m->poly_n < 4 || m->poly_n > FP_POLYTOPE_MAX_FACETS) {
         fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
                "parameter poly_n = %d: a bounded polytope in 3-D needs 4..%d facets",
@@ -295,70 +365,57 @@ static void check_polytope(ControllerModel *m, Check *c) {
         c->errors++;
         return;
     }
-    for (i = 0; i < m->poly_n; i++) {
-        double norm = sqrt(v3_dot(m->poly_A[i], m->poly_A[i]));
-        if (!isfinite(norm) || !isfinite(m->poly_b[i])) {
-            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-                   "parameter poly_A[%d,:] / poly_b[%d]: facet must be finite", i + 1, i + 1);
-            c->errors++;
-        } else if (!(norm > 1e-9)) {
-            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-                   "parameter poly_A[%d,:]: facet normal is zero", i + 1);
-            c->errors++;
-        }
-    }
     if (!(m->poly_margin > 0.0 && m->poly_margin <= 1.0)) {
         fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
                "parameter poly_margin = %.17g: must be in (0, 1]", m->poly_margin);
         c->errors++;
     }
+    for (i = 0; i < m->n_rotors; i++)
+        if (m->fail_poly_n[i] != 0 &&
+            (m->fail_poly_n[i] < 4 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS)) {
+            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+                   "parameter fail_poly_n[%d] = %d: must be 0 (none) or 4..%d", i + 1,
+                   (int)m->fail_poly_n[i], FP_FAIL_POLYTOPE_FACETS);
+            c->errors++;
+        }
     if (c->errors) return;
-    for (i = 0; i < m->poly_n; i++) m->poly_d[i] = m->poly_b[i];
-    for (axis = 0; axis < 3; axis++) {
-        double lo, hi;
-        FpWlsStatus s1 = polytope_support(m, axis, -1.0, &lo);
-        FpWlsStatus s2 = polytope_support(m, axis, 1.0, &hi);
-        if (s1 == FP_WLS_INFEASIBLE || s2 == FP_WLS_INFEASIBLE) {
-            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-                   "parameters poly_A, poly_b: the feasible-force polytope is empty");
-            c->errors++;
-            return;
-        }
-        lo = -lo;
-        if (s1 != FP_WLS_OPTIMAL || s2 != FP_WLS_OPTIMAL || hi > 1e6 || lo < -1e6) {
-            fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-                   "parameters poly_A, poly_b: the feasible-force polytope is unbounded along "
-                   "body axis %d",
-                   axis + 1);
-            c->errors++;
-            return;
-        }
-        if (axis == 2) {
-            m->fz_min = lo;
-            m->fz_max = hi;
-        }
-    }
+    if (check_facets(m, c, "poly_A, poly_b", (const double(*)[3])m->poly_A, m->poly_b, m->poly_n,
+                     &m->fz_min, &m->fz_max))
+        return;
     /* The guidance works in S(0) scaled about the hover force: the margin keeps
      * actuator authority for attitude torques (S(0) assumes none) and absorbs the
      * outer approximation of the polytope. */
+    m->hover_ok[0] = scale_about_hover(m, (const double(*)[3])m->poly_A, m->poly_b, m->poly_n,
+                                       m->poly_d);
+    if (!m->hover_ok[0]) {
+        fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
+               "parameters poly_A, poly_b: the hover force [0, 0, %.6g] N is outside the "
+               "polytope: it does not describe this vehicle",
+               -m->mass * m->g);
+        c->errors++;
+        return;
+    }
     {
-        double hover[3] = {0.0, 0.0, 0.0};
-        hover[2] = -m->mass * m->g;
-        for (i = 0; i < m->poly_n; i++) {
-            double ah = v3_dot(m->poly_A[i], hover);
-            if (!(ah <= m->poly_b[i] + 1e-9 * (1.0 + fabs(m->poly_b[i])))) {
-                fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-                       "parameters poly_A, poly_b: the hover force [0, 0, %.6g] N violates facet "
-                       "%d: the polytope does not describe this vehicle",
-                       hover[2], i + 1);
-                c->errors++;
-                return;
-            }
-            m->poly_d[i] = ah + m->poly_margin * (m->poly_b[i] - ah);
-        }
         /* scaling about the hover force maps the f_bz range the same way */
-        m->fz_min = hover[2] + m->poly_margin * (m->fz_min - hover[2]);
-        m->fz_max = hover[2] + m->poly_margin * (m->fz_max - hover[2]);
+        double hz = -m->mass * m->g;
+        m->fz_min = hz + m->poly_margin * (m->fz_min - hz);
+        m->fz_max = hz + m->poly_margin * (m->fz_max - hz);
+    }
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        int base = i * FP_FAIL_POLYTOPE_FACETS;
+        char name[48];
+        m->hover_ok[i + 1] = 0;
+        if (i >= m->n_rotors || m->fail_poly_n[i] == 0) continue;
+        snprintf(name, sizeof name, "fail_poly_A, fail_poly_b (rotor %d)", i + 1);
+        if (check_facets(m, c, name, (const double(*)[3])&m->fail_poly_A[base],
+                         &m->fail_poly_b[base], m->fail_poly_n[i], &unused_lo, &unused_hi))
+            return;
+        m->hover_ok[i + 1] = scale_about_hover(m, (const double(*)[3])&m->fail_poly_A[base],
+                                               &m->fail_poly_b[base], m->fail_poly_n[i],
+                                               &m->fail_d[base]);
+        if (!m->hover_ok[i + 1])
+            fp_log(c->logger, FP_WARNING, FP_LOG_WARNING,
+                   "losing rotor %d leaves no hover force in its feasible-force set", i + 1);
     }
 }
 
@@ -472,6 +529,7 @@ static void filtered_actuators(const ControllerModel *m, double a[], double b[],
 }
 
 typedef struct {
+    double eff[FP_MAX_ROTORS]; /* known rotor efficiency, 0 for lost rotors */
     double mu_m[3], rate_m[3], ang_acc_m[3];
     double a_m[FP_MAX_ROTORS], b_m[FP_MAX_ROTORS], w_m[FP_MAX_ROTORS];
     double f_b_m[3], tau_b_m[3];
@@ -485,7 +543,22 @@ static void read_filters(const ControllerModel *m, Measured *s) {
         s->ang_acc_m[i] = m->filt[F_RATE + i][1];
     }
     filtered_actuators(m, s->a_m, s->b_m, s->w_m);
-    fp_rotor_wrench(&m->rotors, s->a_m, s->b_m, s->w_m, NULL, s->f_b_m, s->tau_b_m);
+    for (i = 0; i < FP_MAX_ROTORS; i++)
+        s->eff[i] = (m->lost_mask >> i) & 1 ? 0.0 : fmin(fmax(m->rotor_health[i], 0.0), 1.0);
+    fp_rotor_wrench(&m->rotors, s->a_m, s->b_m, s->w_m, s->eff, s->f_b_m, s->tau_b_m);
+}
+
+/* The feasible-force set in use: nominal, or the one after losing the single lost rotor. */
+static int active_set(const ControllerModel *m, const double (**A)[3], const double **d) {
+    int i = m->active_polytope;
+    if (i >= 1) {
+        *A = (const double(*)[3])&m->fail_poly_A[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
+        *d = &m->fail_d[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
+        return m->fail_poly_n[i - 1];
+    }
+    *A = (const double(*)[3])m->poly_A;
+    *d = m->poly_d;
+    return m->poly_n;
 }
 
 /* Guidance: blocks + feed-forward, outer INDI, WLS guidance QP. */
@@ -496,6 +569,9 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
     double sg = sqrt(m->gamma_opt), zero_ub = 0.0, t0;
     int i, j, k, n_cons = 0, flags = 0;
     const int nv = 5;
+    const double(*pa)[3];
+    const double *pd;
+    int np = active_set(m, &pa, &pd);
     /* Position and velocity references pass through the measurement filter H(s) before
      * they meet the filtered measurements: with the same delay on both sides the
      * feedback terms vanish when the vehicle tracks exactly, instead of pushing on the
@@ -561,20 +637,20 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
     }
     if (m->force_constraint == 0) {
         /* joint: A_poly (f_b_m + df) <= b_poly */
-        for (k = 0; k < m->poly_n; k++, n_cons++) {
-            for (j = 0; j < nv; j++) w->C[n_cons * nv + j] = j < 3 ? m->poly_A[k][j] : 0.0;
-            w->d[n_cons] = m->poly_d[k] - v3_dot(m->poly_A[k], s->f_b_m);
+        for (k = 0; k < np; k++, n_cons++) {
+            for (j = 0; j < nv; j++) w->C[n_cons * nv + j] = j < 3 ? pa[k][j] : 0.0;
+            w->d[n_cons] = pd[k] - v3_dot(pa[k], s->f_b_m);
         }
     } else {
         /* paper eq. (22)-(23): slice at f_bz_ref (clamped into the polytope's z range) */
         double fz = fmin(fmax(m->f_b_ref[2], m->fz_min), m->fz_max);
-        for (k = 0; k < m->poly_n; k++) {
-            double ax = m->poly_A[k][0], ay = m->poly_A[k][1];
+        for (k = 0; k < np; k++) {
+            double ax = pa[k][0], ay = pa[k][1];
             if (ax * ax + ay * ay < 1e-18) continue;
             for (j = 0; j < nv; j++) w->C[n_cons * nv + j] = 0.0;
             w->C[n_cons * nv] = ax;
             w->C[n_cons * nv + 1] = ay;
-            w->d[n_cons] = m->poly_d[k] - m->poly_A[k][2] * fz - ax * s->f_b_m[0] -
+            w->d[n_cons] = pd[k] - pa[k][2] * fz - ax * s->f_b_m[0] -
                            ay * s->f_b_m[1];
             n_cons++;
         }
@@ -607,8 +683,8 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
         rot_from_quat(q, rr);
         for (i = 0; i < 3; i++) fb[i] = rr[0][i] * f_w_ref[0] + rr[1][i] * f_w_ref[1] +
                                         rr[2][i] * f_w_ref[2];
-        for (k = 0; k < m->poly_n; k++)
-            if (v3_dot(m->poly_A[k], fb) > m->poly_d[k] + zero_ub) inside = 0;
+        for (k = 0; k < np; k++)
+            if (v3_dot(pa[k], fb) > pd[k] + zero_ub) inside = 0;
         m->feasible = inside;
     }
     for (i = 0; i < 3; i++) m->f_b_c[i] = s->f_b_m[i] + df_c[i];
@@ -639,6 +715,41 @@ static void stabilization(ControllerModel *m, const Measured *s, const double mu
     m3_mul_v(&m->inertia[0][0], dw, dtau_c);
 }
 
+/* Preferred configuration for the rotors still working: the minimum-norm split over
+ * them; lost rotors get their current state (they are fixed in the QP anyway). */
+static void preferred_without_lost(const ControllerModel *m, const double wrench[6],
+                                   double a_pref[], double b_pref[], double w_pref[]) {
+    FpRotorSet rs;
+    double a[FP_MAX_ROTORS], b[FP_MAX_ROTORS], w[FP_MAX_ROTORS];
+    int map[FP_MAX_ROTORS], i, n = 0;
+    if (m->lost_mask == 0) {
+        fp_preferred_config(&m->rotors, wrench, a_pref, b_pref, w_pref, NULL, 0);
+        return;
+    }
+    rs = m->rotors;
+    for (i = 0; i < m->n_rotors; i++) {
+        a_pref[i] = m->filt[F_ALPHA + i][0];
+        b_pref[i] = m->filt[F_BETA + i][0];
+        w_pref[i] = m->omega_min;
+        if ((m->lost_mask >> i) & 1) continue;
+        map[n] = i;
+        memcpy(rs.pos[n], m->rotors.pos[i], sizeof rs.pos[n]);
+        rs.dir[n] = m->rotors.dir[i];
+        rs.gamma[n] = m->rotors.gamma[i];
+        rs.alpha_min[n] = m->rotors.alpha_min[i], rs.alpha_max[n] = m->rotors.alpha_max[i];
+        rs.beta_min[n] = m->rotors.beta_min[i], rs.beta_max[n] = m->rotors.beta_max[i];
+        n++;
+    }
+    if (n == 0) return;
+    rs.n = n;
+    fp_preferred_config(&rs, wrench, a, b, w, NULL, 0);
+    for (i = 0; i < n; i++) {
+        a_pref[map[i]] = a[i];
+        b_pref[map[i]] = b[i];
+        w_pref[map[i]] = w[i];
+    }
+}
+
 /* Inner allocation: WLS on B''(u_a,m) with bounds, torque priority and a
  * preferred configuration (min-norm split of the commanded wrench). */
 static void allocation(ControllerModel *m, const Measured *s, const double dnu[6],
@@ -650,12 +761,14 @@ static void allocation(ControllerModel *m, const Measured *s, const double dnu[6
     double lo[3], hi[3], um[3], pref[3], scale[3], t0;
     int i, j, k, n = m->n_rotors, nv = 3 * n, flags = 0;
     fp_effectiveness_b2prime(&m->rotors, s->a_m, s->b_m, s->w_m, b2p);
+    for (i = 0; i < 6; i++) /* a rotor's effectiveness scales with its known efficiency */
+        for (j = 0; j < nv; j++) b2p[i * nv + j] *= s->eff[j / 3];
     for (i = 0; i < 3; i++) {
         nu_target[i] = s->f_b_m[i] + dnu[i];
         nu_target[3 + i] = s->tau_b_m[i] + dnu[3 + i];
     }
     /* an infeasible split still gives a usable preference once clamped below */
-    fp_preferred_config(&m->rotors, nu_target, a_pref, b_pref, w_pref, NULL, 0);
+    preferred_without_lost(m, nu_target, a_pref, b_pref, w_pref);
     w->n_rows = 6 + nv;
     for (i = 0; i < 6; i++) {
         for (j = 0; j < nv; j++) w->A[i * nv + j] = m->W_nu[i] * b2p[i * nv + j];
@@ -668,6 +781,11 @@ static void allocation(ControllerModel *m, const Measured *s, const double dnu[6
         lo[1] = m->beta_min[i], hi[1] = m->beta_max[i], um[1] = s->b_m[i];
         lo[2] = m->omega_min, hi[2] = m->omega_max, um[2] = s->w_m[i];
         pref[0] = a_pref[i], pref[1] = b_pref[i], pref[2] = w_pref[i];
+        if ((m->lost_mask >> i) & 1) { /* a lost rotor: servos held, motor stopped */
+            lo[0] = hi[0] = pref[0] = um[0];
+            lo[1] = hi[1] = pref[1] = um[1];
+            lo[2] = hi[2] = pref[2] = m->omega_min;
+        }
         for (k = 0; k < 3; k++) {
             int col = 3 * i + k, row = 6 + col;
             for (j = 0; j < nv; j++) w->A[row * nv + j] = (j == col) ? scale[k] : 0.0;
@@ -712,14 +830,49 @@ static int all_finite(const double *v, int n) {
     return 1;
 }
 
+/* Rotors below half efficiency are lost: pick the feasible-force set that goes with
+ * the losses and say so once per change. */
+static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
+    int32_t mask = 0;
+    int i, count = 0, lost = -1;
+    for (i = 0; i < m->n_rotors; i++)
+        if (m->rotor_health[i] < 0.5) {
+            mask |= (int32_t)1 << i;
+            count++;
+            lost = i;
+        }
+    if (mask == m->lost_mask) return;
+    m->lost_mask = mask;
+    m->rotors_lost = count;
+    fp_wls_reset(&m->guid); /* the facets change: the old working set means nothing */
+    if (count == 0) {
+        m->active_polytope = 0;
+        m->hover_possible = m->hover_ok[0];
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING, "all rotors healthy: nominal force set");
+    } else if (count == 1 && m->fail_poly_n[lost] > 0) {
+        m->active_polytope = lost + 1;
+        m->hover_possible = m->hover_ok[lost + 1];
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+               "rotor %d lost: allocations exclude it, guidance uses its feasible force set%s",
+               lost + 1, m->hover_possible ? "" : " (which cannot hold hover)");
+    } else {
+        m->active_polytope = -1;
+        m->hover_possible = 0;
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+               "%d rotors lost (mask 0x%x): no feasible force set for this loss, hovering may "
+               "be impossible; flying on with the remaining rotors",
+               count, (unsigned)mask);
+    }
+}
+
 /* One sample of the controller.  FP_WARNING: an input was not finite and the
  * last valid command is held (nothing else changes). */
 static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     static const char *const names[] = {"pos_ref", "euler_ref", "vel_ref", "acc_ref",
                                         "euler_rate_ref", "pos", "vel", "acc", "euler", "rate",
-                                        "omega", "alpha", "beta"};
-    const double *inputs[13];
-    int counts[13] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0};
+                                        "omega", "alpha", "beta", "rotor_health"};
+    const double *inputs[14];
+    int counts[14] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0};
     Measured s;
     double df_c[3], mu_c[3], dtau[3], a_cmd[FP_MAX_ROTORS], b_cmd[FP_MAX_ROTORS];
     double w_cmd[FP_MAX_ROTORS], psi, t_start = m->timing ? fp_clock_seconds() : 0.0;
@@ -728,8 +881,9 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
     inputs[6] = m->vel, inputs[7] = m->acc, inputs[8] = m->euler, inputs[9] = m->rate;
     inputs[10] = m->omega, inputs[11] = m->alpha, inputs[12] = m->beta;
-    counts[10] = counts[11] = counts[12] = n;
-    for (k = 0; k < 13; k++)
+    inputs[13] = m->rotor_health;
+    counts[10] = counts[11] = counts[12] = counts[13] = n;
+    for (k = 0; k < 14; k++)
         for (i = 0; i < counts[k]; i++)
             if (!isfinite(inputs[k][i])) {
                 fp_log(logger, FP_WARNING, FP_LOG_WARNING,
@@ -737,6 +891,14 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
                        names[k], i + 1, inputs[k][i]);
                 return FP_WARNING;
             }
+    for (i = 0; i < n; i++)
+        if (m->rotor_health[i] < 0.0 || m->rotor_health[i] > 1.0) {
+            fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+                   "input rotor_health[%d] = %g is outside [0, 1]: holding the last valid command",
+                   i + 1, m->rotor_health[i]);
+            return FP_WARNING;
+        }
+    update_rotor_losses(m, logger);
     /* 1. filters (heading unwrapped first so that +-pi crossings filter smoothly) */
     psi = m->psi_unwrapped + wrap_pi(m->euler[2] - m->psi_raw);
     m->psi_raw = m->euler[2];
@@ -849,6 +1011,18 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     memset(m->dnu_c, 0, sizeof m->dnu_c);
     memset(m->alloc_residual, 0, sizeof m->alloc_residual);
     m->t_step = m->t_guid = m->t_alloc = 0.0;
+    m->lost_mask = 0;
+    m->rotors_lost = 0;
+    m->active_polytope = 0;
+    m->hover_possible = m->hover_ok[0];
+    for (i = 0; i < n; i++)
+        if (!isfinite(m->rotor_health[i]) || m->rotor_health[i] < 0.0 ||
+            m->rotor_health[i] > 1.0) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                   "input rotor_health[%d] = %g: must be in [0, 1]", i + 1, m->rotor_health[i]);
+            return FP_ERROR;
+        }
+    update_rotor_losses(m, logger);
     return FP_OK;
 }
 

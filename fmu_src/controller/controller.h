@@ -5,6 +5,7 @@
 
 #include <stdint.h>
 
+#include "default_fail_polytopes.h"
 #include "default_polytope.h"
 #include "fp_model.h"
 #include "multirotor.h"
@@ -31,17 +32,22 @@ typedef struct {
     double gamma_opt, W_u[5], W_v[3], euler_min[2], euler_max[2];
     int32_t force_constraint, poly_n;
     double poly_A[FP_POLYTOPE_MAX_FACETS][3], poly_b[FP_POLYTOPE_MAX_FACETS], poly_margin;
+    int32_t fail_poly_n[FP_MAX_ROTORS];
+    double fail_poly_A[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS][3];
+    double fail_poly_b[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS];
     double W_nu[6], w_pref, pref_omega_scale;
     int32_t qp_max_iter, timing;
     /* inputs */
     double pos_ref[3], euler_ref[3], vel_ref[3], acc_ref[3], euler_rate_ref[3];
     double pos[3], vel[3], acc[3], euler[3], rate[3];
     double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
+    double rotor_health[FP_MAX_ROTORS];
     /* outputs */
     double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
     double mu_c[3], f_b_ref[3], f_b_c[3];
     int32_t feasible, guid_status, guid_iter, alloc_status, alloc_iter, sat_flags, guid_flags;
     double acc_c[3], rate_c[3], dnu_c[6], alloc_residual[6];
+    int32_t rotors_lost, hover_possible, active_polytope;
     double t_step, t_guid, t_alloc;
     /* internal state */
     FpRotorSet rotors;
@@ -52,7 +58,10 @@ typedef struct {
     double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
     double inertia_inv[3][3];
     double fz_min, fz_max;                 /* f_bz range of the polytope */
-    double poly_d[FP_POLYTOPE_MAX_FACETS]; /* offsets of the margin-scaled polytope in use */
+    double poly_d[FP_POLYTOPE_MAX_FACETS]; /* offsets of the margin-scaled nominal polytope */
+    double fail_d[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS]; /* the same per failure set */
+    int32_t hover_ok[FP_MAX_ROTORS + 1];   /* hover force inside: [0] nominal, [i] rotor i lost */
+    int32_t lost_mask;                     /* rotors treated as lost (bit i-1: rotor i) */
     FpWls guid, alloc;
 } ControllerModel;
 

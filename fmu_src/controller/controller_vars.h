@@ -57,6 +57,9 @@
     X(poly_n, 230, INTEGER, PARAM_FIXED, 1, 1, "", "Number of facets of the feasible-force polytope (<= 64)") \
     X(poly_A, 300, REAL, PARAM_FIXED, 64, 3, "", "Feasible-force polytope S(0): A f_b <= b, unit normals") \
     X(poly_b, 500, REAL, PARAM_FIXED, 64, 1, "N", "Feasible-force polytope S(0): offsets b")   \
+    X(fail_poly_n, 570, INTEGER, PARAM_FIXED, 8, 1, "", "Facets of S(0) after losing rotor i (<= 32; 0: none given)") \
+    X(fail_poly_A, 3000, REAL, PARAM_FIXED, 256, 3, "", "S(0) after losing rotor i: rows 32 (i-1) + 1 .. 32 (i-1) + fail_poly_n[i], unit normals") \
+    X(fail_poly_b, 4000, REAL, PARAM_FIXED, 256, 1, "N", "S(0) after losing rotor i: offsets (rows as fail_poly_A)") \
     X(poly_margin, 564, REAL, PARAM_FIXED, 1, 1, "", "Scale (0, 1] of S(0) about the hover force used by the guidance: reserve for attitude torques") \
     /* parameters: inner allocation (eq. 12-13) */                                                \
     X(W_nu, 600, REAL, PARAM_TUNABLE, 6, 1, "", "Row weights of [df_b; dtau_b] (torque priority)") \
@@ -79,6 +82,7 @@
     X(omega, 1120, REAL, INPUT, 8, 1, "rad/s", "Measured rotor speeds")                        \
     X(alpha, 1130, REAL, INPUT, 8, 1, "rad", "Measured servo angles alpha")                    \
     X(beta, 1140, REAL, INPUT, 8, 1, "rad", "Measured servo angles beta")                      \
+    X(rotor_health, 1150, REAL, INPUT, 8, 1, "", "Known rotor efficiency 0..1 (below 0.5: lost; the allocations exclude it)") \
     /* outputs: actuator commands (plant inputs) */                                               \
     X(omega_cmd, 2000, REAL, OUTPUT, 8, 1, "rad/s", "Rotor speed commands")                    \
     X(alpha_cmd, 2010, REAL, OUTPUT, 8, 1, "rad", "Servo commands alpha")                       \
@@ -98,6 +102,9 @@
     X(rate_c, 2053, REAL, OUTPUT, 3, 1, "rad/s", "Commanded body rates")                      \
     X(dnu_c, 2056, REAL, OUTPUT, 6, 1, "", "Virtual control increment [df_b (N); dtau_b (N.m)]") \
     X(alloc_residual, 2062, REAL, OUTPUT, 6, 1, "", "Allocation residual B'' du - dnu_c [N; N.m]") \
+    X(rotors_lost, 2080, INTEGER, OUTPUT, 1, 1, "", "Number of rotors the controller treats as lost") \
+    X(hover_possible, 2081, BOOLEAN, OUTPUT, 1, 1, "", "The hover force lies in the feasible-force set in use (false: the vehicle cannot hold hover)") \
+    X(active_polytope, 2082, INTEGER, OUTPUT, 1, 1, "", "Feasible-force set in use: 0 nominal, i: after losing rotor i, -1: several rotors lost (nominal set, no guarantee)") \
     X(t_step, 2070, REAL, OUTPUT, 1, 1, "s", "Computation time of the last controller sample (0 unless timing)") \
     X(t_guid, 2071, REAL, OUTPUT, 1, 1, "s", "Computation time of the last guidance QP solve (0 unless timing)") \
     X(t_alloc, 2072, REAL, OUTPUT, 1, 1, "s", "Computation time of the last inner allocation QP solve (0 unless timing)")
