@@ -566,7 +566,7 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
     FpWls *w = &m->guid;
     FpWlsResult res;
     double r[9], drp[9], drt[9], g_mat[3][5], v_c[3], dacc[3], f_w_ref[3], rf[3];
-    double sg = sqrt(m->gamma_opt), zero_ub = 0.0, t0;
+    double sg = sqrt(m->gamma_opt), t0;
     int i, j, k, n_cons = 0, flags = 0;
     const int nv = 5;
     const double(*pa)[3];
@@ -683,8 +683,8 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
         rot_from_quat(q, rr);
         for (i = 0; i < 3; i++) fb[i] = rr[0][i] * f_w_ref[0] + rr[1][i] * f_w_ref[1] +
                                         rr[2][i] * f_w_ref[2];
-        for (k = 0; k < np; k++)
-            if (v3_dot(pa[k], fb) > pd[k] + zero_ub) inside = 0;
+        for (k = 0; k < np; k++) /* 1 uN of slack: flat sets (quadrotor) have b = 0 facets */
+            if (v3_dot(pa[k], fb) > pd[k] + 1e-6 * (1.0 + fabs(pd[k]))) inside = 0;
         m->feasible = inside;
     }
     for (i = 0; i < 3; i++) m->f_b_c[i] = s->f_b_m[i] + df_c[i];
@@ -812,6 +812,7 @@ static void allocation(ControllerModel *m, const Measured *s, const double dnu[6
         a_cmd[i] = fmin(fmax(s->a_m[i] + w->x[3 * i], m->alpha_min[i]), m->alpha_max[i]);
         b_cmd[i] = fmin(fmax(s->b_m[i] + w->x[3 * i + 1], m->beta_min[i]), m->beta_max[i]);
         w_cmd[i] = fmin(fmax(s->w_m[i] + w->x[3 * i + 2], m->omega_min), m->omega_max);
+        if ((m->lost_mask >> i) & 1) continue; /* a stopped dead rotor is not saturated */
         if (m->alpha_max[i] > m->alpha_min[i] &&
             (a_cmd[i] <= m->alpha_min[i] + 1e-9 || a_cmd[i] >= m->alpha_max[i] - 1e-9))
             flags |= 1 << (8 + i);
