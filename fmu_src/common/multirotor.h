@@ -19,6 +19,7 @@
 #define FP_MULTIROTOR_H
 
 #include <stdint.h>
+#include <string.h>
 
 #include "fp_model.h"
 
@@ -43,6 +44,42 @@ typedef struct {
 } FpAirframe;
 
 void fp_paper_hexacopter(FpAirframe *af);
+
+/* Both FMUs' model structs name their airframe parameters alike (n_rotors, k_t, k_d,
+ * rotor_pos, rotor_dir, rotor_gamma, alpha/beta_min/max, omega_min/max): these copy
+ * between such a struct and an FpRotorSet. */
+#define FP_ROTOR_SET_TO_MODEL(rs, m)                                          \
+    do {                                                                      \
+        (m)->n_rotors = (rs)->n;                                              \
+        (m)->k_t = (rs)->k_t;                                                 \
+        (m)->k_d = (rs)->k_d;                                                 \
+        memcpy((m)->rotor_pos, (rs)->pos, sizeof (m)->rotor_pos);             \
+        memcpy((m)->rotor_dir, (rs)->dir, sizeof (m)->rotor_dir);             \
+        memcpy((m)->rotor_gamma, (rs)->gamma, sizeof (m)->rotor_gamma);       \
+        memcpy((m)->alpha_min, (rs)->alpha_min, sizeof (m)->alpha_min);       \
+        memcpy((m)->alpha_max, (rs)->alpha_max, sizeof (m)->alpha_max);       \
+        memcpy((m)->beta_min, (rs)->beta_min, sizeof (m)->beta_min);          \
+        memcpy((m)->beta_max, (rs)->beta_max, sizeof (m)->beta_max);          \
+        (m)->omega_min = (rs)->omega_min;                                     \
+        (m)->omega_max = (rs)->omega_max;                                     \
+    } while (0)
+
+#define FP_MODEL_TO_ROTOR_SET(m, rs)                                          \
+    do {                                                                      \
+        memset((rs), 0, sizeof *(rs));                                        \
+        (rs)->n = (m)->n_rotors;                                              \
+        (rs)->k_t = (m)->k_t;                                                 \
+        (rs)->k_d = (m)->k_d;                                                 \
+        memcpy((rs)->pos, (m)->rotor_pos, sizeof (rs)->pos);                  \
+        memcpy((rs)->dir, (m)->rotor_dir, sizeof (rs)->dir);                  \
+        memcpy((rs)->gamma, (m)->rotor_gamma, sizeof (rs)->gamma);            \
+        memcpy((rs)->alpha_min, (m)->alpha_min, sizeof (rs)->alpha_min);      \
+        memcpy((rs)->alpha_max, (m)->alpha_max, sizeof (rs)->alpha_max);      \
+        memcpy((rs)->beta_min, (m)->beta_min, sizeof (rs)->beta_min);         \
+        memcpy((rs)->beta_max, (m)->beta_max, sizeof (rs)->beta_max);         \
+        (rs)->omega_min = (m)->omega_min;                                     \
+        (rs)->omega_max = (m)->omega_max;                                     \
+    } while (0)
 
 /* Partial derivatives of the thrust direction t_i with respect to alpha and beta. */
 void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, double dt_dalpha[3],

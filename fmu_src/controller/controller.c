@@ -77,21 +77,10 @@ static void controller_set_defaults(void *model) {
     memset(m, 0, sizeof *m);
     fp_paper_hexacopter(&af);
     m->Ts = 0.002;
-    m->n_rotors = af.rotors.n;
+    FP_ROTOR_SET_TO_MODEL(&af.rotors, m);
     m->mass = af.mass;
     memcpy(m->inertia, af.inertia, sizeof m->inertia);
     m->g = af.g;
-    m->k_t = af.rotors.k_t;
-    m->k_d = af.rotors.k_d;
-    memcpy(m->rotor_pos, af.rotors.pos, sizeof m->rotor_pos);
-    memcpy(m->rotor_dir, af.rotors.dir, sizeof m->rotor_dir);
-    memcpy(m->rotor_gamma, af.rotors.gamma, sizeof m->rotor_gamma);
-    memcpy(m->alpha_min, af.rotors.alpha_min, sizeof m->alpha_min);
-    memcpy(m->alpha_max, af.rotors.alpha_max, sizeof m->alpha_max);
-    memcpy(m->beta_min, af.rotors.beta_min, sizeof m->beta_min);
-    memcpy(m->beta_max, af.rotors.beta_max, sizeof m->beta_max);
-    m->omega_min = af.rotors.omega_min;
-    m->omega_max = af.rotors.omega_max;
     m->filt_wn = 50.0;
     m->filt_zeta = 0.55;
     /* Hand-tuned P blocks that flew the prototype (DESIGN.md): 2.2, 6, 9, 20 1/s. */
@@ -484,21 +473,6 @@ static int validate(ControllerModel *m, const FpLogger *logger) {
 /* ------------------------------------------------------------------------ */
 /* Control law                                                              */
 
-static void copy_rotor_set(const ControllerModel *m, FpRotorSet *rs) {
-    memset(rs, 0, sizeof *rs);
-    rs->n = m->n_rotors;
-    rs->k_t = m->k_t;
-    rs->k_d = m->k_d;
-    memcpy(rs->pos, m->rotor_pos, sizeof rs->pos);
-    memcpy(rs->dir, m->rotor_dir, sizeof rs->dir);
-    memcpy(rs->gamma, m->rotor_gamma, sizeof rs->gamma);
-    memcpy(rs->alpha_min, m->alpha_min, sizeof rs->alpha_min);
-    memcpy(rs->alpha_max, m->alpha_max, sizeof rs->alpha_max);
-    memcpy(rs->beta_min, m->beta_min, sizeof rs->beta_min);
-    memcpy(rs->beta_max, m->beta_max, sizeof rs->beta_max);
-    rs->omega_min = m->omega_min;
-    rs->omega_max = m->omega_max;
-}
 
 /* R = Rz(psi) Ry(theta) Rx(phi) and its partial derivatives in phi and theta. */
 static void attitude_jacobian(const double e[3], double r[9], double dr_dphi[9],
@@ -958,7 +932,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     (void)t0;
     if (validate(m, logger) != 0) return FP_ERROR;
     n = m->n_rotors;
-    copy_rotor_set(m, &m->rotors);
+    FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
     discretize_filter(m);
     /* filters start in steady state at the initial measurements */
     memset(m->filt, 0, sizeof m->filt);

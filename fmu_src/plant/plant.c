@@ -32,21 +32,6 @@ enum { X_POS = 0, X_VEL = 3, X_QUAT = 6, X_RATE = 10, X_OMEGA = 13 };
 /* ------------------------------------------------------------------------ */
 /* Defaults: the paper's tilting hexacopter (Table I).                      */
 
-static void copy_rotor_set(const PlantModel *m, FpRotorSet *rs) {
-    memset(rs, 0, sizeof *rs);
-    rs->n = m->n_rotors;
-    rs->k_t = m->k_t;
-    rs->k_d = m->k_d;
-    memcpy(rs->pos, m->rotor_pos, sizeof rs->pos);
-    memcpy(rs->dir, m->rotor_dir, sizeof rs->dir);
-    memcpy(rs->gamma, m->rotor_gamma, sizeof rs->gamma);
-    memcpy(rs->alpha_min, m->alpha_min, sizeof rs->alpha_min);
-    memcpy(rs->alpha_max, m->alpha_max, sizeof rs->alpha_max);
-    memcpy(rs->beta_min, m->beta_min, sizeof rs->beta_min);
-    memcpy(rs->beta_max, m->beta_max, sizeof rs->beta_max);
-    rs->omega_min = m->omega_min;
-    rs->omega_max = m->omega_max;
-}
 
 static void hover_wrench(const PlantModel *m, const double euler[3], double w[6]) {
     double q[4], r[3][3];
@@ -63,26 +48,14 @@ static void hover_wrench(const PlantModel *m, const double euler[3], double w[6]
 void plant_set_defaults(void *model) {
     PlantModel *m = (PlantModel *)model;
     FpAirframe af;
-    FpRotorSet rs;
     double w[6], zero[3] = {0.0, 0.0, 0.0};
     int i;
     memset(m, 0, sizeof *m);
     fp_paper_hexacopter(&af);
-    m->n_rotors = af.rotors.n;
+    FP_ROTOR_SET_TO_MODEL(&af.rotors, m);
     m->mass = af.mass;
     memcpy(m->inertia, af.inertia, sizeof m->inertia);
     m->g = af.g;
-    m->k_t = af.rotors.k_t;
-    m->k_d = af.rotors.k_d;
-    memcpy(m->rotor_pos, af.rotors.pos, sizeof m->rotor_pos);
-    memcpy(m->rotor_dir, af.rotors.dir, sizeof m->rotor_dir);
-    memcpy(m->rotor_gamma, af.rotors.gamma, sizeof m->rotor_gamma);
-    memcpy(m->alpha_min, af.rotors.alpha_min, sizeof m->alpha_min);
-    memcpy(m->alpha_max, af.rotors.alpha_max, sizeof m->alpha_max);
-    memcpy(m->beta_min, af.rotors.beta_min, sizeof m->beta_min);
-    memcpy(m->beta_max, af.rotors.beta_max, sizeof m->beta_max);
-    m->omega_min = af.rotors.omega_min;
-    m->omega_max = af.rotors.omega_max;
     m->tau_motor = af.tau_motor;
     m->tau_servo = af.tau_servo;
     for (i = 0; i < FP_MAX_ROTORS; i++) m->efficiency[i] = 1.0;
@@ -90,9 +63,8 @@ void plant_set_defaults(void *model) {
     m->init_trim = 1;
     m->noise_seed = 1;
     /* Inputs start at hover trim so the FMU hovers when simulated alone. */
-    copy_rotor_set(m, &rs);
     hover_wrench(m, zero, w);
-    if (fp_preferred_config(&rs, w, m->alpha_cmd, m->beta_cmd, m->omega_cmd, NULL, 0) != FP_OK) {
+    if (fp_preferred_config(&af.rotors, w, m->alpha_cmd, m->beta_cmd, m->omega_cmd, NULL, 0) != FP_OK) {
         memset(m->omega_cmd, 0, sizeof m->omega_cmd);
     }
 }
@@ -472,7 +444,7 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     int i;
     (void)t0;
     if (validate(m, logger) != 0) return FP_ERROR;
-    copy_rotor_set(m, &m->rotors);
+    FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
     if (invert3(m->inertia, m->inertia_inv) != 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "parameter inertia is singular");
         return FP_ERROR;
