@@ -153,3 +153,17 @@ def test_cli_parameter_overrides(tmp_path):
     bad = cli("run", "position_step", "--set", "controller.no_such=1", "--out",
               str(tmp_path / "x"))
     assert bad.returncode == 2 and "no_such" in bad.stderr
+
+
+@pytest.mark.parametrize("heading", [0.3, 3.0])
+def test_heading_steps_keep_position(tmp_path, heading):
+    # yaw is the weakest axis: its rate is limited (yaw_rate_max) and its torque ranks with
+    # the forces in the inner allocation, so a heading step must not cost the position
+    scenario = tmp_path / "yaw.toml"
+    scenario.write_text('duration = 10.0\nairframe = "paper_hexacopter"\n'
+                        "[reference.position]\nz = -3.0\n[reference.attitude]\n"
+                        f"yaw = {{ type = \"steps\", times = [1.0], values = [{heading}] }}\n")
+    r = run(prepare(scenario))
+    err = np.linalg.norm(r.get("plant.pos") - r.get("ref.pos_ref"), axis=1)
+    assert err.max() < 0.05  # measured 1.2 cm (0.3 rad) and 4.1 cm (3 rad)
+    assert r.get("plant.euler")[-1, 2] == pytest.approx(heading, abs=0.01)

@@ -116,7 +116,12 @@ static void controller_set_defaults(void *model) {
     }
     m->poly_margin = 0.9;
     m->W_nu[0] = m->W_nu[1] = m->W_nu[2] = 1.0;
-    m->W_nu[3] = m->W_nu[4] = m->W_nu[5] = 100.0;
+    /* Torque priority for roll and pitch; yaw, the weakest axis (drag torque and
+     * tangential tilt only), ranks with the forces: with yaw at 100 a 0.3 rad heading
+     * step saturated the servos for yaw and gave up the force, and the vehicle was lost. */
+    m->W_nu[3] = m->W_nu[4] = 100.0;
+    m->W_nu[5] = 1.0;
+    m->yaw_rate_max = 0.5;
     m->w_pref = 0.1;
     m->pref_omega_scale = 1.0 / 50.0;
     m->qp_max_iter = 50;
@@ -246,6 +251,7 @@ static void check_tunables(ControllerModel *m, Check *c) {
     need(c, "W_nu", m->W_nu, 6, 1);
     need(c, "w_pref", &m->w_pref, 1, 1);
     need(c, "pref_omega_scale", &m->pref_omega_scale, 1, 1);
+    need(c, "yaw_rate_max", &m->yaw_rate_max, 1, 1);
     need(c, "euler_min", m->euler_min, 2, 0);
     need(c, "euler_max", m->euler_max, 2, 0);
     for (i = 0; i < 2; i++) {
@@ -679,6 +685,8 @@ static void stabilization(ControllerModel *m, const Measured *s, const double mu
     for (i = 0; i < 3; i++)
         mu_dot_c[i] = block(&m->blk[BLK_ATT][i], m->K_att_A[i], m->K_att_B[i], m->K_att_C[i],
                             m->K_att_D[i], e[i]) + m->euler_rate_ref[i];
+    /* the heading rate is limited to what the yaw authority can follow */
+    mu_dot_c[2] = fmin(fmax(mu_dot_c[2], -m->yaw_rate_max), m->yaw_rate_max);
     /* Euler rates to body rates at the measured attitude */
     m->rate_c[0] = mu_dot_c[0] - st * mu_dot_c[2];
     m->rate_c[1] = cp * mu_dot_c[1] + sp * ct * mu_dot_c[2];

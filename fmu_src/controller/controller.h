@@ -35,7 +35,7 @@ typedef struct {
     int32_t fail_poly_n[FP_MAX_ROTORS];
     double fail_poly_A[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS][3];
     double fail_poly_b[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS];
-    double W_nu[6], w_pref, pref_omega_scale;
+    double W_nu[6], w_pref, pref_omega_scale, yaw_rate_max;
     int32_t qp_max_iter, timing;
     /* inputs */
     double pos_ref[3], euler_ref[3], vel_ref[3], acc_ref[3], euler_rate_ref[3];

@@ -63,6 +63,7 @@
     X(poly_margin, 564, REAL, PARAM_FIXED, 1, 1, "", "Scale (0, 1] of S(0) about the hover force used by the guidance: reserve for attitude torques") \
     /* parameters: inner allocation (eq. 12-13) */                                                \
     X(W_nu, 600, REAL, PARAM_TUNABLE, 6, 1, "", "Row weights of [df_b; dtau_b] (torque priority)") \
+    X(yaw_rate_max, 610, REAL, PARAM_TUNABLE, 1, 1, "rad/s", "Limit of the commanded heading rate (yaw authority is the smallest)") \
     X(w_pref, 606, REAL, PARAM_TUNABLE, 1, 1, "", "Weight of the preferred actuator configuration") \
     X(pref_omega_scale, 607, REAL, PARAM_TUNABLE, 1, 1, "", "Scale of rotor speeds (in rad/s) in the preference term") \
     X(qp_max_iter, 608, INTEGER, PARAM_TUNABLE, 1, 1, "", "Iteration cap of both allocation QPs") \

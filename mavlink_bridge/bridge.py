@@ -1,0 +1,599 @@
+"""The bridge: a LiveSession paced to wall-clock time, talking MAVLink 2 over UDP.
+
+One thread does everything.  The closed loop advances in chunks (default 5 steps of
+2 ms); while it waits for the wall clock to reach the end of the next chunk it sits in
+``select()`` on the endpoints' sockets and handles datagrams as they come, checking the
+clock between small batches.  A chunk is computed when it is due (its end time divided
+by the speed), so the published state is never ahead of wall time; how late it is once
+computed is the lag reported.  When behind, only a bounded batch of datagrams is
+handled per chunk, so a flood cannot starve the simulation.  No receive thread: the
+pymavlink parsers and the FMUs are not thread-safe, a chunk takes well under a
+millisecond, and a single thread keeps the order of events deterministic.
+"""
+
+from __future__ import annotations
+
+import math
+import select
+import time
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any, ClassVar
+
+import numpy as np
+
+from mavlink_bridge import px4, telemetry
+from mavlink_bridge.links import Endpoint, Signing
+from mavlink_bridge.params import ParameterTable
+from mavlink_bridge.setpoints import (
+    AttitudeSetpoint,
+    Limits,
+    PositionSetpoint,
+    Reference,
+    Rejected,
+    VehicleState,
+    decode_attitude,
+    decode_position,
+)
+from mavlink_bridge.telemetry import Snapshot, mav
+from orchestrator.live import LiveSession
+from plant import Airframe
+
+DEFAULT_URLS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
+SYSTEM_ID = 1
+COMPONENT_ID = 1
+RX_BATCH = 8  # datagrams handled between clock checks
+RX_BUDGET_LATE = 32  # datagrams handled per chunk while behind wall time
+STATUSTEXT_PER_S = 5  # rejection/refusal messages per wall second, the rest are counted
+
+
+@dataclass
+class PacingStats:
+    """How the loop kept up with the wall clock."""
+
+    speed: float
+    sim_time: float = 0.0
+    wall_time: float = 0.0
+    chunks: int = 0
+    max_lag: float = 0.0  # s of wall time the published state was ever late
+    late_chunks: int = 0  # chunks finished more than one chunk period late
+    datagrams: int = 0
+    messages: int = 0
+    malformed: int = 0
+    ignored: int = 0
+    refused_unsigned: int = 0
+    sent: int = 0
+    max_rx_rate: float = 0.0  # datagrams per wall second, best 1 s window
+
+    @property
+    def achieved_speed(self) -> float:
+        return self.sim_time / self.wall_time if self.wall_time > 0 else 0.0
+
+    def lines(self) -> list[str]:
+        target = "max" if math.isinf(self.speed) else f"{self.speed:g}x"
+        return [
+            f"simulated           {self.sim_time:.3f} s in {self.wall_time:.3f} s wall "
+            f"(speed {target}, achieved {self.achieved_speed:.2f}x)",
+            f"max lag             {1e3 * self.max_lag:.2f} ms behind wall time "
+            f"({self.late_chunks} of {self.chunks} chunks late by more than a chunk)",
+            f"received            {self.datagrams} datagrams, {self.messages} messages "
+            f"({self.malformed} malformed, {self.ignored} ignored, "
+            f"{self.refused_unsigned} refused by signing); peak {self.max_rx_rate:.0f}/s",
+            f"sent                {self.sent} messages",
+        ]
+
+
+@dataclass
+class BridgeConfig:
+    airframe: str | Airframe = "paper_hexacopter"
+    pos0: Sequence[float] = (0.0, 0.0, -3.0)
+    euler0: Sequence[float] = (0.0, 0.0, 0.0)
+    plant_parameters: Mapping[str, Any] | None = None
+    controller_parameters: Mapping[str, Any] | None = None
+    coupling: str = "gauss-seidel"
+    urls: Sequence[str] = DEFAULT_URLS
+    speed: float = 1.0  # math.inf: as fast as possible
+    signing_key: bytes | None = None
+    duration: float | None = None  # simulated s; None: until stop()
+    chunk: int = 5
+    limits: Limits = field(default_factory=Limits)
+
+
+class Bridge:
+    def __init__(self, config: BridgeConfig) -> None:
+        if not config.speed > 0:
+            raise ValueError("speed must be positive (math.inf: as fast as possible)")
+        if not config.urls:
+            raise ValueError("at least one endpoint is needed")
+        self.config = config
+        self.session = LiveSession(config.airframe, pos0=config.pos0, euler0=config.euler0,
+                                   chunk=config.chunk,
+                                   plant_parameters=config.plant_parameters,
+                                   controller_parameters_=config.controller_parameters,
+                                   coupling=config.coupling)
+        self.endpoints: list[Endpoint] = []
+        try:
+            for i, url in enumerate(config.urls):
+                self.endpoints.append(Endpoint(url, link_id=i, system=SYSTEM_ID,
+                                               component=COMPONENT_ID))
+        except Exception:
+            self.close()
+            raise
+        for ep in self.endpoints:
+            ep.intervals = {k: 1.0 / v for k, v in telemetry.DEFAULT_RATES.items()}
+        self.signing = Signing()
+        if config.signing_key is not None:
+            self.set_signing(config.signing_key)
+        af = self.session.airframe
+        self.airframe = af
+        self.params = ParameterTable(self._tunables(), self.session.set_controller_parameter)
+        self.limits = config.limits
+        self._sync_limits()
+        self.stats = PacingStats(speed=config.speed)
+        self.mode = "HOLD"
+        self.armed = False
+        self.ref = Reference.hold(np.array(config.pos0, float), np.array(config.euler0, float))
+        self.pos_sp: PositionSetpoint | None = None
+        self.att_sp: AttitudeSetpoint | None = None
+        self.last_setpoint: float = -math.inf  # simulated time of the last accepted one
+        self.feasible = True
+        self._stop = False
+        self._state = self.session.state()
+        self._snapshot: Snapshot | None = None
+        self._text_budget: tuple[int, int] = (0, 0)  # (wall second, sent in it)
+        self._text_dropped = 0
+        self._rx_window: tuple[float, int] = (0.0, 0)
+        self._busy = 0.0
+        self.events: list[str] = []  # STATUSTEXTs sent, for logs and tests
+        self.on_chunk: Callable[[Bridge], None] | None = None
+
+    # -- setup -----------------------------------------------------------------
+
+    def _tunables(self) -> list[tuple[str, float]]:
+        inst = self.session.ctrl_inst
+        out = []
+        for name, var in inst.variables.items():
+            if var.causality == "parameter" and var.variability == "tunable":
+                out.append((name, float(inst.get(name))))
+        return out
+
+    def _sync_limits(self) -> None:
+        g = self.params.get
+        self.timeout = g("FPB_SP_TIMEOUT")
+        self.limits.xy, self.limits.z = g("FPB_SP_XY_MAX"), g("FPB_SP_Z_MAX")
+        self.limits.vel, self.limits.acc = g("FPB_SP_VEL_MAX"), g("FPB_SP_ACC_MAX")
+        self.limits.rate, self.limits.tilt = g("FPB_SP_RATE_MAX"), g("FPB_SP_TILT_MAX")
+
+    def set_signing(self, key: bytes | None, initial_timestamp: int = 0) -> None:
+        self.signing.enable(key, initial_timestamp)
+        for ep in self.endpoints:
+            ep.set_signing(self.signing)
+
+    # -- the loop ----------------------------------------------------------------
+
+    def stop(self) -> None:
+        self._stop = True
+
+    def run(self) -> PacingStats:
+        cfg, s = self.config, self.session
+        chunk_dt = s.step_size * s.chunk
+        t0 = time.perf_counter()
+        self._rx_window = (t0, 0)
+        self._publish(force_heartbeat=True)
+        while not self._stop:
+            if cfg.duration is not None and s.time >= cfg.duration - 1e-9:
+                break
+            due = t0 + (s.time + chunk_dt) / cfg.speed
+            if time.perf_counter() < due:
+                self._receive_until(due)
+                if self._stop:
+                    break
+            else:
+                self._receive_budget(RX_BUDGET_LATE)
+            busy0 = time.perf_counter()
+            self._step()
+            now = time.perf_counter()
+            self._busy += now - busy0
+            if math.isfinite(cfg.speed):
+                lag = now - due
+                self.stats.max_lag = max(self.stats.max_lag, lag)
+                if lag > chunk_dt / cfg.speed:
+                    self.stats.late_chunks += 1
+            self.stats.chunks += 1
+            self.stats.sim_time = s.time
+            self.stats.wall_time = now - t0
+            if self.on_chunk is not None:
+                self.on_chunk(self)
+        self.stats.wall_time = time.perf_counter() - t0
+        self.stats.sim_time = s.time
+        self.stats.sent = sum(ep.sent for ep in self.endpoints)
+        return self.stats
+
+    def _step(self) -> None:
+        s = self.session
+        if self.control_active:
+            self.ref.integrate(self.pos_sp, self.att_sp, s.step_size * s.chunk)
+        s.set_reference(**self.ref.as_inputs())
+        s.advance()
+        self._state = s.state()
+        self._snapshot = None
+        self._watch()
+        self._publish()
+
+    @property
+    def control_active(self) -> bool:
+        return self.armed and self.mode == "OFFBOARD"
+
+    def _watch(self) -> None:
+        t = self.session.time
+        if self.mode == "OFFBOARD" and t - self.last_setpoint > self.timeout:
+            self._hold()
+            self._set_mode("HOLD")
+            self.statustext(mav.MAV_SEVERITY_WARNING,
+                            f"offboard lost: no setpoint for {self.timeout:g} s, holding")
+        feasible = bool(self._state["ctrl"]["feasible"][0] > 0.5)
+        if feasible != self.feasible:
+            self.feasible = feasible
+            if feasible:
+                self.statustext(mav.MAV_SEVERITY_INFO, "attitude reference feasible again")
+            else:
+                mu = np.degrees(self._state["ctrl"]["mu_c"])
+                self.statustext(mav.MAV_SEVERITY_WARNING,
+                                f"attitude infeasible: flying r{mu[0]:.0f} p{mu[1]:.0f} deg")
+
+    # -- vehicle state -------------------------------------------------------------
+
+    def vehicle(self) -> VehicleState:
+        p = self._state["plant"]
+        return VehicleState(p["pos"].copy(), p["euler"].copy())
+
+    def _hold(self) -> None:
+        v = self.vehicle()
+        self.ref = Reference.hold(v.pos, v.euler)
+        self.pos_sp = None
+        self.att_sp = None
+
+    def _set_mode(self, mode: str) -> None:
+        if mode != self.mode:
+            self.mode = mode
+            self._heartbeat_now()
+
+    def _enter_offboard(self) -> None:
+        v = self.vehicle()
+        self.ref = Reference.hold(v.pos, v.euler)
+        if self.pos_sp is not None:
+            self.ref.apply_position(self.pos_sp)
+        if self.att_sp is not None:
+            self.ref.apply_attitude(self.att_sp)
+        self._set_mode("OFFBOARD")
+
+    # -- output ----------------------------------------------------------------------
+
+    def snapshot(self) -> Snapshot:
+        if self._snapshot is None:
+            af = self.airframe
+            n = af.n_rotors
+            wall = max(self.stats.wall_time, 1e-9)
+            self._snapshot = Snapshot(
+                time=self.session.time, plant=self._state["plant"], ctrl=self._state["ctrl"],
+                reference=self.ref.as_inputs(), mode_custom=px4.custom_mode(self.mode),
+                armed=self.armed, n_rotors=n, omega_max=af.omega_max,
+                tilt_limits=np.abs(np.column_stack([af.alpha_limits[:, 1],
+                                                    af.beta_limits[:, 1]])),
+                thrust_max=n * af.k_t * af.omega_max ** 2, load=self._busy / wall)
+        return self._snapshot
+
+    def _publish(self, force_heartbeat: bool = False) -> None:
+        t = self.session.time
+        cache: dict[int, list[Any]] = {}
+        for ep in self.endpoints:
+            for msg_id, interval in ep.intervals.items():
+                if interval <= 0:
+                    continue
+                due = ep.next_due.get(msg_id, 0.0)
+                if t + 1e-9 < due and not (force_heartbeat and
+                                          msg_id == mav.MAVLINK_MSG_ID_HEARTBEAT):
+                    continue
+                ep.next_due[msg_id] = due + interval if due + interval > t else t + interval
+                if msg_id not in cache:
+                    cache[msg_id] = telemetry.build_all(msg_id, self.snapshot())
+                for m in cache[msg_id]:
+                    ep.send(m)
+
+    def _heartbeat_now(self) -> None:
+        self._snapshot = None
+        hb = telemetry.heartbeat(self.snapshot())
+        for ep in self.endpoints:
+            ep.send(hb)
+
+    def statustext(self, severity: int, text: str, limited: bool = False) -> None:
+        """Tell every ground station; ``limited`` texts are rate-limited (bad input)."""
+        if limited:
+            sec = int(time.monotonic())
+            window, count = self._text_budget
+            if sec != window:
+                window, count = sec, 0
+                if self._text_dropped:
+                    dropped, self._text_dropped = self._text_dropped, 0
+                    self._send_text(mav.MAV_SEVERITY_WARNING,
+                                    f"{dropped} more rejections not shown")
+            if count >= STATUSTEXT_PER_S:
+                self._text_dropped += 1
+                self._text_budget = (window, count)
+                return
+            self._text_budget = (window, count + 1)
+        self._send_text(severity, text)
+
+    def _send_text(self, severity: int, text: str) -> None:
+        self.events.append(text)
+        if len(self.events) > 1000:
+            del self.events[:500]
+        m = mav.MAVLink_statustext_message(severity, text[:50].encode("ascii", "replace"))
+        for ep in self.endpoints:
+            ep.send(m)
+
+    # -- input -------------------------------------------------------------------------
+
+    def _receive_until(self, due: float) -> None:
+        socks = {ep.sock.fileno(): ep for ep in self.endpoints}
+        while not self._stop:
+            remaining = due - time.perf_counter()
+            if remaining <= 0:
+                return
+            try:
+                ready, _, _ = select.select(list(socks), [], [], remaining)
+            except (OSError, ValueError):
+                time.sleep(max(0.0, remaining))
+                return
+            for fd in ready:
+                self._drain(socks[fd], RX_BATCH)
+
+    def _receive_budget(self, budget: int) -> None:
+        for ep in self.endpoints:
+            self._drain(ep, budget)
+
+    def _drain(self, ep: Endpoint, budget: int) -> None:
+        last = None
+        for data, msg in ep.receive(budget):
+            if data is not last:
+                last = data
+                self._count_datagram()
+            if msg is None:
+                self.stats.malformed += 1
+                continue
+            self.stats.messages += 1
+            try:
+                self._handle(ep, msg)
+            except Exception as e:  # a message the decoder accepted but we cannot use
+                self.stats.ignored += 1
+                self.statustext(mav.MAV_SEVERITY_WARNING,
+                                f"{msg.get_type()[:24]} ignored: {type(e).__name__}",
+                                limited=True)
+
+    def _count_datagram(self) -> None:
+        self.stats.datagrams += 1
+        start, n = self._rx_window
+        now = time.perf_counter()
+        if now - start >= 1.0:
+            self.stats.max_rx_rate = max(self.stats.max_rx_rate, n / (now - start))
+            self._rx_window = (now, 1)
+        else:
+            self._rx_window = (start, n + 1)
+
+    def _handle(self, ep: Endpoint, msg: Any) -> None:
+        kind = msg.get_type()
+        hdr = msg.get_header()
+        src = (hdr.srcSystem, hdr.srcComponent)
+        if src == (SYSTEM_ID, COMPONENT_ID):
+            self.stats.ignored += 1  # our own messages looped back
+            return
+        if self.signing.enabled and kind != "HEARTBEAT":
+            why = self.signing.verify(msg.get_msgbuf(), hdr.incompat_flags, src)
+            if why is not None:
+                self.signing.count(why)
+                self.stats.refused_unsigned += 1
+                self.statustext(mav.MAV_SEVERITY_WARNING, f"{kind[:26]} refused: {why}",
+                                limited=True)
+                return
+        handler = self._HANDLERS.get(kind)
+        if handler is None:
+            self.stats.ignored += 1
+            return
+        target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
+        if target[0] not in (0, SYSTEM_ID) or target[1] not in (0, COMPONENT_ID):
+            self.stats.ignored += 1
+            return
+        handler(self, ep, msg, src)
+
+    def _on_heartbeat(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        pass  # ground stations announce themselves; nothing to do
+
+    def _on_position(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        try:
+            sp = decode_position(msg, self.vehicle(), self.limits)
+        except Rejected as e:
+            self.statustext(mav.MAV_SEVERITY_WARNING, f"POSITION_TARGET rejected: {e}",
+                            limited=True)
+            return
+        self.pos_sp = sp
+        self.last_setpoint = self.session.time
+        if self.control_active:
+            self.ref.apply_position(sp)
+
+    def _on_attitude(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        try:
+            sp = decode_attitude(msg, self.limits)
+        except Rejected as e:
+            self.statustext(mav.MAV_SEVERITY_WARNING, f"ATTITUDE_TARGET rejected: {e}",
+                            limited=True)
+            return
+        self.att_sp = sp
+        self.last_setpoint = self.session.time
+        if self.control_active:
+            self.ref.apply_attitude(sp)
+
+    # commands
+
+    def _ack(self, ep: Endpoint, command: int, result: int, src: tuple[int, int]) -> None:
+        ep.send(mav.MAVLink_command_ack_message(command, result, 0, 0, src[0], src[1]))
+
+    def _on_command(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        cmd = int(msg.command)
+        p = [float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4)]
+        result = self._command(ep, cmd, p)
+        self._ack(ep, cmd, result, src)
+        if result == mav.MAV_RESULT_ACCEPTED and cmd in (
+                mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
+            msg_id = (int(p[0]) if cmd == mav.MAV_CMD_REQUEST_MESSAGE
+                      else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+            self._snapshot = None
+            for m in telemetry.build_all(msg_id, self.snapshot()):
+                ep.send(m)
+        elif result == mav.MAV_RESULT_ACCEPTED and cmd == mav.MAV_CMD_GET_MESSAGE_INTERVAL:
+            msg_id = int(p[0])
+            interval = ep.intervals.get(msg_id, 0.0)
+            us = int(interval * 1e6) if interval > 0 else -1
+            ep.send(mav.MAVLink_message_interval_message(msg_id, us))
+
+    def _command(self, ep: Endpoint, cmd: int, p: list[float]) -> int:
+        if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
+            if p[0] not in (0.0, 1.0):
+                return mav.MAV_RESULT_DENIED
+            arm = p[0] == 1.0
+            if arm != self.armed:
+                self.armed = arm
+                if self.mode == "OFFBOARD" and arm:
+                    self._enter_offboard()
+                elif not arm:
+                    self._hold()
+                    self.mode = "HOLD"
+                self._heartbeat_now()
+            return mav.MAV_RESULT_ACCEPTED
+        if cmd == mav.MAV_CMD_DO_SET_MODE:
+            if not int(p[0]) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
+                return mav.MAV_RESULT_DENIED
+            mode = px4.mode_from_main_sub(int(p[1]), int(p[2]))
+            if mode is None:
+                self.statustext(mav.MAV_SEVERITY_WARNING,
+                                f"mode {int(p[1])}/{int(p[2])} not available here")
+                return mav.MAV_RESULT_DENIED
+            return self._request_mode(mode)
+        if cmd == mav.MAV_CMD_REQUEST_MESSAGE:
+            known = int(p[0]) in telemetry.DEFAULT_RATES or int(p[0]) in telemetry.ON_REQUEST
+            return mav.MAV_RESULT_ACCEPTED if known else mav.MAV_RESULT_DENIED
+        if cmd == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+            return mav.MAV_RESULT_ACCEPTED
+        if cmd in (mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_GET_MESSAGE_INTERVAL):
+            msg_id = int(p[0])
+            if msg_id not in telemetry.DEFAULT_RATES:
+                return mav.MAV_RESULT_DENIED
+            if cmd == mav.MAV_CMD_SET_MESSAGE_INTERVAL:
+                us = p[1]
+                if not math.isfinite(us):
+                    return mav.MAV_RESULT_DENIED
+                interval = (1.0 / telemetry.DEFAULT_RATES[msg_id] if us == 0 else
+                            -1.0 if us < 0 else max(us * 1e-6, 0.001))
+                ep.intervals[msg_id] = interval
+                ep.next_due[msg_id] = self.session.time
+            return mav.MAV_RESULT_ACCEPTED
+        return mav.MAV_RESULT_UNSUPPORTED
+
+    def _request_mode(self, mode: str) -> int:
+        if mode == "OFFBOARD":
+            if self.session.time - self.last_setpoint > self.timeout:
+                self.statustext(mav.MAV_SEVERITY_WARNING,
+                                "offboard refused: no recent setpoint")
+                return mav.MAV_RESULT_TEMPORARILY_REJECTED
+            if self.mode != "OFFBOARD":
+                self._enter_offboard()
+            return mav.MAV_RESULT_ACCEPTED
+        if self.mode != mode:
+            self._hold()
+            self._set_mode(mode)
+        return mav.MAV_RESULT_ACCEPTED
+
+    # parameters
+
+    def _param_value(self, index: int) -> Any:
+        p = self.params.items[index]
+        return mav.MAVLink_param_value_message(p.name.encode("ascii"), p.value,
+                                               mav.MAV_PARAM_TYPE_REAL32, len(self.params),
+                                               index)
+
+    def _on_param_list(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        for i in range(len(self.params)):
+            ep.send(self._param_value(i))
+
+    def _on_param_read(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        index = int(msg.param_index)
+        if index < 0:
+            found = self.params.index(_param_id(msg.param_id))
+            if found is None:
+                return
+            index = found
+        if 0 <= index < len(self.params):
+            ep.send(self._param_value(index))
+
+    def _on_param_set(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        name = _param_id(msg.param_id)
+        index = self.params.index(name)
+        if index is None:
+            self.statustext(mav.MAV_SEVERITY_WARNING, f"unknown parameter {name[:30]}",
+                            limited=True)
+            return
+        reason = self.params.set(name, float(msg.param_value))
+        if reason is not None:
+            self.statustext(mav.MAV_SEVERITY_WARNING, reason, limited=True)
+        elif name.startswith("FPB_"):
+            self._sync_limits()
+        m = self._param_value(index)  # the value in force, accepted or not
+        for e in self.endpoints:
+            e.send(m)
+
+    # time sync and signing
+
+    def _on_timesync(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        if int(msg.tc1) == 0:
+            now_ns = int(self.session.time * 1e9)
+            ep.send(mav.MAVLink_timesync_message(now_ns, int(msg.ts1)))
+
+    def _on_setup_signing(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        key = bytes(int(b) & 0xFF for b in msg.secret_key)
+        if len(key) != 32:
+            return
+        if not any(key) and int(msg.initial_timestamp) == 0:
+            self.set_signing(None)
+            self.statustext(mav.MAV_SEVERITY_NOTICE, "signing disabled")
+            return
+        self.set_signing(key, int(msg.initial_timestamp))
+        self.statustext(mav.MAV_SEVERITY_NOTICE, "signing enabled with a new key")
+
+    _HANDLERS: ClassVar[dict[str, Callable[[Bridge, Endpoint, Any, tuple[int, int]], None]]] = {
+        "HEARTBEAT": _on_heartbeat,
+        "SET_POSITION_TARGET_LOCAL_NED": _on_position,
+        "SET_ATTITUDE_TARGET": _on_attitude,
+        "COMMAND_LONG": _on_command,
+        "COMMAND_INT": _on_command,
+        "PARAM_REQUEST_LIST": _on_param_list,
+        "PARAM_REQUEST_READ": _on_param_read,
+        "PARAM_SET": _on_param_set,
+        "TIMESYNC": _on_timesync,
+        "SETUP_SIGNING": _on_setup_signing,
+    }
+
+    def close(self) -> None:
+        for ep in self.endpoints:
+            ep.close()
+        self.session.close()
+
+    def __enter__(self) -> Bridge:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _param_id(raw: Any) -> str:
+    if isinstance(raw, bytes | bytearray):
+        raw = raw.decode("ascii", errors="replace")
+    return str(raw).split("\x00", 1)[0]

@@ -1,0 +1,222 @@
+"""Offboard setpoints: decoded, checked and latched as two channels.
+
+The position channel (SET_POSITION_TARGET_LOCAL_NED) and the attitude channel
+(SET_ATTITUDE_TARGET) are latched independently; together they form the full-pose
+reference of the controller (``Reference``).  Decoding resolves the frame at the
+time of reception, so a latched setpoint is always in absolute NED terms.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from mavlink_bridge.geometry import body_rates_to_euler_rates, quat_to_euler, rotation, wrap_pi
+
+# POSITION_TARGET_TYPEMASK
+X_IGNORE, Y_IGNORE, Z_IGNORE = 1, 2, 4
+VX_IGNORE, VY_IGNORE, VZ_IGNORE = 8, 16, 32
+AX_IGNORE, AY_IGNORE, AZ_IGNORE = 64, 128, 256
+FORCE_SET, YAW_IGNORE, YAW_RATE_IGNORE = 512, 1024, 2048
+# ATTITUDE_TARGET_TYPEMASK
+ROLL_RATE_IGNORE, PITCH_RATE_IGNORE, YAW_RATE_IGNORE_ATT = 1, 2, 4
+THRUST_BODY_SET, THROTTLE_IGNORE, ATTITUDE_IGNORE = 32, 64, 128
+
+MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED = 1, 7, 8
+
+
+class Rejected(ValueError):
+    """A setpoint refused, with the reason told to the ground station."""
+
+
+@dataclass
+class PositionSetpoint:
+    """Absolute NED values; NaN where the type_mask ignores a field."""
+
+    pos: np.ndarray
+    vel: np.ndarray
+    acc: np.ndarray
+    yaw: float
+    yaw_rate: float
+
+
+@dataclass
+class AttitudeSetpoint:
+    euler: np.ndarray | None  # roll, pitch, yaw (rad); None: attitude ignored
+    euler_rate: np.ndarray | None  # Euler-angle rates from the body rates; None: ignored
+    thrust: float | None  # collective thrust 0..1 (decoded, not flown: see docs)
+    thrust_body: np.ndarray | None  # normalized body thrust vector (decoded, not flown)
+
+
+@dataclass
+class Limits:
+    xy: float = 100.0
+    z: float = 100.0
+    vel: float = 10.0
+    acc: float = 20.0
+    rate: float = 6.0
+    tilt: float = 1.4
+
+
+@dataclass
+class VehicleState:
+    pos: np.ndarray
+    euler: np.ndarray
+
+
+def _fields(msg: object, names: tuple[str, ...], mask: int, bits: tuple[int, int, int]
+            ) -> np.ndarray:
+    return np.array([math.nan if mask & b else float(getattr(msg, n))
+                     for n, b in zip(names, bits, strict=True)])
+
+
+def decode_position(msg: object, state: VehicleState, limits: Limits) -> PositionSetpoint:
+    mask = int(msg.type_mask)  # type: ignore[attr-defined]
+    frame = int(msg.coordinate_frame)  # type: ignore[attr-defined]
+    if frame not in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED):
+        raise Rejected(f"coordinate frame {frame} unsupported")
+    if mask & FORCE_SET:
+        raise Rejected("force setpoints unsupported")
+    used = [(("x", "y", "z"), (X_IGNORE, Y_IGNORE, Z_IGNORE)),
+            (("vx", "vy", "vz"), (VX_IGNORE, VY_IGNORE, VZ_IGNORE)),
+            (("afx", "afy", "afz"), (AX_IGNORE, AY_IGNORE, AZ_IGNORE))]
+    # every field the mask does not ignore must be finite (PX4 also rejects NaN there)
+    for names, bits in used:
+        for n, b in zip(names, bits, strict=True):
+            if not mask & b and not math.isfinite(float(getattr(msg, n))):
+                raise Rejected(f"{n} not finite")
+    for n, b in (("yaw", YAW_IGNORE), ("yaw_rate", YAW_RATE_IGNORE)):
+        if not mask & b and not math.isfinite(float(getattr(msg, n))):
+            raise Rejected(f"{n} not finite")
+    pos = _fields(msg, used[0][0], mask, used[0][1])
+    vel = _fields(msg, used[1][0], mask, used[1][1])
+    acc = _fields(msg, used[2][0], mask, used[2][1])
+    if frame == MAV_FRAME_LOCAL_OFFSET_NED:
+        pos = state.pos + pos  # NaN stays NaN where ignored
+    elif frame == MAV_FRAME_BODY_NED:
+        # as PX4: velocity and acceleration rotated from body to NED, position unused
+        r = rotation(*state.euler)
+        pos = np.full(3, math.nan)
+        if not np.all(np.isnan(vel)):
+            vel = r @ np.nan_to_num(vel)
+        if not np.all(np.isnan(acc)):
+            acc = r @ np.nan_to_num(acc)
+    yaw = math.nan if mask & YAW_IGNORE else wrap_pi(float(msg.yaw))  # type: ignore[attr-defined]
+    yaw_rate = math.nan if mask & YAW_RATE_IGNORE else float(msg.yaw_rate)  # type: ignore
+    sp = PositionSetpoint(pos, vel, acc, yaw, yaw_rate)
+    _limit(sp, limits)
+    if np.all(np.isnan(pos)) and np.all(np.isnan(vel)) and np.all(np.isnan(acc)) \
+            and math.isnan(yaw) and math.isnan(yaw_rate):
+        raise Rejected("every field ignored")
+    return sp
+
+
+def _limit(sp: PositionSetpoint, lim: Limits) -> None:
+    def over(v: np.ndarray, bound: float) -> bool:
+        return bool(np.any(np.abs(np.nan_to_num(v)) > bound))
+
+    if over(sp.pos[:2], lim.xy):
+        raise Rejected(f"|x|, |y| above {lim.xy:g} m")
+    if over(sp.pos[2:], lim.z):
+        raise Rejected(f"|z| above {lim.z:g} m")
+    if over(sp.vel, lim.vel):
+        raise Rejected(f"velocity above {lim.vel:g} m/s")
+    if over(sp.acc, lim.acc):
+        raise Rejected(f"acceleration above {lim.acc:g} m/s^2")
+    if not math.isnan(sp.yaw_rate) and abs(sp.yaw_rate) > lim.rate:
+        raise Rejected(f"yaw rate above {lim.rate:g} rad/s")
+
+
+def decode_attitude(msg: object, limits: Limits) -> AttitudeSetpoint:
+    mask = int(msg.type_mask)  # type: ignore[attr-defined]
+    euler = None
+    if not mask & ATTITUDE_IGNORE:
+        q = np.array([float(v) for v in msg.q], dtype=float)  # type: ignore[attr-defined]
+        if not np.all(np.isfinite(q)):
+            raise Rejected("quaternion not finite")
+        norm = float(np.linalg.norm(q))
+        if abs(norm - 1.0) > 0.1:
+            raise Rejected(f"quaternion norm {norm:.3g} (must be 1)")
+        euler = np.array(quat_to_euler(q / norm))
+        if max(abs(euler[0]), abs(euler[1])) > limits.tilt:
+            raise Rejected(f"roll/pitch beyond {math.degrees(limits.tilt):.0f} deg")
+    rate_bits = (ROLL_RATE_IGNORE, PITCH_RATE_IGNORE, YAW_RATE_IGNORE_ATT)
+    rates = np.array([math.nan if mask & b else float(getattr(msg, n)) for n, b in zip(
+        ("body_roll_rate", "body_pitch_rate", "body_yaw_rate"), rate_bits, strict=True)])
+    for r, b in zip(rates, rate_bits, strict=True):
+        if not mask & b and not math.isfinite(r):
+            raise Rejected("body rate not finite")
+    if np.any(np.abs(np.nan_to_num(rates)) > limits.rate):
+        raise Rejected(f"body rate above {limits.rate:g} rad/s")
+    euler_rate = None
+    if not np.all(np.isnan(rates)):
+        phi, theta = (euler[0], euler[1]) if euler is not None else (0.0, 0.0)
+        euler_rate = np.array(body_rates_to_euler_rates(phi, theta, *np.nan_to_num(rates)))
+    thrust = None
+    thrust_body = None
+    if mask & THRUST_BODY_SET:
+        tb = np.array([float(v) for v in getattr(msg, "thrust_body", [0.0, 0.0, 0.0])])
+        if not np.all(np.isfinite(tb)) or np.any(np.abs(tb) > 1.0):
+            raise Rejected("thrust_body must be finite and within [-1, 1]")
+        thrust_body = tb
+    elif not mask & THROTTLE_IGNORE:
+        t = float(msg.thrust)  # type: ignore[attr-defined]
+        if not math.isfinite(t) or not 0.0 <= t <= 1.0:
+            raise Rejected("thrust must be finite and within [0, 1]")
+        thrust = t
+    if euler is None and euler_rate is None and thrust is None and thrust_body is None:
+        raise Rejected("every field ignored")
+    return AttitudeSetpoint(euler, euler_rate, thrust, thrust_body)
+
+
+@dataclass
+class Reference:
+    """The controller's references, built from the hold pose and the latched channels."""
+
+    pos: np.ndarray
+    euler: np.ndarray
+    vel: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    acc: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    euler_rate: np.ndarray = field(default_factory=lambda: np.zeros(3))
+
+    @classmethod
+    def hold(cls, pos: np.ndarray, euler: np.ndarray) -> Reference:
+        return cls(np.array(pos, float), np.array(euler, float))
+
+    def apply_position(self, sp: PositionSetpoint) -> None:
+        have = ~np.isnan(sp.pos)
+        self.pos[have] = sp.pos[have]
+        self.vel = np.nan_to_num(sp.vel)
+        self.acc = np.nan_to_num(sp.acc)
+        if not math.isnan(sp.yaw):
+            self.euler[2] = sp.yaw
+        self.euler_rate[2] = 0.0 if math.isnan(sp.yaw_rate) else sp.yaw_rate
+
+    def apply_attitude(self, sp: AttitudeSetpoint) -> None:
+        if sp.euler is not None:
+            self.euler = sp.euler.copy()
+        self.euler_rate = np.zeros(3) if sp.euler_rate is None else sp.euler_rate.copy()
+
+    def integrate(self, pos_sp: PositionSetpoint | None, att_sp: AttitudeSetpoint | None,
+                  dt: float) -> None:
+        """Axes commanded by velocity (or yaw rate) only: move the reference along."""
+        if pos_sp is not None:
+            free = np.isnan(pos_sp.pos) & ~np.isnan(pos_sp.vel)
+            self.pos[free] += pos_sp.vel[free] * dt
+            if math.isnan(pos_sp.yaw) and not math.isnan(pos_sp.yaw_rate):
+                self.euler[2] = wrap_pi(self.euler[2] + pos_sp.yaw_rate * dt)
+        if att_sp is not None and att_sp.euler is None and att_sp.euler_rate is not None:
+            self.euler = self.euler + att_sp.euler_rate * dt
+            self.euler[2] = wrap_pi(self.euler[2])
+
+    def as_inputs(self) -> dict[str, np.ndarray]:
+        return {"pos_ref": self.pos, "euler_ref": self.euler, "vel_ref": self.vel,
+                "acc_ref": self.acc, "euler_rate_ref": self.euler_rate}
+
+
+def fmt_rejection(msg_name: str, reason: str) -> str:
+    text = f"{msg_name.replace('SET_', '').replace('_TARGET', '')} rejected: {reason}"
+    return text[:50]
+
