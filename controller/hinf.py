@@ -61,12 +61,13 @@ penalty on any unstable model.  The final gamma is certified by the exact norm.
 
 from __future__ import annotations
 
+import functools
 import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field, replace
 
 import numpy as np
-from scipy import optimize
+from scipy import optimize, signal
 
 from controller.lti import SS, Diagram, Margins, hinf_norm, loop_margins
 
@@ -139,11 +140,15 @@ TRANSLATION = LoopSpec(
     k_range=(1 / 1.3, 1 / 0.7))
 ROTATION = LoopSpec(
     name="rotation", outer="att", inner="rate",
-    w1=6.0, w2=15.0, u_max=80.0, d_max=0.0011, wT=70.0, r0=0.5,
-    k_range=(1 / 1.5, 1 / 0.5))
+    w1=8.0, w2=18.0, ms=5.0, u_max=90.0, d_max=0.009, wT=100.0, r0=0.2, r_inf=1.8,
+    k_range=(1 / 1.5, 1 / 0.6), delay=0,
+    # an extra deterministic start: the optimum of an earlier run of these loops
+    start=((math.log(-math.log(0.959743) / TS), 0.00208886, 8.23108,
+            math.log(-math.log(0.937955) / TS), -0.8062, 25.3323),))
 SPECS = (TRANSLATION, ROTATION)
 
 
+@functools.lru_cache(maxsize=64)
 def _filter(Ts: float = TS) -> SS:
     """H(s) as controller.c discretizes it (exact ZOH; output after the update)."""
     a = np.array([[0.0, 1.0], [-FILT_WN ** 2, -2 * FILT_ZETA * FILT_WN]])
@@ -153,6 +158,7 @@ def _filter(Ts: float = TS) -> SS:
     return SS.make(Phi, Gam, Phi[:1, :], Gam[:1, :], Ts)
 
 
+@functools.lru_cache(maxsize=64)
 def _plant(tau: float, Ts: float = TS, position: bool = True) -> SS:
     """Inputs [u_eff, d]; outputs [a_act, v, p] (or [a_act, v]); ZOH."""
     n = 3 if position else 2
@@ -161,6 +167,7 @@ def _plant(tau: float, Ts: float = TS, position: bool = True) -> SS:
     return SS.from_continuous(A, B, np.eye(n), np.zeros((n, 2)), Ts, "zoh")
 
 
+@functools.lru_cache(maxsize=64)
 def _delay(n: int, Ts: float = TS) -> SS:
     if n == 0:
         return SS.gain(1.0, Ts)
@@ -172,6 +179,7 @@ def _delay(n: int, Ts: float = TS) -> SS:
     return SS.make(A, B, C, [[0.0]], Ts)
 
 
+@functools.lru_cache(maxsize=64)
 def weights(spec: LoopSpec, Ts: float = TS) -> dict[str, SS]:
     """The weighting functions (continuous, Tustin-discretized)."""
     ws1 = SS.from_tf([1 / spec.ms, spec.w1], [1, spec.eps * spec.w1], Ts)
@@ -286,11 +294,96 @@ def grid_gains(spec: LoopSpec, k1: Block, k2: Block, w: np.ndarray) -> np.ndarra
     return np.array(out)
 
 
-def _objective(x: np.ndarray, spec: LoopSpec, w: np.ndarray) -> float:
-    if not np.all(np.isfinite(x)) or np.any(np.abs(x) > 1e4):
+def _tf(sys: SS, out: int, inp: int) -> tuple[np.ndarray, np.ndarray]:
+    num, den = signal.ss2tf(sys.A, sys.B, sys.C, sys.D, input=inp)
+    return np.trim_zeros(num[out], "f") if np.any(num[out]) else np.zeros(1), den
+
+
+class FastEval:
+    """The synthesis objective in the frequency domain: SISO loop algebra on precomputed
+    responses (the same model as :func:`interconnection`; tests compare the two), and the
+    closed-loop characteristic polynomials for stability:
+    ``char = dK1 dK2 cE + k nK2 nH (nV dK1 + nK1 nP)`` with
+    ``cE = z^n dPlant dH - (1 - k) nA nH`` (the INDI loop through the actuator feedback), and
+    ``dK2 cE2 + k nK2 nH nV2`` for the inner loop alone."""
+
+    def __init__(self, spec: LoopSpec, w: np.ndarray) -> None:
+        self.spec, self.w = spec, np.asarray(w, float)
+        z = np.exp(1j * self.w * TS)
+        self.z = z
+        h = _filter()
+        self.nh, self.dh = _tf(h, 0, 0)
+        self.H = np.polyval(self.nh, z) / np.polyval(self.dh, z)
+        wts = weights(spec)
+        self.W = [wts[c].freqresp(self.w)[:, 0, 0] for c in CHANNELS]
+        self.models = []
+        zn = np.zeros(spec.delay + 1)
+        zn[0] = 1.0
+        one = np.array([1.0, -1.0])          # z - 1, kept exact
+        for kk, tau in models(spec):
+            e = math.exp(-TS / tau)
+            # ZOH of A(s)/s (exact): [(Ts - tau(1-e)) z + tau(1-e) - Ts e] / ((z-1)(z-e))
+            nv = np.array([TS - tau * (1 - e), tau * (1 - e) - TS * e])
+            np_, den = _tf(_plant(tau), 2, 0)            # ZOH of A(s)/s^2
+            np_ = np_ / den[0]
+            cEp = np.polysub(np.polymul(np.polymul(zn, [1.0, -e]), self.dh),
+                             (1 - kk) * (1 - e) * self.nh)   # cE / (z-1)^2
+            cE = np.polymul(np.polymul(one, one), cEp)
+            cE2 = np.polymul(one, cEp)
+            dh, c1 = np.polyval(self.dh, z), np.polyval(cEp, z) * (z - 1.0)
+            Gv = kk * np.polyval(nv, z) * dh / c1
+            Gp = kk * np.polyval(np_, z) * dh / (c1 * (z - 1.0))
+            Pvd = TS / (z - 1.0)
+            Ppd = TS * TS * (z + 1.0) / (2.0 * (z - 1.0) ** 2)
+            self.models.append(dict(k=kk, nv=np.polymul(nv, one), np=np_, nv2=nv, cE=cE,
+                                    cE2=cE2, Gv=Gv, Gp=Gp, Dv=Pvd - Gv * self.H,
+                                    Dp=Ppd - Gp * self.H))
+
+    def responses(self, k1: Block, k2: Block) -> np.ndarray | None:
+        """|weighted channel| (n_models, len(w), 5), None if a model is unstable."""
+        z = self.z
+        nk1, dk1 = _block_poly(k1)
+        nk2, dk2 = _block_poly(k2)
+        K1 = np.polyval(nk1, z) / np.polyval(dk1, z)
+        K2 = np.polyval(nk2, z) / np.polyval(dk2, z)
+        out = np.empty((len(self.models), len(z), len(CHANNELS)))
+        for i, m in enumerate(self.models):
+            char = np.polyadd(np.polymul(np.polymul(dk1, dk2), m["cE"]),
+                              m["k"] * np.polymul(np.polymul(nk2, self.nh),
+                                                  np.polyadd(np.polymul(m["nv"], dk1),
+                                                             np.polymul(nk1, m["np"]))))
+            char2 = np.polyadd(np.polymul(dk2, m["cE2"]),
+                               m["k"] * np.polymul(np.polymul(nk2, self.nh), m["nv2"]))
+            if _max_root(char) >= 1.0 - 1e-9 or _max_root(char2) >= 1.0 - 1e-9:
+                return None
+            KH2 = K2 * self.H
+            L = KH2 * (m["Gv"] + K1 * m["Gp"])
+            S = 1.0 / (1.0 + L)
+            out[i, :, 0] = np.abs(self.W[0] * (1.0 - m["Gp"] * K1 * KH2 * S))
+            out[i, :, 1] = np.abs(self.W[1] / (1.0 + KH2 * m["Gv"]))
+            out[i, :, 2] = np.abs(self.W[2] * L * S)
+            out[i, :, 3] = np.abs(self.W[3] * KH2 * S)
+            out[i, :, 4] = np.abs(self.W[4] * (m["Dp"] - m["Gp"] * KH2 * (m["Dv"] + K1 * m["Dp"])
+                                               * S))
+        return out
+
+
+def _block_poly(b: Block) -> tuple[np.ndarray, np.ndarray]:
+    if b.g == 0.0:
+        return np.array([b.d]), np.array([1.0])
+    return np.array([b.d, b.g - b.d * b.a]), np.array([1.0, -b.a])
+
+
+def _max_root(p: np.ndarray) -> float:
+    p = np.trim_zeros(p, "f")
+    return float(np.max(np.abs(np.roots(p)))) if len(p) > 1 else 0.0
+
+
+def _objective(x: np.ndarray, ev: FastEval) -> float:
+    if not np.all(np.isfinite(x)) or np.any(np.abs(x) > 1e4) or max(x[0], x[3]) > 12.0:
         return 1e6
     k1, k2 = _unpack(x)
-    g = grid_gains(spec, k1, k2, w)
+    g = ev.responses(k1, k2)
     if g is None:
         return 1e6
     return float(g.max())
@@ -379,6 +472,7 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
     """Multi-start Nelder-Mead on the grid objective, the grid refined with the exact peak
     frequencies between rounds.  Deterministic (fixed starts + seeded extra starts)."""
     w = default_grid()
+    ev = FastEval(spec, w)
     if starts is None:
         rng = np.random.default_rng(seed)
         base = _pack(Block.p(spec.w1), Block.p(spec.w2))
@@ -387,12 +481,13 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
                               Block(math.exp(-spec.w2 / 5 * TS), spec.w2 * spec.w2 / 5 * TS,
                                     spec.w2))]
         starts += [base * (1 + 0.3 * rng.standard_normal(6)) for _ in range(2)]
+        starts += [np.array(x) for x in spec.start]
     best_x, best_f = None, math.inf
     for x0 in starts:
         x0 = np.asarray(x0, float)
-        if _objective(x0, spec, w) >= 1e6:
+        if _objective(x0, ev) >= 1e6:
             continue
-        r = optimize.minimize(_objective, x0, args=(spec, w), method="Nelder-Mead",
+        r = optimize.minimize(_objective, x0, args=(ev,), method="Nelder-Mead",
                               options={"maxiter": maxiter, "xatol": 1e-6, "fatol": 1e-7,
                                        "adaptive": True})
         if r.fun < best_f:
@@ -404,7 +499,8 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
         _, norms = exact_gamma(spec, k1, k2)
         extra = sorted({n.w_peak for n in norms if n.gamma > 0.9 * best_f and n.w_peak > 0})
         w = np.unique(np.concatenate([w, extra]))
-        r = optimize.minimize(_objective, best_x, args=(spec, w), method="Nelder-Mead",
+        ev = FastEval(spec, w)
+        r = optimize.minimize(_objective, best_x, args=(ev,), method="Nelder-Mead",
                               options={"maxiter": maxiter // 2, "xatol": 1e-7, "fatol": 1e-8,
                                        "adaptive": True})
         best_x, best_f = r.x, float(r.fun)

@@ -155,6 +155,30 @@ def _cmd_fly(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    import time
+
+    from orchestrator.sweep import run_sweep, summarize, write_outputs
+
+    if args.cases < 1 or args.duration <= 1.0:
+        raise ValueError("sweep needs --cases >= 1 and --duration > 1 s")
+    t0 = time.perf_counter()
+    rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
+                     dask=args.dask)
+    wall = time.perf_counter() - t0
+    meta = {"n": args.cases, "seed": args.seed, "duration": args.duration,
+            "workers": args.dask or args.workers, "wall_time": wall,
+            "throughput": len(rows) / wall}
+    files = write_outputs(rows, args.out, meta)
+    for d, s in summarize(rows).items():
+        print(f"{d:9s} stable {100 * s['stable_fraction']:.0f} %  max err mean "
+              f"{s['max_err_mean']:.4f} m (worst {s['max_err_worst']:.4f})  RMS mean "
+              f"{s['rms_err_mean']:.4f} m  recovery mean {s['recovery_mean']:.2f} s")
+    print(f"{len(rows)} runs in {wall:.1f} s ({len(rows) / wall:.2f} runs/s)")
+    print(f"wrote               {', '.join(str(f) for f in files)}")
+    return 0
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="fullpose",
@@ -224,6 +248,17 @@ def build_parser() -> argparse.ArgumentParser:
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
     fly.set_defaults(func=_cmd_fly)
+
+    sw = sub.add_parser("sweep", help="Monte-Carlo robustness campaign: H-infinity vs baseline")
+    sw.add_argument("--cases", type=int, default=50, help="sampled cases (default: 50)")
+    sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
+    sw.add_argument("--duration", type=float, default=6.0, help="seconds per run (default: 6)")
+    sw.add_argument("--workers", type=int, default=1, help="local processes (default: 1)")
+    sw.add_argument("--dask", default=None, metavar="tcp://HOST:PORT",
+                    help="run on a Dask cluster at this scheduler address")
+    sw.add_argument("--out", type=Path, default=Path("results") / "sweep",
+                    help="output directory (default: results/sweep)")
+    sw.set_defaults(func=_cmd_sweep)
 
     fmus = sub.add_parser("fmus", help="print where the installed FMUs are")
     fmus.set_defaults(func=_cmd_fmus)

@@ -1,0 +1,157 @@
+"""Generate the controller FMU's default gains from the structured H-infinity synthesis.
+
+    python -m controller.gains_defaults          # runs the synthesis, (re)writes the header
+    python -m controller.gains_defaults --check  # exit 1 if the committed header is stale
+
+The header is fmu_src/controller/default_gains.h: static const double arrays
+fp_default_K_{pos,vel,att,rate}_{A,B,C,D}[3] (same block on the three axes: after INDI the
+axes have the same design model), printed with "%.17g", plus the achieved gammas and margins in
+the header comment.  The synthesis (controller/hinf.py) is deterministic: fixed starts and a
+seeded generator; it takes ~30-60 s, so ``--check`` does not rerun it by default: the header
+records a hash of the synthesis inputs (the hinf.py/lti.py sources and this file), and
+``--check`` recomputes the hash and verifies that the header's numbers match the cached result
+file next to it (default_gains.json, written by the command).  ``--check --full`` reruns the
+synthesis and compares the numbers (relative 1e-6).
+"""
+
+from __future__ import annotations
+
+import argparse
+import hashlib
+import json
+import math
+import sys
+from pathlib import Path
+
+from controller import hinf
+
+COMMAND = "python -m controller.gains_defaults"
+ROOT = Path(__file__).resolve().parents[1]
+HEADER = ROOT / "fmu_src" / "controller" / "default_gains.h"
+CACHE = ROOT / "controller" / "default_gains.json"
+SOURCES = ("controller/hinf.py", "controller/lti.py", "controller/gains_defaults.py")
+LOOPS = (("pos", "translation", "outer"), ("vel", "translation", "inner"),
+         ("att", "rotation", "outer"), ("rate", "rotation", "inner"))
+
+
+def inputs_hash() -> str:
+    h = hashlib.sha256()
+    for rel in SOURCES:
+        h.update(rel.encode())
+        h.update((ROOT / rel).read_bytes().replace(b"\r\n", b"\n"))
+    return h.hexdigest()[:16]
+
+
+def run_synthesis() -> dict:
+    """{'hash', 'blocks': {loop: [A, B, C, D]}, 'report': {...}} from a fresh synthesis."""
+    designs = hinf.design_all()
+    blocks, report = {}, {}
+    for loop, cascade, which in LOOPS:
+        d = designs[cascade]
+        blk = d.outer if which == "outer" else d.inner
+        blocks[loop] = list(blk.fmu())
+    for name, d in designs.items():
+        report[name] = {
+            "gamma": d.gamma,
+            "spectral_radius": d.spectral_radius,
+            "bandwidth": d.bandwidth,
+            "margins": {k: {"crossover": m.crossover, "gain_margin": m.gain_margin,
+                            "phase_margin": m.phase_margin, "disk_alpha": m.disk_margin,
+                            "disk_gain": list(m.disk_gain), "disk_phase": m.disk_phase}
+                        for k, m in d.margins.items()},
+            "summary": hinf.summary(d),
+        }
+    return {"hash": inputs_hash(), "blocks": blocks, "report": report}
+
+
+def _f(x: float) -> str:
+    return f"{x:.17g}"
+
+
+def _db(x: float) -> str:
+    return "inf" if not math.isfinite(x) else f"{20 * math.log10(x):.1f} dB"
+
+
+def render(result: dict) -> str:
+    lines = [
+        "/*",
+        f" * GENERATED FILE - do not edit.  Regenerate with:   {COMMAND}",
+        f" * Freshness: {COMMAND} --check (tests/test_hinf.py runs the check).",
+        f" * Synthesis inputs hash: {result['hash']}",
+        " *",
+        " * Default first-order blocks x+ = A x + B e, y = C x + D e (Ts = 2 ms, same on the",
+        " * three axes) of the FullPoseController from the structured H-infinity synthesis",
+        " * (controller/hinf.py, docs/robust_design.md): INDI design model with the actuator",
+        " * A(s) = 1/(tau s + 1), the filter H(s), ZOH and the computational delay per cascade;",
+        " * multi-model (mass/inertia mismatch, actuator tau +-30 %); gamma < 1 meets all weights.",
+    ]
+    for name in ("translation", "rotation"):
+        rep = result["report"][name]
+        lines.append(f" * {name}: gamma = {rep['gamma']:.4f}")
+        for where in ("input", "inner", "outer"):
+            m = rep["margins"][where]
+            lines.append(f" *   loop at {where}: crossover {m['crossover']:.3g} rad/s, GM "
+                         f"{_db(m['gain_margin'])}, PM {m['phase_margin']:.1f} deg, disk "
+                         f"margin {m['disk_alpha']:.3f} (gain {m['disk_gain'][0]:.2f}.."
+                         f"{m['disk_gain'][1]:.2f}, phase +-{m['disk_phase']:.1f} deg)")
+    lines += [" */", "#ifndef FP_DEFAULT_GAINS_H", "#define FP_DEFAULT_GAINS_H", ""]
+    for loop, _, _ in LOOPS:
+        for name, v in zip("ABCD", result["blocks"][loop], strict=True):
+            lines.append(f"static const double fp_default_K_{loop}_{name}[3] = "
+                         f"{{{_f(v)}, {_f(v)}, {_f(v)}}};")
+    lines += ["", "#endif /* FP_DEFAULT_GAINS_H */", ""]
+    return "\n".join(lines)
+
+
+def controller_parameters(blocks: dict | None = None) -> dict[str, float]:
+    """The shipped gains as controller FMU parameter overrides {"K_pos_A[1]": ...}."""
+    if blocks is None:
+        blocks = json.loads(CACHE.read_text())["blocks"]
+    out = {}
+    for loop, vals in blocks.items():
+        for name, v in zip("ABCD", vals, strict=True):
+            for i in range(3):
+                out[f"K_{loop}_{name}[{i + 1}]"] = float(v)
+    return out
+
+
+def check(full: bool = False) -> tuple[bool, str]:
+    if not HEADER.is_file() or not CACHE.is_file():
+        return False, f"{HEADER.name} or {CACHE.name} is missing: run {COMMAND}"
+    cached = json.loads(CACHE.read_text())
+    if cached.get("hash") != inputs_hash():
+        return False, f"synthesis inputs changed since {HEADER.name} was generated: run {COMMAND}"
+    if HEADER.read_text() != render(cached):
+        return False, f"{HEADER} does not match {CACHE.name}: run {COMMAND}"
+    if full:
+        fresh = run_synthesis()
+        for loop in fresh["blocks"]:
+            for a, b in zip(fresh["blocks"][loop], cached["blocks"][loop], strict=True):
+                if not math.isclose(a, b, rel_tol=1e-6, abs_tol=1e-9):
+                    return False, f"a fresh synthesis gives other K_{loop}: run {COMMAND}"
+    return True, f"{HEADER} is up to date"
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = argparse.ArgumentParser(prog=COMMAND, description=__doc__.splitlines()[0])
+    parser.add_argument("--check", action="store_true",
+                        help="do not write; exit 1 if the header is stale")
+    parser.add_argument("--full", action="store_true",
+                        help="with --check: rerun the synthesis and compare the numbers")
+    args = parser.parse_args(argv)
+    if args.check:
+        ok, msg = check(args.full)
+        print(msg, file=sys.stdout if ok else sys.stderr)
+        return 0 if ok else 1
+    text = json.dumps(run_synthesis(), indent=1, sort_keys=True) + "\n"
+    result = json.loads(text)
+    CACHE.write_text(text)
+    HEADER.write_text(render(result))
+    for rep in result["report"].values():
+        print(rep["summary"])
+    print(f"wrote {HEADER} and {CACHE}")
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
