@@ -270,6 +270,8 @@ class _Plan:
                 a |= c_get(cc, gc_out, n_cout, row + c_ctrl)
                 a |= c_geti(cc, gc_int, n_cint, irow + o_cint)
                 a |= c_getb(cc, gc_bool, n_cbool, irow + o_cbool)
+                if a > 1:  # statuses: 0 ok, 1 warning; anything else stops the run
+                    self.fail(t)
                 if jacobi:  # plant integrates with u_{k-1}
                     a |= p_set(pc, gp_cmd, n_cmd, (row - stride if k else spare) + c_ctrl)
                     a |= p_set(pc, gp_dist, n_dist, row + c_dist)

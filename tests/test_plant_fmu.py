@@ -644,6 +644,33 @@ def test_deserializing_garbage_fails_with_a_message(make_plant):
     inst.step(H)
 
 
+
+def test_restoring_a_structurally_corrupt_state_is_refused(make_plant):
+    inst = make_plant()
+    good = bytearray(inst.slave.serializeFMUstate(inst.slave.getFMUstate()))
+    header = 72  # snapshot header; the model struct follows, n_rotors is its first member
+    assert int.from_bytes(good[header:header + 4], "little") == 6
+    bad = bytearray(good)
+    bad[header:header + 4] = (40).to_bytes(4, "little")
+    state = inst.slave.deSerializeFMUstate(bytes(bad))
+    with pytest.raises(FMICallException):
+        inst.slave.setFMUstate(state)
+    assert any("state is corrupt" in m for m in errors(inst))
+    inst.slave.setFMUstate(inst.slave.deSerializeFMUstate(bytes(good)))  # still usable
+    trim_feedback(inst)
+    inst.step(H)
+
+
+def test_non_finite_input_at_initialization_is_refused(make_plant):
+    inst = make_plant(initialize=False)
+    inst.slave.setupExperiment(startTime=0.0)
+    inst.set("f_d[1]", float("nan"))
+    inst.slave.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        inst.slave.exitInitializationMode()
+    assert any("input f_d[1]" in m for m in errors(inst))
+
+
 def test_reset_then_reinitialize_reproduces_the_run(make_plant, run_steps):
     inst = make_plant(NOISY)
     first = run_steps(inst, 200, REAL_OUTPUTS, before_step=_commands(inst))

@@ -221,6 +221,10 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     int j;
     unsigned mask = 0;
     CHECK("fmi2SetDebugLogging", S_ANY_BUT_FATAL);
+    if (nCategories > 0 && categories == NULL) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetDebugLogging: categories is NULL");
+        return fmi2Error;
+    }
     if (nCategories == 0) {
         mask = (1u << FP_LOG_N_CATEGORIES) - 1u;
     } else {
@@ -453,6 +457,7 @@ fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     (void)value;
     CHECK("fmi2GetString", S_READABLE);
     if (nvr == 0) return fmi2OK;
+    if (vr == NULL) return fmi2Error;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2GetString: unknown value reference %u (no strings)",
           (unsigned)vr[0]);
     return fmi2Error;
@@ -505,6 +510,7 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
     (void)value;
     CHECK("fmi2SetString", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
     if (nvr == 0) return fmi2OK;
+    if (vr == NULL) return fmi2Error;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetString: unknown value reference %u (no strings)",
           (unsigned)vr[0]);
     return fmi2Error;
@@ -546,7 +552,8 @@ static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, size_t
               inst->info->model_name);
         return fmi2Error;
     }
-    if (!(h.state & S_ANY_BUT_FATAL) || !isfinite(h.time)) {
+    if (!(h.state & S_ANY_BUT_FATAL) || (h.state & (h.state - 1)) != 0 || !isfinite(h.time) ||
+        (inst->info->state_valid != NULL && !inst->info->state_valid(buf + sizeof h))) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state is corrupt", fn);
         return fmi2Error;
     }

@@ -28,15 +28,18 @@ static uint64_t fnv1a_str(uint64_t h, const char *s) { return fnv1a(h, s, strlen
 
 static uint64_t hash_model(const FpModelInfo *info, uint64_t seed) {
     uint64_t h = fnv1a_str(seed, info->model_name);
+    uint64_t layout = (uint64_t)info->model_size;
     size_t i;
+    h = fnv1a(h, &layout, sizeof layout); /* a state saved by another build must not fit */
     for (i = 0; i < info->n_vars; i++) {
         const FpVar *v = &info->vars[i];
-        uint32_t fields[5];
+        uint32_t fields[6];
         fields[0] = v->vr;
         fields[1] = (uint32_t)v->type;
         fields[2] = (uint32_t)v->kind;
         fields[3] = v->rows;
         fields[4] = v->cols;
+        fields[5] = (uint32_t)v->offset;
         h = fnv1a_str(h, v->name);
         h = fnv1a(h, fields, sizeof fields);
         h = fnv1a_str(h, v->unit);

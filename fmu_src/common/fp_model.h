@@ -96,6 +96,9 @@ typedef struct {
     FpStatus (*step)(void *model, double t, double h, const FpLogger *logger);
     /* Re-validate tunable parameters changed while stepping (may be NULL). */
     FpStatus (*tunables_changed)(void *model, const FpLogger *logger);
+    /* 1 if a model struct restored from an FMU state is structurally sound (sizes and
+     * indices within their caps), so stepping it cannot overrun an array (may be NULL). */
+    int (*state_valid)(const void *model);
 } FpModelInfo;
 
 /* Each FMU links exactly one model that provides this. */

@@ -363,7 +363,11 @@ static int ratio_step(Ctx *c, int *moved) {
     FpWlsWork *k = c->k;
     int q, i, blk = -1, nv = c->nv;
     double pn = vnorm(k->p, nv), amin = 1.0, alpha_blk = 2.0, rate_blk = 0.0;
-    double xinf = inf_norm(k->x, nv);
+    double xinf = inf_norm(k->x, nv), pinf = inf_norm(k->p, nv);
+    /* ties are judged as distances along the step: with a huge face step (an
+     * ill-conditioned face) a fixed 1e-12 in step fraction is O(1) in x, and snapping
+     * x onto the tied constraint's bound would leave another one violated */
+    double tie = (pinf > 0.0 && c->tol_feas / pinf < TOL_TIE) ? c->tol_feas / pinf : TOL_TIE;
     /* candidates: global index j < nv for bounds, nv + i for rows */
     for (q = 0; q < c->nf; q++) {
         int j = k->free_idx[q];
@@ -380,8 +384,8 @@ static int ratio_step(Ctx *c, int *moved) {
             continue;
         }
         if (ratio < amin) amin = ratio;
-        if (ratio < alpha_blk - TOL_TIE ||
-            (ratio <= alpha_blk + TOL_TIE && !c->bland && rate > rate_blk)) {
+        if (ratio < alpha_blk - tie ||
+            (ratio <= alpha_blk + tie && !c->bland && rate > rate_blk)) {
             if (ratio < 1.0 || (blk >= 0 && ratio <= 1.0)) {
                 blk = j;
                 alpha_blk = ratio;
@@ -398,8 +402,8 @@ static int ratio_step(Ctx *c, int *moved) {
         rate = cp / pn;
         ratio = (s > 0.0 ? s : 0.0) / cp;
         if (ratio < amin) amin = ratio;
-        if (ratio < alpha_blk - TOL_TIE ||
-            (ratio <= alpha_blk + TOL_TIE && !c->bland && rate > rate_blk)) {
+        if (ratio < alpha_blk - tie ||
+            (ratio <= alpha_blk + tie && !c->bland && rate > rate_blk)) {
             if (ratio < 1.0 || (blk >= 0 && ratio <= 1.0)) {
                 blk = nv + i;
                 alpha_blk = ratio;

@@ -352,7 +352,7 @@ static int scale_about_hover(const ControllerModel *m, const double (*A)[3], con
 
 static void check_polytope(ControllerModel *m, Check *c) {
     int i;
-    double unused_lo, unused_hi;
+    double fz_lo, fz_hi;
     if (m->poly_n < 4 || m->poly_n > FP_POLYTOPE_MAX_FACETS) {
         fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
                "parameter poly_n = %d: a bounded polytope in 3-D needs 4..%d facets",
@@ -403,11 +403,18 @@ static void check_polytope(ControllerModel *m, Check *c) {
         if (i >= m->n_rotors || m->fail_poly_n[i] == 0) continue;
         snprintf(name, sizeof name, "fail_poly_A, fail_poly_b (rotor %d)", i + 1);
         if (check_facets(m, c, name, (const double(*)[3])&m->fail_poly_A[base],
-                         &m->fail_poly_b[base], m->fail_poly_n[i], &unused_lo, &unused_hi))
+                         &m->fail_poly_b[base], m->fail_poly_n[i], &fz_lo, &fz_hi))
             return;
         m->hover_ok[i + 1] = scale_about_hover(m, (const double(*)[3])&m->fail_poly_A[base],
                                                &m->fail_poly_b[base], m->fail_poly_n[i],
                                                &m->fail_d[base]);
+        if (m->hover_ok[i + 1]) { /* scaled about hover like the set itself */
+            double hz = -m->mass * m->g;
+            fz_lo = hz + m->poly_margin * (fz_lo - hz);
+            fz_hi = hz + m->poly_margin * (fz_hi - hz);
+        }
+        m->fail_fz[i][0] = fz_lo;
+        m->fail_fz[i][1] = fz_hi;
         if (!m->hover_ok[i + 1])
             fp_log(c->logger, FP_WARNING, FP_LOG_WARNING,
                    "losing rotor %d leaves no hover force in its feasible-force set", i + 1);
@@ -529,15 +536,20 @@ static void read_filters(const ControllerModel *m, Measured *s) {
 }
 
 /* The feasible-force set in use: nominal, or the one after losing the single lost rotor. */
-static int active_set(const ControllerModel *m, const double (**A)[3], const double **d) {
+static int active_set(const ControllerModel *m, const double (**A)[3], const double **d,
+                      double fz[2]) {
     int i = m->active_polytope;
     if (i >= 1) {
         *A = (const double(*)[3])&m->fail_poly_A[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
         *d = &m->fail_d[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
+        fz[0] = m->fail_fz[i - 1][0];
+        fz[1] = m->fail_fz[i - 1][1];
         return m->fail_poly_n[i - 1];
     }
     *A = (const double(*)[3])m->poly_A;
     *d = m->poly_d;
+    fz[0] = m->fz_min;
+    fz[1] = m->fz_max;
     return m->poly_n;
 }
 
@@ -551,7 +563,8 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
     const int nv = 5;
     const double(*pa)[3];
     const double *pd;
-    int np = active_set(m, &pa, &pd);
+    double fz_range[2];
+    int np = active_set(m, &pa, &pd, fz_range);
     /* Position and velocity references pass through the measurement filter H(s) before
      * they meet the filtered measurements: with the same delay on both sides the
      * feedback terms vanish when the vehicle tracks exactly, instead of pushing on the
@@ -623,7 +636,7 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
         }
     } else {
         /* paper eq. (22)-(23): slice at f_bz_ref (clamped into the polytope's z range) */
-        double fz = fmin(fmax(m->f_b_ref[2], m->fz_min), m->fz_max);
+        double fz = fmin(fmax(m->f_b_ref[2], fz_range[0]), fz_range[1]);
         for (k = 0; k < np; k++) {
             double ax = pa[k][0], ay = pa[k][1];
             if (ax * ax + ay * ay < 1e-18) continue;
@@ -634,8 +647,8 @@ static void guidance(ControllerModel *m, const Measured *s, double df_c[3], doub
                            ay * s->f_b_m[1];
             n_cons++;
         }
-        w->lb[2] = m->fz_min - s->f_b_m[2];
-        w->ub[2] = m->fz_max - s->f_b_m[2];
+        w->lb[2] = fz_range[0] - s->f_b_m[2];
+        w->ub[2] = fz_range[1] - s->f_b_m[2];
     }
     w->n_cons = n_cons;
     t0 = m->timing ? fp_clock_seconds() : 0.0;
@@ -1042,6 +1055,24 @@ static FpStatus controller_step(void *model, double t, double h, const FpLogger 
     return status;
 }
 
+static int wls_valid(const FpWls *w) {
+    return w->n_vars >= 0 && w->n_vars <= FP_WLS_MAX_VARS && w->n_rows >= 0 &&
+           w->n_rows <= FP_WLS_MAX_ROWS && w->n_cons >= 0 && w->n_cons <= FP_WLS_MAX_CONS;
+}
+
+static int controller_state_valid(const void *model) {
+    const ControllerModel *m = (const ControllerModel *)model;
+    int i;
+    if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
+        m->rotors.n > FP_MAX_ROTORS || m->poly_n < 0 || m->poly_n > FP_POLYTOPE_MAX_FACETS ||
+        m->active_polytope < -1 || m->active_polytope > FP_MAX_ROTORS ||
+        !wls_valid(&m->guid) || !wls_valid(&m->alloc))
+        return 0;
+    for (i = 0; i < FP_MAX_ROTORS; i++)
+        if (m->fail_poly_n[i] < 0 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS) return 0;
+    return 1;
+}
+
 static const FpModelInfo controller_info = {
     "FullPoseController",
     "Full-pose controller for multirotors: robust INDI cascade with first-order blocks, WLS "
@@ -1056,6 +1087,7 @@ static const FpModelInfo controller_info = {
     controller_initialize,
     controller_step,
     controller_tunables_changed,
+    controller_state_valid,
 };
 
 const FpModelInfo *controller_model_info(void) { return &controller_info; }

@@ -58,6 +58,7 @@ typedef struct {
     double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
     double inertia_inv[3][3];
     double fz_min, fz_max;                 /* f_bz range of the polytope */
+    double fail_fz[FP_MAX_ROTORS][2];      /* the same for each single-failure set */
     double poly_d[FP_POLYTOPE_MAX_FACETS]; /* offsets of the margin-scaled nominal polytope */
     double fail_d[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS]; /* the same per failure set */
     int32_t hover_ok[FP_MAX_ROTORS + 1];   /* hover force inside: [0] nominal, [i] rotor i lost */

@@ -437,6 +437,39 @@ static int validate(PlantModel *m, const FpLogger *logger) {
 /* ------------------------------------------------------------------------ */
 /* Model callbacks                                                          */
 
+static int check_inputs(const PlantModel *m, const FpLogger *logger) {
+    static const char *const names[] = {"omega_cmd", "alpha_cmd", "beta_cmd", "efficiency"};
+    const double *vectors[4];
+    int i, k, n = m->n_rotors;
+    vectors[0] = m->omega_cmd;
+    vectors[1] = m->alpha_cmd;
+    vectors[2] = m->beta_cmd;
+    vectors[3] = m->efficiency;
+    for (k = 0; k < 4; k++)
+        for (i = 0; i < n; i++)
+            if (!isfinite(vectors[k][i])) {
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] = %g is not finite", names[k],
+                       i + 1, vectors[k][i]);
+                return 1;
+            }
+    for (i = 0; i < n; i++)
+        if (m->efficiency[i] < 0.0 || m->efficiency[i] > 1.0) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input efficiency[%d] = %g is outside [0, 1]",
+                   i + 1, m->efficiency[i]);
+            return 1;
+        }
+    for (i = 0; i < 3; i++) {
+        const char *name = !isfinite(m->f_d[i]) ? "f_d" : !isfinite(m->tau_d[i]) ? "tau_d"
+                                                       : !isfinite(m->a_d[i])   ? "a_d"
+                                                                                : NULL;
+        if (name != NULL) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] is not finite", name, i + 1);
+            return 1;
+        }
+    }
+    return 0;
+}
+
 static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger) {
     PlantModel *m = (PlantModel *)model;
     Commands u;
@@ -475,6 +508,7 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
             m->x[X_BETA + i] = m->beta0[i];
         }
     }
+    if (check_inputs(m, logger) != 0) return FP_ERROR; /* inputs set before initialization */
     seed = (uint64_t)(uint32_t)m->noise_seed;
     for (i = 0; i < 4; i++) m->rng[i] = splitmix64(&seed);
     saturate(m, &u, &m->sat_flags);
@@ -486,38 +520,6 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     return FP_OK;
 }
 
-static int check_inputs(const PlantModel *m, const FpLogger *logger) {
-    static const char *const names[] = {"omega_cmd", "alpha_cmd", "beta_cmd", "efficiency"};
-    const double *vectors[4];
-    int i, k, n = m->n_rotors;
-    vectors[0] = m->omega_cmd;
-    vectors[1] = m->alpha_cmd;
-    vectors[2] = m->beta_cmd;
-    vectors[3] = m->efficiency;
-    for (k = 0; k < 4; k++)
-        for (i = 0; i < n; i++)
-            if (!isfinite(vectors[k][i])) {
-                fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] = %g is not finite", names[k],
-                       i + 1, vectors[k][i]);
-                return 1;
-            }
-    for (i = 0; i < n; i++)
-        if (m->efficiency[i] < 0.0 || m->efficiency[i] > 1.0) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input efficiency[%d] = %g is outside [0, 1]",
-                   i + 1, m->efficiency[i]);
-            return 1;
-        }
-    for (i = 0; i < 3; i++) {
-        const char *name = !isfinite(m->f_d[i]) ? "f_d" : !isfinite(m->tau_d[i]) ? "tau_d"
-                                                       : !isfinite(m->a_d[i])   ? "a_d"
-                                                                                : NULL;
-        if (name != NULL) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] is not finite", name, i + 1);
-            return 1;
-        }
-    }
-    return 0;
-}
 
 #define MAX_SUBSTEPS 10000000.0
 
@@ -551,6 +553,12 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
     return FP_OK;
 }
 
+static int plant_state_valid(const void *model) {
+    const PlantModel *m = (const PlantModel *)model;
+    return m->n_rotors >= 1 && m->n_rotors <= FP_MAX_ROTORS && m->rotors.n >= 0 &&
+           m->rotors.n <= FP_MAX_ROTORS;
+}
+
 static const FpModelInfo plant_info = {
     "MultirotorPlant",
     "6-DoF multirotor with up to 8 tilting rotors (paper eq. 1-3), first-order motor and servo "
@@ -564,6 +572,7 @@ static const FpModelInfo plant_info = {
     plant_initialize,
     plant_step,
     NULL,
+    plant_state_valid,
 };
 
 const FpModelInfo *plant_model_info(void) { return &plant_info; }

@@ -115,9 +115,14 @@ FP_API int fp_wls_set_data_api(void *buffer, const double *A, const double *b, c
 }
 
 /* Start of the next solve: x0 (NULL keeps the stored x) and working set (NULL keeps it). */
+static int wls_sizes_ok(const FpWls *w) {
+    return w != NULL && w->n_vars >= 1 && w->n_vars <= FP_WLS_MAX_VARS && w->n_rows >= 0 &&
+           w->n_rows <= FP_WLS_MAX_ROWS && w->n_cons >= 0 && w->n_cons <= FP_WLS_MAX_CONS;
+}
+
 FP_API int fp_wls_set_start_api(void *buffer, const double *x0, const int8_t *ws) {
     FpWls *w = (FpWls *)buffer;
-    if (w == NULL || w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS) return FP_ERROR;
+    if (!wls_sizes_ok(w)) return FP_ERROR;
     if (x0 != NULL) memcpy(w->x, x0, (size_t)w->n_vars * sizeof(double));
     if (ws != NULL) {
         memcpy(w->bound_ws, ws, (size_t)w->n_vars);
@@ -128,7 +133,7 @@ FP_API int fp_wls_set_start_api(void *buffer, const double *x0, const int8_t *ws
 
 FP_API int fp_wls_get_working_set_api(const void *buffer, int8_t *ws) {
     const FpWls *w = (const FpWls *)buffer;
-    if (w == NULL) return FP_ERROR;
+    if (!wls_sizes_ok(w) || ws == NULL) return FP_ERROR;
     memcpy(ws, w->bound_ws, (size_t)w->n_vars);
     memcpy(ws + w->n_vars, w->cons_ws, (size_t)w->n_cons);
     return FP_OK;
@@ -139,8 +144,9 @@ FP_API int fp_wls_get_working_set_api(const void *buffer, int8_t *ws) {
 FP_API int fp_wls_solve_api(void *buffer, int max_iter, double *x, int32_t *info, double *fout) {
     FpWls *w = (FpWls *)buffer;
     FpWlsResult res;
-    FpStatus st = fp_wls_solve(w, max_iter, &res);
-    if (w == NULL) return FP_ERROR;
+    FpStatus st;
+    if (!wls_sizes_ok(w) || info == NULL || fout == NULL) return FP_ERROR;
+    st = fp_wls_solve(w, max_iter, &res);
     if (x != NULL) memcpy(x, w->x, (size_t)w->n_vars * sizeof(double));
     info[0] = (int32_t)res.status;
     info[1] = res.iterations;
@@ -173,7 +179,8 @@ FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_
     FpWlsResult res;
     FpStatus st = FP_OK;
     int r;
-    if (w == NULL || repeats < 1) return FP_ERROR;
+    if (!wls_sizes_ok(w) || repeats < 1 || ns_out == NULL || info == NULL || fout == NULL)
+        return FP_ERROR;
     memcpy(x0, w->x, sizeof x0);
     memcpy(bws, w->bound_ws, sizeof bws);
     memcpy(cws, w->cons_ws, sizeof cws);
@@ -223,8 +230,8 @@ FP_API int fp_controller_state_qp(const unsigned char *state, long size, int whi
     if (state == NULL || size < (long)model_size || (which != 0 && which != 1)) return FP_ERROR;
     m = (const ControllerModel *)(const void *)(state + (size_t)size - model_size);
     w = which == 0 ? &m->guid : &m->alloc;
-    if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows > FP_WLS_MAX_ROWS ||
-        w->n_cons > FP_WLS_MAX_CONS)
+    if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
+        w->n_rows > FP_WLS_MAX_ROWS || w->n_cons < 0 || w->n_cons > FP_WLS_MAX_CONS)
         return FP_ERROR;
     nv = (size_t)w->n_vars, nr = (size_t)w->n_rows, nc = (size_t)w->n_cons;
     dims[0] = w->n_vars, dims[1] = w->n_rows, dims[2] = w->n_cons;

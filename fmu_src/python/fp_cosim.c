@@ -38,43 +38,57 @@ FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
                           double *data, long stride, int32_t *ints, long istride, double *spare,
                           const long offsets[O_COUNT], double t0, double h, int jacobi,
                           long first, long last, long *failed_step) {
-    fmi2SetRealTYPE *c_set = (fmi2SetRealTYPE *)fns[F_C_SET];
-    fmi2DoStepTYPE *c_step = (fmi2DoStepTYPE *)fns[F_C_STEP];
-    fmi2GetRealTYPE *c_get = (fmi2GetRealTYPE *)fns[F_C_GET];
-    fmi2GetIntegerTYPE *c_geti = (fmi2GetIntegerTYPE *)fns[F_C_GETI];
-    fmi2GetBooleanTYPE *c_getb = (fmi2GetBooleanTYPE *)fns[F_C_GETB];
-    fmi2SetRealTYPE *p_set = (fmi2SetRealTYPE *)fns[F_P_SET];
-    fmi2DoStepTYPE *p_step = (fmi2DoStepTYPE *)fns[F_P_STEP];
-    fmi2GetRealTYPE *p_get = (fmi2GetRealTYPE *)fns[F_P_GET];
-    fmi2GetIntegerTYPE *p_geti = (fmi2GetIntegerTYPE *)fns[F_P_GETI];
+    fmi2SetRealTYPE *c_set, *p_set;
+    fmi2DoStepTYPE *c_step, *p_step;
+    fmi2GetRealTYPE *c_get, *p_get;
+    fmi2GetIntegerTYPE *c_geti, *p_geti;
+    fmi2GetBooleanTYPE *c_getb;
+    fmi2Component cc, pc;
+    long k;
     if (fns == NULL || comps == NULL || vrs == NULL || counts == NULL || data == NULL ||
         ints == NULL || spare == NULL || offsets == NULL || failed_step == NULL)
         return (int)fmi2Error;
-    fmi2Component cc = comps[0], pc = comps[1];
-    long k;
+    c_set = (fmi2SetRealTYPE *)fns[F_C_SET];
+    c_step = (fmi2DoStepTYPE *)fns[F_C_STEP];
+    c_get = (fmi2GetRealTYPE *)fns[F_C_GET];
+    c_geti = (fmi2GetIntegerTYPE *)fns[F_C_GETI];
+    c_getb = (fmi2GetBooleanTYPE *)fns[F_C_GETB];
+    p_set = (fmi2SetRealTYPE *)fns[F_P_SET];
+    p_step = (fmi2DoStepTYPE *)fns[F_P_STEP];
+    p_get = (fmi2GetRealTYPE *)fns[F_P_GET];
+    p_geti = (fmi2GetIntegerTYPE *)fns[F_P_GETI];
+    cc = comps[0];
+    pc = comps[1];
     for (k = first; k < last; k++) {
         double *row = data + k * stride;
         int32_t *irow = ints + k * istride;
         double t = t0 + (double)k * h;
-        int s = (int)c_set(cc, vrs[V_C_IN], counts[V_C_IN], row + offsets[O_REF]);
-        s |= (int)c_step(cc, t, h, fmi2True);
-        s |= (int)c_get(cc, vrs[V_C_OUT], counts[V_C_OUT], row + offsets[O_CTRL]);
-        s |= (int)c_geti(cc, vrs[V_C_INT], counts[V_C_INT], irow + offsets[O_CINT]);
-        s |= (int)c_getb(cc, vrs[V_C_BOOL], counts[V_C_BOOL], irow + offsets[O_CBOOL]);
+        /* every status is checked before the next call: after an error neither FMU is
+         * called again (after fmi2Fatal the standard forbids it) */
+#define FP_CALL(expr)                                   \
+    do {                                                \
+        fmi2Status st_ = (expr);                        \
+        if (st_ > fmi2Warning) {                        \
+            *failed_step = k;                           \
+            return (int)st_;                            \
+        }                                               \
+    } while (0)
+        FP_CALL(c_set(cc, vrs[V_C_IN], counts[V_C_IN], row + offsets[O_REF]));
+        FP_CALL(c_step(cc, t, h, fmi2True));
+        FP_CALL(c_get(cc, vrs[V_C_OUT], counts[V_C_OUT], row + offsets[O_CTRL]));
+        FP_CALL(c_geti(cc, vrs[V_C_INT], counts[V_C_INT], irow + offsets[O_CINT]));
+        FP_CALL(c_getb(cc, vrs[V_C_BOOL], counts[V_C_BOOL], irow + offsets[O_CBOOL]));
         if (jacobi) {
             const double *prev = (k > 0 ? row - stride : spare) + offsets[O_CTRL];
-            s |= (int)p_set(pc, vrs[V_P_CMD], counts[V_P_CMD], prev);
-            s |= (int)p_set(pc, vrs[V_P_DIST], counts[V_P_DIST], row + offsets[O_DIST]);
+            FP_CALL(p_set(pc, vrs[V_P_CMD], counts[V_P_CMD], prev));
+            FP_CALL(p_set(pc, vrs[V_P_DIST], counts[V_P_DIST], row + offsets[O_DIST]));
         } else {
-            s |= (int)p_set(pc, vrs[V_P_IN], counts[V_P_IN], row + offsets[O_DIST]);
+            FP_CALL(p_set(pc, vrs[V_P_IN], counts[V_P_IN], row + offsets[O_DIST]));
         }
-        s |= (int)p_step(pc, t, h, fmi2True);
-        s |= (int)p_get(pc, vrs[V_P_OUT], counts[V_P_OUT], row + stride + offsets[O_PLANT]);
-        s |= (int)p_geti(pc, vrs[V_P_INT], counts[V_P_INT], irow + istride + offsets[O_PINT]);
-        if (s > (int)fmi2Warning) { /* statuses OR together: > 1 iff one was > 1 */
-            *failed_step = k;
-            return s;
-        }
+        FP_CALL(p_step(pc, t, h, fmi2True));
+        FP_CALL(p_get(pc, vrs[V_P_OUT], counts[V_P_OUT], row + stride + offsets[O_PLANT]));
+        FP_CALL(p_geti(pc, vrs[V_P_INT], counts[V_P_INT], irow + istride + offsets[O_PINT]));
+#undef FP_CALL
     }
     return 0;
 }
