@@ -93,8 +93,8 @@ def test_archive_layout_and_fmus_verbatim(hover_ssp):
 
 
 def test_ssd_and_ssv_validate_against_fmpy_schemas(hover_ssp, mds):
-    if not (SCHEMAS / "SystemStructureDescription.xsd").is_file():
-        pytest.skip(f"fmpy ships no SSP schemas at {SCHEMAS}")
+    assert (SCHEMAS / "SystemStructureDescription.xsd").is_file(), \
+        f"fmpy ships no SSP schemas at {SCHEMAS}"
     got = members(hover_ssp)
     ssd_schema = etree.XMLSchema(file=str(SCHEMAS / "SystemStructureDescription.xsd"))
     ssv_schema = etree.XMLSchema(file=str(SCHEMAS / "SystemStructureParameterValues.xsd"))

@@ -36,15 +36,10 @@ import math
 import time
 
 import numpy as np
+import piqp
 import pytest
 
-piqp = pytest.importorskip("piqp")
-wls = pytest.importorskip("controller.wls")
-
-try:
-    wls.caps()
-except Exception as exc:  # the native library is not built
-    pytest.skip(f"core library not available: {exc}", allow_module_level=True)
+import controller.wls as wls
 
 MAX_ITER = 200
 OBJ_RTOL = 1e-6
