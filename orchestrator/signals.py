@@ -54,23 +54,17 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from itertools import pairwise
-from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike
 
+from plant.toml_fields import FieldError, TomlTable
+
 SIGNAL_TYPES = ("constant", "sine", "chirp", "steps", "ramp", "waypoints", "sum")
 
 
-class ScenarioError(ValueError):
+class ScenarioError(FieldError):
     """A scenario file (or a setting given on top of it) is missing, unreadable or invalid."""
-
-    def __init__(self, source: str, field: str, reason: str) -> None:
-        self.source = source
-        self.field = field
-        self.reason = reason
-        where = f"field '{field}': " if field else ""
-        super().__init__(f"{source}: {where}{reason}")
 
 
 def _times(t: ArrayLike) -> np.ndarray:
@@ -286,27 +280,10 @@ def is_number(value: object) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
-class FieldReader:
+class FieldReader(TomlTable):
     """Typed access to one TOML table; every error names the file and the dotted field."""
 
-    def __init__(self, source: str, data: dict[str, Any], prefix: str = "") -> None:
-        self.source = source
-        self.data = data
-        self.prefix = prefix
-        self.used: set[str] = set()
-
-    def field(self, key: str) -> str:
-        return f"{self.prefix}{key}"
-
-    def fail(self, key: str, reason: str) -> ScenarioError:
-        return ScenarioError(self.source, self.field(key), reason)
-
-    def has(self, key: str) -> bool:
-        return key in self.data
-
-    def raw(self, key: str) -> Any:
-        self.used.add(key)
-        return self.data.get(key)
+    error = ScenarioError
 
     def table(self, key: str) -> FieldReader | None:
         """A sub-table, or None when absent."""

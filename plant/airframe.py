@@ -17,6 +17,7 @@ from typing import Any
 import numpy as np
 
 from plant.effectiveness import RotorSet
+from plant.toml_fields import FieldError, TomlTable
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -27,15 +28,8 @@ MAX_ROTORS = 8
 RPM = 2.0 * math.pi / 60.0
 
 
-class AirframeError(ValueError):
+class AirframeError(FieldError):
     """An airframe file is missing, unreadable or inconsistent."""
-
-    def __init__(self, source: str, field: str, reason: str) -> None:
-        self.source = source
-        self.field = field
-        self.reason = reason
-        where = f"field '{field}': " if field else ""
-        super().__init__(f"{source}: {where}{reason}")
 
 
 @dataclass(frozen=True)
@@ -153,23 +147,10 @@ def load_airframe(name_or_path: str | Path) -> Airframe:
     return parse_airframe(data, source)
 
 
-class _Reader:
-    """Typed access to a TOML table with errors that name the field."""
+class _Reader(TomlTable):
+    """Typed access to an airframe file's table with errors that name the field."""
 
-    def __init__(self, source: str, data: dict[str, Any], prefix: str = "") -> None:
-        self.source = source
-        self.data = data
-        self.prefix = prefix
-        self.used: set[str] = set()
-
-    def field(self, key: str) -> str:
-        return f"{self.prefix}{key}"
-
-    def fail(self, key: str, reason: str) -> AirframeError:
-        return AirframeError(self.source, self.field(key), reason)
-
-    def has(self, key: str) -> bool:
-        return key in self.data
+    error = AirframeError
 
     def table(self, key: str, required: bool = True) -> _Reader | None:
         self.used.add(key)

@@ -1,0 +1,44 @@
+"""Shared base of the validating TOML readers (airframe and scenario files).
+
+Every error names the file, the dotted field and what is expected.
+"""
+
+from __future__ import annotations
+
+from typing import Any, ClassVar
+
+
+class FieldError(ValueError):
+    """A file's field is missing or invalid: ``source: field 'a.b': reason``."""
+
+    def __init__(self, source: str, field: str, reason: str) -> None:
+        self.source = source
+        self.field = field
+        self.reason = reason
+        where = f"field '{field}': " if field else ""
+        super().__init__(f"{source}: {where}{reason}")
+
+
+class TomlTable:
+    """Typed access to one TOML table; subclasses choose the error type and add readers."""
+
+    error: ClassVar[type[FieldError]] = FieldError
+
+    def __init__(self, source: str, data: dict[str, Any], prefix: str = "") -> None:
+        self.source = source
+        self.data = data
+        self.prefix = prefix
+        self.used: set[str] = set()
+
+    def field(self, key: str) -> str:
+        return f"{self.prefix}{key}"
+
+    def fail(self, key: str, reason: str) -> FieldError:
+        return self.error(self.source, self.field(key), reason)
+
+    def has(self, key: str) -> bool:
+        return key in self.data
+
+    def raw(self, key: str) -> Any:
+        self.used.add(key)
+        return self.data.get(key)
