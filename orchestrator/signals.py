@@ -295,25 +295,6 @@ class FieldReader(TomlTable):
             raise self.fail(key, f"expected a table, got {value!r}")
         return FieldReader(self.source, value, f"{self.field(key)}.")
 
-    def number(self, key: str, default: float | None = None, *, positive: bool = False,
-               nonnegative: bool = False) -> float:
-        self.used.add(key)
-        if key not in self.data:
-            if default is None:
-                raise self.fail(key, "missing (expected a number)")
-            return default
-        value = self.data[key]
-        if not is_number(value):
-            raise self.fail(key, f"expected a number, got {value!r}")
-        x = float(value)
-        if not math.isfinite(x):
-            raise self.fail(key, f"expected a finite number, got {value!r}")
-        if positive and not x > 0:
-            raise self.fail(key, f"expected a positive number, got {value!r}")
-        if nonnegative and x < 0:
-            raise self.fail(key, f"expected a number >= 0, got {value!r}")
-        return x
-
     def integer(self, key: str) -> int:
         self.used.add(key)
         value = self.data.get(key)

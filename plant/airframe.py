@@ -163,25 +163,6 @@ class _Reader(TomlTable):
             raise self.fail(key, "expected a table")
         return _Reader(self.source, value, f"{self.field(key)}.")
 
-    def number(self, key: str, default: float | None = None, *, positive: bool = False,
-               nonnegative: bool = False) -> float:
-        self.used.add(key)
-        if key not in self.data:
-            if default is None:
-                raise self.fail(key, "missing (expected a number)")
-            return default
-        value = self.data[key]
-        if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise self.fail(key, f"expected a number, got {value!r}")
-        x = float(value)
-        if not math.isfinite(x):
-            raise self.fail(key, f"expected a finite number, got {value!r}")
-        if positive and not x > 0:
-            raise self.fail(key, f"must be positive, got {value!r}")
-        if nonnegative and x < 0:
-            raise self.fail(key, f"must not be negative, got {value!r}")
-        return x
-
     def string(self, key: str, default: str | None = None) -> str:
         self.used.add(key)
         if key not in self.data:

@@ -5,6 +5,7 @@ Every error names the file, the dotted field and what is expected.
 
 from __future__ import annotations
 
+import math
 from typing import Any, ClassVar
 
 
@@ -42,3 +43,22 @@ class TomlTable:
     def raw(self, key: str) -> Any:
         self.used.add(key)
         return self.data.get(key)
+
+    def number(self, key: str, default: float | None = None, *, positive: bool = False,
+               nonnegative: bool = False) -> float:
+        self.used.add(key)
+        if key not in self.data:
+            if default is None:
+                raise self.fail(key, "missing (expected a number)")
+            return default
+        value = self.data[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise self.fail(key, f"expected a number, got {value!r}")
+        x = float(value)
+        if not math.isfinite(x):
+            raise self.fail(key, f"expected a finite number, got {value!r}")
+        if positive and not x > 0:
+            raise self.fail(key, f"expected a positive number, got {value!r}")
+        if nonnegative and x < 0:
+            raise self.fail(key, f"expected a number >= 0, got {value!r}")
+        return x
