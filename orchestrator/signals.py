@@ -51,7 +51,7 @@ from __future__ import annotations
 
 import math
 from abc import ABC, abstractmethod
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 from dataclasses import dataclass
 from itertools import pairwise
 
@@ -302,21 +302,6 @@ class FieldReader(TomlTable):
             raise self.fail(key, "missing (expected an integer)")
         if not isinstance(value, int) or isinstance(value, bool):
             raise self.fail(key, f"expected an integer, got {value!r}")
-        return value
-
-    def string(self, key: str, default: str | None = None,
-               choices: Sequence[str] | None = None) -> str:
-        self.used.add(key)
-        if key not in self.data:
-            if default is None:
-                raise self.fail(key, "missing (expected a string)")
-            return default
-        value = self.data[key]
-        if not isinstance(value, str):
-            raise self.fail(key, f"expected a string, got {value!r}")
-        if choices is not None and value not in choices:
-            raise self.fail(key, f"expected one of {', '.join(repr(c) for c in choices)}, "
-                            f"got {value!r}")
         return value
 
     def numbers(self, key: str, *, increasing: bool = False) -> tuple[float, ...]:

@@ -163,17 +163,6 @@ class _Reader(TomlTable):
             raise self.fail(key, "expected a table")
         return _Reader(self.source, value, f"{self.field(key)}.")
 
-    def string(self, key: str, default: str | None = None) -> str:
-        self.used.add(key)
-        if key not in self.data:
-            if default is None:
-                raise self.fail(key, "missing (expected a string)")
-            return default
-        value = self.data[key]
-        if not isinstance(value, str):
-            raise self.fail(key, f"expected a string, got {value!r}")
-        return value
-
     def numbers(self, key: str, length: int | None = None,
                 default: list[float] | None = None) -> list[float]:
         self.used.add(key)

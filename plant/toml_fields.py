@@ -6,6 +6,7 @@ Every error names the file, the dotted field and what is expected.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from typing import Any, ClassVar
 
 
@@ -62,3 +63,18 @@ class TomlTable:
         if nonnegative and x < 0:
             raise self.fail(key, f"expected a number >= 0, got {value!r}")
         return x
+
+    def string(self, key: str, default: str | None = None,
+               choices: Sequence[str] | None = None) -> str:
+        self.used.add(key)
+        if key not in self.data:
+            if default is None:
+                raise self.fail(key, "missing (expected a string)")
+            return default
+        value = self.data[key]
+        if not isinstance(value, str):
+            raise self.fail(key, f"expected a string, got {value!r}")
+        if choices is not None and value not in choices:
+            raise self.fail(key, f"expected one of {', '.join(repr(c) for c in choices)}, "
+                            f"got {value!r}")
+        return value
