@@ -56,12 +56,18 @@ def _draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bo
         return
     faces = _faces(poly)
     if alpha > 0:
+        # callers set the limits from the vertices; mplot3d's autoscale from a fresh
+        # axes' infinite data limits overflowed into NaN limits now and then
         ax.add_collection3d(Poly3DCollection(faces, facecolor=color, alpha=alpha,
-                                             edgecolor="none"))
+                                             edgecolor="none"), autolim=False)
     if edges:
         ax.add_collection3d(Line3DCollection([np.vstack([f, f[:1]]) for f in faces],
-                                             colors=color, linewidths=0.6))
-    ax.plot([], [], color=color, lw=6 if alpha > 0 else 1, alpha=max(alpha, 0.6), label=label)
+                                             colors=color, linewidths=0.6), autolim=False)
+    # legend proxy: a one-point line (draws nothing) at a real vertex, so that the
+    # autoscale it triggers sees finite data (an empty line gave NaN limits)
+    v = poly.vertices[:1]
+    ax.plot(v[:, 0], v[:, 1], v[:, 2], color=color, lw=6 if alpha > 0 else 1,
+            alpha=max(alpha, 0.6), label=label)
 
 
 def _closed(poly2: np.ndarray) -> np.ndarray:
@@ -95,7 +101,8 @@ def plot_force_sets(
     _draw_polytope(ax, s0, BLUE, 0.0, True, f"S(0) ({s0.n_facets} facets)")
     ring = _closed(pxy)
     ax.add_collection3d(Poly3DCollection([np.column_stack([pxy, np.full(len(pxy), z)])],
-                                         facecolor=RED, alpha=0.45, edgecolor=RED))
+                                         facecolor=RED, alpha=0.45, edgecolor=RED),
+                        autolim=False)
     ax.plot(ring[:, 0], ring[:, 1], np.full(len(ring), z), color=RED, lw=1.5,
             label=f"P_xy at f_bz = {z:.2f} N")
     ax.scatter(*hover, color="k", s=12, label="hover force")
