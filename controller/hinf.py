@@ -82,7 +82,9 @@ TAU_ACT = 1.0 / 53.94
 FILT_WN = 50.0
 FILT_ZETA = 0.55
 
-CHANNELS = ("S_outer", "S_inner", "T_input", "KS_noise", "disturbance")
+CHANNELS = ("S_outer", "S_inner", "T_input", "KS_noise", "disturbance", "KS_outer")
+# the closed-loop input of each channel in :func:`interconnection` ([do1, do2, di, n2, d])
+CHANNEL_INPUT = (0, 1, 2, 3, 4, 0)
 
 
 @dataclass(frozen=True)
@@ -132,9 +134,11 @@ class LoopSpec:
     r_inf: float = 2.0   # high-frequency relative uncertainty
     wT: float = 60.0     # rad/s where the uncertainty reaches ~100 %
     u_max: float = 60.0  # noise -> command gain bound
+    u1_max: float = 1e3  # outer noise -> outer command (velocity/rate) gain bound
     d_max: float = 0.01  # disturbance -> outer output bound (outer unit per (unit/s^2))
     wd: float = 0.0      # > 0: W_D grows as ~wd/s below wd (fast recovery, integral action)
     inner_no_lag: bool = False  # inner block restricted to C >= 0 (PI-like, no slow lag tail)
+    perf_scales_with_k: bool = False  # performance bandwidths w1, w2 required x min(1, k)
     k_range: tuple[float, float] = (0.77, 1.43)
     tau_scale: tuple[float, float] = (0.7, 1.3)
     delay: int = 1
@@ -144,18 +148,18 @@ class LoopSpec:
 
 TRANSLATION = LoopSpec(
     name="translation", outer="pos", inner="vel",
-    w1=1.6, w2=4.5, u_max=30.0, d_max=0.008, wd=3.0, wT=35.0, r0=0.35,
-    k_range=(1 / 1.3, 1 / 0.7), inner_no_lag=True,
+    w1=2.0, w2=6.0, u_max=30.0, u1_max=3.0, d_max=0.016, wd=3.0, wT=9.0, r0=0.35,
+    k_range=(1 / 1.3, 1 / 0.7), inner_no_lag=True, perf_scales_with_k=True,
     # an extra deterministic start: the optimum of an earlier run of these loops
-    start=((math.log(-math.log(0.99054366) / TS), 0.00315599, 1.78502636,
-            math.log(-math.log(0.99793847) / TS), 1e-6, 11.5344505),))
+    start=((math.log(-math.log(0.991444) / TS), 0.000895218, 2.07276,
+            math.log(-math.log(0.994308) / TS), math.sqrt(0.000741974), 6.32727),))
 ROTATION = LoopSpec(
     name="rotation", outer="att", inner="rate",
-    w1=5.0, w2=11.0, ms=5.0, u_max=90.0, d_max=0.009, wT=150.0, r0=0.1, r_inf=1.8,
-    k_range=(1 / 1.5, 1 / 0.5), delay=0,
+    w1=6.0, w2=14.0, ms=5.0, u_max=90.0, u1_max=25.0, d_max=0.015, wT=150.0, r0=0.1, r_inf=1.8,
+    k_range=(1 / 1.5, 1 / 0.5), delay=0, perf_scales_with_k=True,
     # an extra deterministic start: the optimum of an earlier run of these loops
-    start=((math.log(-math.log(0.890488) / TS), 0.00571046, 6.34363,
-            math.log(-math.log(0.943548) / TS), -0.538553, 21.0403),))
+    start=((math.log(-math.log(0.9977) / TS), 5.59941e-05, 7.65094,
+            math.log(-math.log(0.941519) / TS), -0.264554, 18.6923),))
 SPECS = (TRANSLATION, ROTATION)
 
 
@@ -190,16 +194,24 @@ def _delay(n: int, Ts: float = TS) -> SS:
     return SS.make(A, B, C, [[0.0]], Ts)
 
 
+def perf_scale(spec: LoopSpec, k: float) -> float:
+    """Factor on the sensitivity bandwidths required of the model with gain k."""
+    return min(1.0, k) if spec.perf_scales_with_k else 1.0
+
+
 @functools.lru_cache(maxsize=64)
-def weights(spec: LoopSpec, Ts: float = TS) -> dict[str, SS]:
-    """The weighting functions (continuous, Tustin-discretized)."""
-    ws1 = SS.from_tf([1 / spec.ms, spec.w1], [1, spec.eps * spec.w1], Ts)
-    ws2 = SS.from_tf([1 / spec.ms, spec.w2], [1, spec.eps * spec.w2], Ts)
+def weights(spec: LoopSpec, k: float = 1.0, Ts: float = TS) -> dict[str, SS]:
+    """The weighting functions (continuous, Tustin-discretized) for the model with gain k."""
+    c = perf_scale(spec, k)
+    w1, w2 = c * spec.w1, c * spec.w2
+    ws1 = SS.from_tf([1 / spec.ms, w1], [1, spec.eps * w1], Ts)
+    ws2 = SS.from_tf([1 / spec.ms, w2], [1, spec.eps * w2], Ts)
     wt = SS.from_tf([1 / spec.wT, spec.r0], [1 / (spec.r_inf * spec.wT), 1], Ts)
     wd = (SS.from_tf([1 / spec.d_max, spec.wd / spec.d_max], [1, spec.eps * spec.wd], Ts)
           if spec.wd > 0 else SS.gain(1 / spec.d_max, Ts))
     return {"S_outer": ws1, "S_inner": ws2, "T_input": wt,
-            "KS_noise": SS.gain(1 / spec.u_max, Ts), "disturbance": wd}
+            "KS_noise": SS.gain(1 / spec.u_max, Ts), "disturbance": wd,
+            "KS_outer": SS.gain(1 / spec.u1_max, Ts)}
 
 
 def weight_functions(spec: LoopSpec) -> dict[str, str]:
@@ -211,15 +223,17 @@ def weight_functions(spec: LoopSpec) -> dict[str, str]:
         "KS_noise": f"1/{spec.u_max:g}",
         "disturbance": (f"(s + {spec.wd:g}) / ({spec.d_max:g} (s + {spec.eps * spec.wd:.3g}))"
                         if spec.wd > 0 else f"1/{spec.d_max:g}"),
+        "KS_outer": f"1/{spec.u1_max:g}",
     }
 
 
 def interconnection(spec: LoopSpec, k1: Block, k2: Block, k: float = 1.0,
                     tau: float | None = None, weighted: bool = True) -> SS:
-    """Closed loop, inputs [do1, do2, di, n2, d], outputs the five requirement channels
-    (weighted, or unweighted with ``weighted=False``; the pair (i, i) is requirement i).
-    Channel 2 (inner sensitivity) is taken with the outer loop open (see :func:`channels`);
-    here its pair is the inner sensitivity with both loops closed (for information)."""
+    """Closed loop, inputs [do1, do2, di, n2, d], outputs the six requirement channels
+    (weighted, or unweighted with ``weighted=False``); requirement i is output i from input
+    ``CHANNEL_INPUT[i]``.  Channel 2 (inner sensitivity) is taken with the outer loop open
+    (see :func:`channels`); here its pair is the inner sensitivity with both loops closed
+    (for information)."""
     tau = spec.tau if tau is None else tau
     dg = Diagram(TS)
     dg.add(_plant(tau), ["udel", "d"], ["a_act", "v", "p"])
@@ -232,9 +246,9 @@ def interconnection(spec: LoopSpec, k1: Block, k2: Block, k: float = 1.0,
     dg.add(k2.ss(), [{"vc": 1.0, "Hv": -1.0}], ["uk"])
     dg.add(SS.gain(1.0, TS), [{"uk": 1.0, "di": 1.0}], ["u"])
     outs = [{"p": 1.0, "do1": 1.0}, {"v": 1.0, "do2": 1.0}, {"uk": -1.0}, {"uk": 1.0},
-            {"p": 1.0}]
+            {"p": 1.0}, {"vc": 1.0}]
     if weighted:
-        w = weights(spec)
+        w = weights(spec, k)
         for name, o in zip(CHANNELS, outs, strict=True):
             dg.add(w[name], [o], ["z_" + name])
         outs = ["z_" + n for n in CHANNELS]
@@ -253,19 +267,19 @@ def inner_loop(spec: LoopSpec, k2: Block, k: float = 1.0, tau: float | None = No
     dg.add(k2.ss(), [{"Hv": -1.0}], ["u"])
     out: str | dict[str, float] = {"v": 1.0, "do2": 1.0}
     if weighted:
-        dg.add(weights(spec)["S_inner"], [out], ["z"])
+        dg.add(weights(spec, k)["S_inner"], [out], ["z"])
         out = "z"
     return dg.build(["do2", "d"], [out]).sub([0], [0])
 
 
 def channels(spec: LoopSpec, k1: Block, k2: Block, k: float = 1.0,
              tau: float | None = None) -> list[SS] | None:
-    """The five weighted requirement channels (SISO) of one model, None if unstable."""
+    """The six weighted requirement channels (SISO) of one model, None if unstable."""
     cl = interconnection(spec, k1, k2, k, tau)
     ci = inner_loop(spec, k2, k, tau)
     if max(cl.spectral_radius(), ci.spectral_radius()) >= 1.0 - 1e-9:
         return None
-    out = [cl.sub([i], [i]) for i in range(len(CHANNELS))]
+    out = [cl.sub([i], [j]) for i, j in enumerate(CHANNEL_INPUT)]
     out[1] = ci
     return out
 
@@ -279,21 +293,24 @@ def models(spec: LoopSpec) -> list[tuple[float, float]]:
     return out
 
 
-def _unpack(x: np.ndarray) -> tuple[Block, Block]:
+def _unpack(x: np.ndarray, no_lag: bool = False) -> tuple[Block, Block]:
+    """Blocks from the search variables; with ``no_lag`` the inner residue is x[4]^2 >= 0
+    (a smooth parametrization: a barrier at C = 0 stalls the simplex on its edge)."""
     p1, g1, d1, p2, g2, d2 = x
     a1 = math.exp(-math.exp(p1) * TS)
     a2 = math.exp(-math.exp(p2) * TS)
-    return Block(a1, g1, d1), Block(a2, g2, d2)
+    return Block(a1, g1, d1), Block(a2, g2 * g2 if no_lag else g2, d2)
 
 
-def _pack(k1: Block, k2: Block) -> np.ndarray:
+def _pack(k1: Block, k2: Block, no_lag: bool = False) -> np.ndarray:
     def lp(a: float) -> float:
         return math.log(-math.log(a) / TS) if 0 < a < 1 else math.log(1.0)
-    return np.array([lp(k1.a), k1.g, k1.d, lp(k2.a), k2.g, k2.d])
+    g2 = math.sqrt(max(k2.g, 0.0)) if no_lag else k2.g
+    return np.array([lp(k1.a), k1.g, k1.d, lp(k2.a), g2, k2.d])
 
 
 def grid_gains(spec: LoopSpec, k1: Block, k2: Block, w: np.ndarray) -> np.ndarray | None:
-    """|weighted channels| on a grid for every model: (n_models, len(w), 5), or None when a
+    """|weighted channels| on a grid for every model: (n_models, len(w), 6), or None when a
     model's closed loop is unstable."""
     out = []
     for kk, tau in models(spec):
@@ -301,7 +318,7 @@ def grid_gains(spec: LoopSpec, k1: Block, k2: Block, w: np.ndarray) -> np.ndarra
         ci = inner_loop(spec, k2, kk, tau)
         if max(cl.spectral_radius(), ci.spectral_radius()) >= 1.0 - 1e-9:
             return None
-        g = np.abs(np.diagonal(cl.freqresp(w), axis1=1, axis2=2)).copy()
+        g = np.abs(cl.freqresp(w)[:, np.arange(len(CHANNELS)), list(CHANNEL_INPUT)])
         g[:, 1] = np.abs(ci.freqresp(w)[:, 0, 0])
         out.append(g)
     return np.array(out)
@@ -327,8 +344,10 @@ class FastEval:
         h = _filter()
         self.nh, self.dh = _tf(h, 0, 0)
         self.H = np.polyval(self.nh, z) / np.polyval(self.dh, z)
-        wts = weights(spec)
-        self.W = [wts[c].freqresp(self.w)[:, 0, 0] for c in CHANNELS]
+        self.W = {}
+        for kk, _ in models(spec):
+            wts = weights(spec, kk)
+            self.W[kk] = [wts[c].freqresp(self.w)[:, 0, 0] for c in CHANNELS]
         self.models = []
         zn = np.zeros(spec.delay + 1)
         zn[0] = 1.0
@@ -353,7 +372,7 @@ class FastEval:
                                     Dp=Ppd - Gp * self.H))
 
     def responses(self, k1: Block, k2: Block) -> np.ndarray | None:
-        """|weighted channel| (n_models, len(w), 5), None if a model is unstable."""
+        """|weighted channel| (n_models, len(w), 6), None if a model is unstable."""
         z = self.z
         nk1, dk1 = _block_poly(k1)
         nk2, dk2 = _block_poly(k2)
@@ -369,15 +388,18 @@ class FastEval:
                                m["k"] * np.polymul(np.polymul(nk2, self.nh), m["nv2"]))
             if _max_root(char) >= 1.0 - 1e-9 or _max_root(char2) >= 1.0 - 1e-9:
                 return None
+            W = self.W[m["k"]]
             KH2 = K2 * self.H
             L = KH2 * (m["Gv"] + K1 * m["Gp"])
             S = 1.0 / (1.0 + L)
-            out[i, :, 0] = np.abs(self.W[0] * (1.0 - m["Gp"] * K1 * KH2 * S))
-            out[i, :, 1] = np.abs(self.W[1] / (1.0 + KH2 * m["Gv"]))
-            out[i, :, 2] = np.abs(self.W[2] * L * S)
-            out[i, :, 3] = np.abs(self.W[3] * KH2 * S)
-            out[i, :, 4] = np.abs(self.W[4] * (m["Dp"] - m["Gp"] * KH2 * (m["Dv"] + K1 * m["Dp"])
+            So = 1.0 - m["Gp"] * K1 * KH2 * S
+            out[i, :, 0] = np.abs(W[0] * So)
+            out[i, :, 1] = np.abs(W[1] / (1.0 + KH2 * m["Gv"]))
+            out[i, :, 2] = np.abs(W[2] * L * S)
+            out[i, :, 3] = np.abs(W[3] * KH2 * S)
+            out[i, :, 4] = np.abs(W[4] * (m["Dp"] - m["Gp"] * KH2 * (m["Dv"] + K1 * m["Dp"])
                                                * S))
+            out[i, :, 5] = np.abs(W[5] * K1 * self.H * So)
         return out
 
 
@@ -395,9 +417,7 @@ def _max_root(p: np.ndarray) -> float:
 def _objective(x: np.ndarray, ev: FastEval) -> float:
     if not np.all(np.isfinite(x)) or np.any(np.abs(x) > 1e4) or max(x[0], x[3]) > 12.0:
         return 1e6
-    k1, k2 = _unpack(x)
-    if ev.spec.inner_no_lag and k2.g < 0.0:
-        return 1e6
+    k1, k2 = _unpack(x, ev.spec.inner_no_lag)
     g = ev.responses(k1, k2)
     if g is None:
         return 1e6
@@ -490,11 +510,11 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
     ev = FastEval(spec, w)
     if starts is None:
         rng = np.random.default_rng(seed)
-        base = _pack(Block.p(spec.w1), Block.p(spec.w2))
+        base = _pack(Block.p(spec.w1), Block.p(spec.w2), spec.inner_no_lag)
         starts = [base, _pack(Block(math.exp(-spec.w1 / 5 * TS), spec.w1 * spec.w1 / 5 * TS,
                                     spec.w1),
                               Block(math.exp(-spec.w2 / 5 * TS), spec.w2 * spec.w2 / 5 * TS,
-                                    spec.w2))]
+                                    spec.w2), spec.inner_no_lag)]
         starts += [base * (1 + 0.3 * rng.standard_normal(6)) for _ in range(2)]
         starts += [np.array(x) for x in spec.start]
     best_x, best_f = None, math.inf
@@ -510,7 +530,7 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
     if best_x is None:
         raise RuntimeError(f"{spec.name}: no stabilizing start")
     for _ in range(rounds):
-        k1, k2 = _unpack(best_x)
+        k1, k2 = _unpack(best_x, spec.inner_no_lag)
         _, norms = exact_gamma(spec, k1, k2)
         extra = sorted({n.w_peak for n in norms if n.gamma > 0.9 * best_f and n.w_peak > 0})
         w = np.unique(np.concatenate([w, extra]))
@@ -519,7 +539,7 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
                               options={"maxiter": maxiter // 2, "xatol": 1e-7, "fatol": 1e-8,
                                        "adaptive": True})
         best_x, best_f = r.x, float(r.fun)
-    k1, k2 = _unpack(best_x)
+    k1, k2 = _unpack(best_x, spec.inner_no_lag)
     return analyse(spec, k1, k2)
 
 

@@ -15,6 +15,7 @@ os.environ["MAVLINK20"] = "1"
 
 from pymavlink import mavutil
 
+from controller.gains_defaults import controller_parameters
 from mavlink_bridge.bridge import Bridge, BridgeConfig
 from mavlink_bridge.geometry import euler_to_quat
 
@@ -159,7 +160,8 @@ def test_parameters_round_trip_and_unsupported_command(flight):
     f = flight
     f.gcs.mav.param_request_read_send(1, 1, b"FP_KPOS_D1", -1)
     pv = f.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "FP_KPOS_D1")
-    assert pv.param_value == pytest.approx(2.2, rel=1e-6)
+    shipped = controller_parameters()["K_pos_D[1]"]  # the synthesis' result file
+    assert pv.param_value == pytest.approx(shipped, rel=1e-6)
     f.gcs.mav.param_set_send(1, 1, b"FP_KPOS_D1", 1.8, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
     pv = f.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "FP_KPOS_D1")
     assert pv.param_value == pytest.approx(1.8, rel=1e-6)
@@ -167,7 +169,7 @@ def test_parameters_round_trip_and_unsupported_command(flight):
     # out of range: refused, the old value reported, the loop flies on
     f.gcs.mav.param_set_send(1, 1, b"FP_KPOS_A1", 1.5, mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
     pv = f.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "FP_KPOS_A1")
-    assert pv.param_value == 0.0
+    assert pv.param_value == pytest.approx(controller_parameters()["K_pos_A[1]"], rel=1e-6)
     f.gcs.mav.param_request_list_send(1, 1)
     pv = f.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "FPB_SP_TIMEOUT")
     assert pv.param_count == len(f.bridge.params)

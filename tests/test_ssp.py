@@ -192,9 +192,12 @@ def test_fmpy_runner_hovers(hover_ssp):
     print(f"\nsimulate_ssp hover: max |pos - pos0| = {dev.max() * 1e3:.3f} mm "
           f"at t = {res['time'][dev.argmax()]:.3f} s, {dev[-1] * 1e6:.2f} um at the end")
     # fmpy's runner feeds 0.0 to every connected input in its first step (motors spin down
-    # for 2 ms); the start-up dip that follows peaks at ~1.24 mm and dies out
-    assert dev.max() < 1.5e-3
-    assert dev[res["time"] >= 1.5].max() < 2e-5
+    # for 2 ms); the start-up dip that follows peaks at ~1.6 mm with the shipped gains
+    # (1.24 mm with the earlier hand-tuned ones) and dies out
+    assert dev.max() < 2e-3
+    # the blocks' slow lag states take the tail down at ~2.4/s (0.12 mm at 1.5 s)
+    tail = dev[res["time"] >= 1.5]
+    assert tail.max() < 2e-4 and dev[-1] < 0.4 * tail[0] and np.all(np.diff(tail) < 0)
     assert np.abs(res[f"{PLANT}.euler[1]"]).max() < 1e-6
 
 
@@ -246,8 +249,10 @@ def test_quadrotor(tmp_path):
     assert int(ctrl["poly_n"][1]) == len(feasible_force_set("quadrotor").b)
     res = run(path)
     dev = np.linalg.norm(positions(res) - HOVER, axis=1)
-    assert dev.max() < 1.5e-3  # the same start-up dip as the hexacopter's (1.24 mm)
-    assert dev[res["time"] >= 1.5].max() < 2e-5
+    assert dev.max() < 2e-3  # the same start-up dip as the hexacopter's (~1.6 mm)
+    # the blocks' slow lag states take the tail down at ~2.4/s (0.12 mm at 1.5 s)
+    tail = dev[res["time"] >= 1.5]
+    assert tail.max() < 2e-4 and dev[-1] < 0.4 * tail[0] and np.all(np.diff(tail) < 0)
 
 
 def test_other_hover_point(tmp_path, consistent_start):

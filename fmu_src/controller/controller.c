@@ -22,6 +22,7 @@
 #include <string.h>
 
 #include "controller_vars.h"
+#include "default_gains.h"
 #include "fp_clock.h"
 #include "fp_math.h"
 
@@ -61,13 +62,13 @@ static double wrap_pi(double a) {
 /* ------------------------------------------------------------------------ */
 /* Defaults                                                                 */
 
-static void set_block(double a[3], double b[3], double c[3], double d[3], double gain) {
-    int i;
-    for (i = 0; i < 3; i++) {
-        a[i] = b[i] = c[i] = 0.0;
-        d[i] = gain;
-    }
-}
+#define FP_COPY_BLOCK(m, loop)                                                     \
+    do {                                                                           \
+        memcpy((m)->K_##loop##_A, fp_default_K_##loop##_A, sizeof (m)->K_##loop##_A); \
+        memcpy((m)->K_##loop##_B, fp_default_K_##loop##_B, sizeof (m)->K_##loop##_B); \
+        memcpy((m)->K_##loop##_C, fp_default_K_##loop##_C, sizeof (m)->K_##loop##_C); \
+        memcpy((m)->K_##loop##_D, fp_default_K_##loop##_D, sizeof (m)->K_##loop##_D); \
+    } while (0)
 
 static void controller_set_defaults(void *model) {
     ControllerModel *m = (ControllerModel *)model;
@@ -83,11 +84,11 @@ static void controller_set_defaults(void *model) {
     m->g = af.g;
     m->filt_wn = 50.0;
     m->filt_zeta = 0.55;
-    /* Hand-tuned P blocks that flew the prototype (DESIGN.md): 2.2, 6, 9, 20 1/s. */
-    set_block(m->K_pos_A, m->K_pos_B, m->K_pos_C, m->K_pos_D, 2.2);
-    set_block(m->K_vel_A, m->K_vel_B, m->K_vel_C, m->K_vel_D, 6.0);
-    set_block(m->K_att_A, m->K_att_B, m->K_att_C, m->K_att_D, 9.0);
-    set_block(m->K_rate_A, m->K_rate_B, m->K_rate_C, m->K_rate_D, 20.0);
+    /* The structured H-infinity design (python -m controller.gains_defaults) */
+    FP_COPY_BLOCK(m, pos);
+    FP_COPY_BLOCK(m, vel);
+    FP_COPY_BLOCK(m, att);
+    FP_COPY_BLOCK(m, rate);
     m->gamma_opt = 1000.0;
     m->W_u[0] = m->W_u[1] = m->W_u[2] = 1.0;
     m->W_u[3] = m->W_u[4] = 10.0;
