@@ -48,7 +48,14 @@ over all channels and all plant models; gamma < 1 meets every requirement):
    residual (1 - A H) d through the closed loop, the quantity the campaign measures),
    W_D = 1/d_max, or with ``wd > 0`` W_D(s) = (s + wd) / (d_max (s + eps wd)), which grows as
    wd/s below wd: gamma <= 1 bounds the position (attitude) error per unit disturbance and,
-   below wd, forces it to fall off fast (short recovery, no slow tail).
+   below wd, forces it to fall off fast (short recovery, no slow tail);
+6. outer control effort  |W_U1 K_1 H S_o| from outer measurement noise (or a reference step)
+   to the outer command (velocity / rate command): W_U1 = 1 / U1_max.
+
+Performance scaling ``perf_scales_with_k``: on a model with loop gain k < 1 the sensitivity
+bandwidths w1, w2 are required at k w1, k w2 (a vehicle heavier than the controller believes
+is allowed to be proportionally slower); robustness, effort and stability are required on every
+model unchanged.  Without it the k_lo corner forces a nominal gain the k_hi corner cannot carry.
 
 Structure option ``inner_no_lag``: the inner block is restricted to C >= 0 (P or PI, DC gain
 >= D).  Without it the translation optimum put a slow lag (pole 0.8 rad/s, DC gain 40 % of D)
