@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from pathlib import Path
 
@@ -162,11 +163,13 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
     if args.cases < 1 or args.duration <= 1.0:
         raise ValueError("sweep needs --cases >= 1 and --duration > 1 s")
+    if not (math.isfinite(args.noise) and args.noise >= 0.0):
+        raise ValueError(f"sweep --noise must be a finite factor >= 0, got {args.noise}")
     t0 = time.perf_counter()
     rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
-                     dask=args.dask)
+                     dask=args.dask, noise=args.noise)
     wall = time.perf_counter() - t0
-    meta = {"n": args.cases, "seed": args.seed, "duration": args.duration,
+    meta = {"n": args.cases, "seed": args.seed, "duration": args.duration, "noise": args.noise,
             "workers": args.dask or args.workers, "wall_time": wall,
             "throughput": len(rows) / wall}
     files = write_outputs(rows, args.out, meta)
@@ -253,6 +256,8 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--cases", type=int, default=50, help="sampled cases (default: 50)")
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
     sw.add_argument("--duration", type=float, default=6.0, help="seconds per run (default: 6)")
+    sw.add_argument("--noise", type=float, default=1.0,
+                    help="factor on the sampled sensor noise, 0 for none (default: 1)")
     sw.add_argument("--workers", type=int, default=1, help="local processes (default: 1)")
     sw.add_argument("--dask", default=None, metavar="tcp://HOST:PORT",
                     help="run on a Dask cluster at this scheduler address")

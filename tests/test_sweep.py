@@ -46,3 +46,13 @@ def test_outputs_and_cli(tmp_path, capsys):
     assert "runs/s" in capsys.readouterr().out
     assert main(["sweep", "--cases", "0"]) == 2
     assert "fullpose: error:" in capsys.readouterr().err
+    assert main(["sweep", "--cases", "1", "--noise", "-1"]) == 2
+    assert "--noise" in capsys.readouterr().err
+
+
+def test_noise_factor_keeps_the_other_draws():
+    noisy, quiet = sweep.sample_cases(20, 5), sweep.sample_cases(20, 5, noise=0.0)
+    for a, b in zip(noisy, quiet, strict=True):
+        assert b["noise_scale"] == 0.0 and a["noise_scale"] > 0.0
+        assert {k: v for k, v in a.items() if k != "noise_scale"} == \
+            {k: v for k, v in b.items() if k != "noise_scale"}
