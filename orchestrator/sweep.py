@@ -208,7 +208,7 @@ def write_outputs(rows: Sequence[dict[str, Any]], out: Path, meta: dict[str, Any
         pass
     stats = summarize(rows)
     files += plot(rows, out)
-    (out / "report.md").write_text(report_markdown(stats, meta))
+    (out / "report.md").write_text(report_markdown(stats, meta, sensitivity(rows)))
     files.append(out / "report.md")
     return files
 
@@ -228,7 +228,32 @@ def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
     return out
 
 
-def report_markdown(stats: dict[str, dict[str, float]], meta: dict[str, Any]) -> str:
+SAMPLED = ("mass_scale", "ixx_scale", "iyy_scale", "izz_scale", "tau_motor_scale",
+           "tau_servo_scale", "noise_scale")
+
+
+def sensitivity(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str, float]]]:
+    """The model-mismatch view: per design and sampled plant parameter, how the max error per
+    unit disturbance (m per m/s^2, stable runs) depends on it - the Pearson correlation and
+    the mean in the parameter's lowest and highest quartile of cases."""
+    out: dict[str, dict[str, dict[str, float]]] = {}
+    for d in sorted({r["design"] for r in rows}):
+        st = [r for r in rows if r["design"] == d and r["stable"]]
+        if len(st) < 4:
+            continue
+        y = np.array([r["max_err"] / r["dist_amp"] for r in st])
+        out[d] = {}
+        for key in SAMPLED:
+            x = np.array([r[key] for r in st], dtype=float)
+            lo, hi = np.percentile(x, [25, 75])
+            corr = float(np.corrcoef(x, y)[0, 1]) if np.ptp(x) > 0 and np.ptp(y) > 0 else 0.0
+            out[d][key] = {"corr": corr, "low": float(y[x <= lo].mean()),
+                           "high": float(y[x >= hi].mean())}
+    return out
+
+
+def report_markdown(stats: dict[str, dict[str, float]], meta: dict[str, Any],
+                    sens: dict[str, dict[str, dict[str, float]]] | None = None) -> str:
     lines = ["# Robustness sweep", "",
              f"{meta.get('n')} cases x {len(stats)} designs, seed {meta.get('seed')}, "
              f"{meta.get('duration')} s each; plant mass +-30 %, inertia +-50 %, actuator time "
@@ -252,6 +277,16 @@ def report_markdown(stats: dict[str, dict[str, float]], meta: dict[str, Any]) ->
     if meta.get("wall_time") is not None:
         lines += ["", f"Wall time {meta['wall_time']:.1f} s with {meta.get('workers')} "
                   f"worker(s) ({meta.get('throughput', float('nan')):.2f} runs/s)."]
+    for d, per in (sens or {}).items():
+        lines += ["", f"Model mismatch, {d}: max error per unit disturbance (mm per m/s^2) in "
+                  "the lowest and highest quartile of each sampled parameter (the controller "
+                  "keeps nominal values)", "",
+                  "| parameter | correlation | low quartile | high quartile | high / low |",
+                  "|---|---|---|---|---|"]
+        for key, v in per.items():
+            ratio = v["high"] / v["low"] if v["low"] > 0 else math.nan
+            lines.append(f"| {key} | {v['corr']:+.2f} | {1e3 * v['low']:.2f} | "
+                         f"{1e3 * v['high']:.2f} | {ratio:.2f} |")
     lines += ["", "Files: sweep.csv (one row per run), sweep_errors.png (distributions), "
               "sweep_worst.png (worst cases).", ""]
     return "\n".join(lines)

@@ -56,3 +56,17 @@ def test_noise_factor_keeps_the_other_draws():
         assert b["noise_scale"] == 0.0 and a["noise_scale"] > 0.0
         assert {k: v for k, v in a.items() if k != "noise_scale"} == \
             {k: v for k, v in b.items() if k != "noise_scale"}
+
+
+def test_sensitivity_finds_the_parameter_that_drives_the_error():
+    cases = sweep.sample_cases(200, 11)
+    rows = [{**c, "design": "x", "stable": 1,
+             "max_err": 0.01 * c["dist_amp"] * c["mass_scale"] ** 2, "rms_err": 0.0,
+             "recovery_time": 0.0} for c in cases]
+    sens = sweep.sensitivity(rows)["x"]
+    assert sens["mass_scale"]["corr"] > 0.99
+    assert sens["mass_scale"]["high"] / sens["mass_scale"]["low"] > 1.5
+    for key in ("ixx_scale", "tau_motor_scale", "noise_scale"):
+        assert abs(sens[key]["corr"]) < 0.25
+    text = sweep.report_markdown(sweep.summarize(rows), {"n": 200}, {"x": sens})
+    assert "| mass_scale | +" in text
