@@ -171,6 +171,14 @@ def test_shipped_header_is_fresh():
     assert res.returncode == 0, res.stdout + res.stderr
 
 
+@pytest.mark.slow
+def test_fresh_synthesis_reproduces_the_shipped_gains():
+    """Reruns the whole synthesis (~30 s): the shipped numbers within 1e-6 (opt-in, since
+    another scipy/numpy build may move the simplex path in the last digits)."""
+    ok, msg = gains_defaults.check(full=True)
+    assert ok, msg
+
+
 def test_baseline_matches_hinf_bandwidths():
     bw = baseline.shipped_bandwidths()
     g = baseline.compute_gains()
