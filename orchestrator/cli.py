@@ -167,7 +167,8 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError(f"sweep --noise must be a finite factor >= 0, got {args.noise}")
     t0 = time.perf_counter()
     rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
-                     dask=args.dask, noise=args.noise)
+                     dask=args.dask, noise=args.noise,
+                     design_set=[d.strip() for d in args.designs.split(",") if d.strip()])
     wall = time.perf_counter() - t0
     meta = {"n": args.cases, "seed": args.seed, "duration": args.duration, "noise": args.noise,
             "workers": args.dask or args.workers, "wall_time": wall,
@@ -256,6 +257,10 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--cases", type=int, default=50, help="sampled cases (default: 50)")
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
     sw.add_argument("--duration", type=float, default=6.0, help="seconds per run (default: 6)")
+    sw.add_argument("--designs", default="hinf,baseline",
+                    help="comma-separated: hinf, baseline, hinf_matched, baseline_matched "
+                         "(_matched: the controller knows the perturbed mass and inertia; "
+                         "default: hinf,baseline)")
     sw.add_argument("--noise", type=float, default=1.0,
                     help="factor on the sampled sensor noise, 0 for none (default: 1)")
     sw.add_argument("--workers", type=int, default=1, help="local processes (default: 1)")

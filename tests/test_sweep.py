@@ -70,3 +70,21 @@ def test_sensitivity_finds_the_parameter_that_drives_the_error():
         assert abs(sens[key]["corr"]) < 0.25
     text = sweep.report_markdown(sweep.summarize(rows), {"n": 200}, {"x": sens})
     assert "| mass_scale | +" in text
+
+
+def test_matched_design_tells_the_controller_the_true_plant(tmp_path, capsys):
+    """hinf_matched flies the same cases with the controller given the perturbed mass and
+    inertia; the heaviest sampled vehicle then errs less than with nominal values (INDI
+    under-corrects when it believes the vehicle lighter than it is)."""
+    cases = sweep.sample_cases(40, 0)
+    heavy = max(cases, key=lambda c: c["mass_scale"])
+    assert heavy["mass_scale"] > 1.2
+    params = sweep.designs()
+    nominal = sweep.run_case(heavy, "hinf", params["hinf"], 3.0)
+    matched = sweep.run_case(heavy, "hinf_matched", params["hinf_matched"], 3.0)
+    assert nominal["stable"] and matched["stable"]
+    assert matched["max_err"] < 0.9 * nominal["max_err"]
+    with pytest.raises(ValueError, match="unknown design"):
+        sweep.run_sweep(1, design_set=("hinf_typo",))
+    assert main(["sweep", "--cases", "1", "--designs", "nope", "--out", str(tmp_path)]) == 2
+    assert "unknown design" in capsys.readouterr().err
