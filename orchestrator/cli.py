@@ -258,7 +258,7 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
     sw.add_argument("--duration", type=float, default=6.0, help="seconds per run (default: 6)")
     sw.add_argument("--designs", default="hinf,baseline",
-                    help="comma-separated: hinf, baseline, hinf_matched, baseline_matched "
+                    help="comma-separated: hinf, baseline, prototype, and each NAME_matched "
                          "(_matched: the controller knows the perturbed mass and inertia; "
                          "default: hinf,baseline)")
     sw.add_argument("--noise", type=float, default=1.0,
