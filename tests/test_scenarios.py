@@ -184,7 +184,9 @@ def test_shipped_scenarios_listed_and_valid():
                             "position_step", "translation_frequency_sweep",
                             "quadrotor_translation", "quadrotor_hover_attitude",
                             "fixed_tilt_translation", "fixed_tilt_hover_attitude",
-                            "rotor_failure_hover", "rotor_failure_no_reconfiguration"])
+                            "rotor_failure_hover", "rotor_failure_no_reconfiguration",
+                            "robustness_inertia_corner",
+                            "robustness_inertia_corner_prototype"])
     loaded = list_scenarios()
     assert [s.name for s in loaded] == names
     for sc in loaded:
