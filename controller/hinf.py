@@ -106,6 +106,11 @@ class Block:
     def p(gain: float) -> Block:
         return Block(0.0, 0.0, float(gain))
 
+    @staticmethod
+    def from_fmu(A: float, B: float, C: float, D: float) -> Block:
+        """The block of the FMU parameters (A, B, C, D): the inverse of :meth:`fmu`."""
+        return Block(float(A), float(B) * float(C), float(D))
+
     def fmu(self) -> tuple[float, float, float, float]:
         """(A, B, C, D) for the FMU (B = 1; a P block is A = B = C = 0)."""
         if self.g == 0.0:

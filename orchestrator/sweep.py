@@ -67,6 +67,7 @@ def sample_cases(n: int, seed: int = 0, noise: float = 1.0) -> list[dict[str, fl
 
 
 MATCHED = "_matched"
+BASE_DESIGNS = ("hinf", "baseline", "prototype")
 
 
 def designs() -> dict[str, dict[str, float]]:
@@ -77,9 +78,10 @@ def designs() -> dict[str, dict[str, float]]:
     for what the model mismatch costs)."""
     from controller import baseline, gains_defaults
 
-    base = {"hinf": gains_defaults.controller_parameters(),
-            "baseline": baseline.controller_parameters(),
-            "prototype": baseline.controller_parameters(baseline.PROTOTYPE)}
+    base = dict(zip(BASE_DESIGNS, (gains_defaults.controller_parameters(),
+                                   baseline.controller_parameters(),
+                                   baseline.controller_parameters(baseline.PROTOTYPE)),
+                    strict=True))
     return {**base, **{name + MATCHED: p for name, p in base.items()}}
 
 
@@ -299,7 +301,7 @@ def report_markdown(stats: dict[str, dict[str, float]], meta: dict[str, Any],
                                    "reduction)")]
     pairs += [(d + MATCHED, d, f"{d} told the true mass and inertia vs {d} at nominal values "
                                "(what the model mismatch costs, as a reduction)")
-              for d in ("hinf", "baseline", "prototype")]
+              for d in BASE_DESIGNS]
     for better, ref, title in pairs:
         if better in stats and ref in stats:
             h, b = stats[better], stats[ref]

@@ -64,9 +64,8 @@ def designs() -> dict[str, hinf.Design]:
     blocks = _shipped()["blocks"]
     out = {}
     for spec, (o, i) in ((hinf.TRANSLATION, ("pos", "vel")), (hinf.ROTATION, ("att", "rate"))):
-        k1 = hinf.Block(blocks[o][0], blocks[o][2] * blocks[o][1], blocks[o][3])
-        k2 = hinf.Block(blocks[i][0], blocks[i][2] * blocks[i][1], blocks[i][3])
-        out[spec.name] = hinf.analyse(spec, k1, k2)
+        out[spec.name] = hinf.analyse(spec, hinf.Block.from_fmu(*blocks[o]),
+                                      hinf.Block.from_fmu(*blocks[i]))
     return out
 
 

@@ -15,19 +15,16 @@ from orchestrator.runner import prepare
 CORNER = (1 / 1.5, 1.3 * hinf.TAU_ACT)  # (k = I_nom / I, tau)
 
 
-def _blocks(params: dict[str, float], o: str, i: str) -> tuple[hinf.Block, hinf.Block]:
-    def blk(loop: str) -> hinf.Block:
-        a, b, c, d = (params[f"K_{loop}_{n}[1]"] for n in "ABCD")
-        return hinf.Block(a, b * c, d)
-    return blk(o), blk(i)
+def _block(params: dict[str, float], loop: str) -> hinf.Block:
+    return hinf.Block.from_fmu(*(params[f"K_{loop}_{n}[1]"] for n in "ABCD"))
 
 
 @pytest.mark.parametrize(("design", "stable"), [("hinf", True), ("prototype", False)])
 def test_design_model_on_the_corner(design, stable):
     params = (gains_defaults.controller_parameters() if design == "hinf"
               else baseline.controller_parameters(baseline.PROTOTYPE))
-    k1, k2 = _blocks(params, "att", "rate")
-    cl = hinf.interconnection(hinf.ROTATION, k1, k2, *CORNER, weighted=False)
+    cl = hinf.interconnection(hinf.ROTATION, _block(params, "att"), _block(params, "rate"),
+                              *CORNER, weighted=False)
     assert (cl.spectral_radius() < 1.0) == stable
 
 
