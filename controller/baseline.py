@@ -53,8 +53,9 @@ def shipped_bandwidths() -> dict[str, float]:
             "rate": rep["rotation"]["margins"]["inner"]["crossover"]}
 
 
-# The hand-tuned P blocks that flew the prototype (DESIGN.md) and were the FMU defaults before
-# the synthesis: a third reference for the campaign (``fullpose sweep --designs prototype``).
+# The hand-tuned P blocks that flew the prototype (docs/architecture.md) and were the FMU
+# defaults before the synthesis: a third reference for the campaign
+# (``fullpose sweep --designs prototype``).
 PROTOTYPE = {"pos": 2.2, "vel": 6.0, "att": 9.0, "rate": 20.0}
 
 

@@ -1,4 +1,11 @@
-"""The ``fullpose`` command line."""
+"""The ``fullpose`` command line.
+
+Exit status: 0 success; 2 bad input or a refused call (a scenario or airframe field, an FMU
+refusing a value, an unwritable output folder, a run too long for memory), printed as one
+short ``fullpose: error: ...`` line naming the file, field or variable and the reason; 3 a
+run that lost the vehicle (results are written, ``metrics.json`` says ``"outcome": "lost"``);
+130 interrupted (Ctrl-C).  Never a Python traceback for any of these.
+"""
 
 from __future__ import annotations
 
@@ -27,25 +34,51 @@ def _cmd_hover(args: argparse.Namespace) -> int:
     return 0
 
 
+def _fmt(value: object, spec: str, unit: str = "") -> str:
+    """A metric for printing; n/a when it could not be computed (None)."""
+    if value is None or not isinstance(value, (int, float)):
+        return "n/a"
+    return f"{value:{spec}}{' ' + unit if unit else ''}"
+
+
+def _warn(lines: object) -> None:
+    for line in lines if isinstance(lines, (list, tuple)) else ():
+        print(f"fullpose: warning: {line}", file=sys.stderr)
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
+    from orchestrator.outcome import EXIT_LOST
     from orchestrator.runner import prepare, run_scenario
 
     scenario = prepare(args.scenario, args.duration, args.set)
-    out = args.out if args.out is not None else Path("results") / scenario.name
+    _warn(getattr(scenario, "warnings", ()))
+    out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
     print(f"running {scenario.name} ({scenario.duration:g} s, airframe {scenario.airframe.name}, "
           f"{scenario.coupling}) -> {out}")
-    output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
-                          csv=not args.no_csv, engine=args.engine)
+    sys.stdout.flush()
+    try:
+        output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
+                              csv=not args.no_csv, engine=args.engine)
+    except (Exception, KeyboardInterrupt):
+        kept = (out / "metrics.json").is_file()
+        args.after_error = ("no results written" + (f"; the previous results in {out} are "
+                                                    "untouched" if kept else ""))
+        raise
     m = output.metrics
-    meta = output.result.meta
+    wall = m.get("wall_time")
     pos = m.get("position_error") or {}
-    print(f"max position error  {pos.get('max', float('nan')):.4f} m "
-          f"(RMS {pos.get('rms', float('nan')):.4f} m)")
-    print(f"real-time factor    {meta['duration'] / meta['wall_time']:.0f}x "
-          f"({meta['wall_time']:.2f} s wall)")
+    print(f"max position error  {_fmt(pos.get('max'), '.4f', 'm')} "
+          f"(RMS {_fmt(pos.get('rms'), '.4f', 'm')})")
+    print(f"real-time factor    {_fmt(m.get('real_time_factor'), '.0f')}x "
+          f"({_fmt(wall, '.2f', 's')} wall)")
     for line in output.paper:
         print(line)
-    print(f"wrote               {', '.join(f.name for f in output.files)}")
+    print(f"wrote {out}: {', '.join(f.name for f in output.files)}")
+    lost = m.get("lost")
+    if m.get("outcome") == "lost" and isinstance(lost, dict):
+        print(f"fullpose: vehicle lost at t = {_fmt(lost.get('time'), '.3f', 's')}: "
+              f"{lost.get('reason')}; the run stopped there", file=sys.stderr)
+        return EXIT_LOST
     return 0
 
 
@@ -58,10 +91,16 @@ def _cmd_scenarios(args: argparse.Namespace) -> int:
 
 
 def _cmd_check(args: argparse.Namespace) -> int:
-    from orchestrator.scenario import check_scenario
+    from orchestrator.master import CoSimulation
+    from orchestrator.runner import prepare
 
-    sc = check_scenario(args.file)
-    print(f"{args.file}: OK ({sc.name}, {sc.duration:g} s, airframe {sc.airframe.name})")
+    sc = prepare(args.file, args.duration, args.set)
+    _warn(getattr(sc, "warnings", ()))
+    # both FMUs instantiated and initialized with the scenario's values: whatever they
+    # would refuse at the start of a run is reported here too
+    CoSimulation(sc).initialize_only()
+    print(f"{args.file}: OK ({sc.name}, {sc.duration:g} s, airframe {sc.airframe.name}; "
+          "both FMUs initialize)")
     return 0
 
 
@@ -208,8 +247,12 @@ def build_parser() -> argparse.ArgumentParser:
     scen = sub.add_parser("scenarios", help="list the shipped scenarios")
     scen.set_defaults(func=_cmd_scenarios)
 
-    check = sub.add_parser("check", help="validate a scenario file (runs nothing)")
+    check = sub.add_parser("check", help="validate a scenario file and initialize both FMUs "
+                                         "with its values (steps nothing)")
     check.add_argument("file", help="scenario TOML file or shipped name")
+    check.add_argument("--duration", type=float, default=None, help="override the duration (s)")
+    check.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
+                       help="override a parameter, as for run (repeatable)")
     check.set_defaults(func=_cmd_check)
 
     ssp = sub.add_parser("export-ssp", help="export the closed loop as an SSP archive")
@@ -281,11 +324,26 @@ def main(argv: list[str] | None = None) -> int:
     if args.command is None:
         parser.print_help()
         return 0
+    from fmpy.fmi1 import FMICallException
+
     try:
         return int(args.func(args))
-    except (AirframeError, NativeBuildMissing, ValueError, RuntimeError) as e:
-        print(f"fullpose: error: {e}", file=sys.stderr)
-        return 2
+    except (AirframeError, NativeBuildMissing, ValueError, RuntimeError, OSError,
+            FMICallException) as e:
+        print(f"fullpose: error: {_message(e)}", file=sys.stderr)
+        status = 2
+    except KeyboardInterrupt:
+        print("fullpose: interrupted", file=sys.stderr)
+        status = 130
+    if getattr(args, "after_error", None):
+        print(f"fullpose: {args.after_error}", file=sys.stderr)
+    return status
+
+
+def _message(e: BaseException) -> str:
+    if isinstance(e, OSError) and e.filename is not None and e.strerror:
+        return f"{e.filename}: {e.strerror}"
+    return str(e) or type(e).__name__
 
 
 if __name__ == "__main__":

@@ -8,12 +8,14 @@ from __future__ import annotations
 
 import ctypes
 import shutil
-from collections.abc import Callable, Iterable, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
 from fmpy import calloc, extract, free, read_model_description
+from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
     fmi2CallbackAllocateMemoryTYPE,
@@ -28,10 +30,22 @@ LogSink = Callable[[int, str, str], None]
 """Receives (status, category, message) for every message the FMU logs."""
 
 _STATUS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
+_FAILED = ("DISCARD", "ERROR", "FATAL")
 
 
 def status_name(status: int) -> str:
     return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
+
+
+class FmuError(RuntimeError):
+    """An FMI call failed.  The message is the FMU's own: what it logged (naming the
+    variable, value and reason) for the failing call, e.g.
+    ``FullPoseController: parameter K_vel_A[1] = 1.2: must be in (0, 1)``."""
+
+    def __init__(self, model: str, call: str, messages: list[str]) -> None:
+        self.model, self.call, self.messages = model, call, messages
+        text = "; ".join(messages) if messages else f"{call} failed (the FMU logged no reason)"
+        super().__init__(f"{model}: {text}")
 
 
 @dataclass
@@ -75,7 +89,11 @@ class FmuInstance:
             modelIdentifier=self.md.coSimulation.modelIdentifier,
             instanceName=instance_name or self.md.modelName,
         )
-        self.slave.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
+        try:
+            self.slave.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
+        except Exception:  # fmpy raises a bare Exception when fmi2Instantiate returns NULL
+            logged = [m for s, _, m in self.messages if s in _FAILED]
+            raise FmuError(self.md.modelName, "fmi2Instantiate", logged) from None
         self.time = 0.0
 
     # -- logging ---------------------------------------------------------------
@@ -87,10 +105,10 @@ class FmuInstance:
         # process-wide logger, so it cannot serve several masters; our FMUs pass
         # no varargs and only escape '%', which is undone here.
         msg = message.decode(errors="replace").replace("%%", "%") if message else ""
+        if self._sink is None or status_name(status) in _FAILED:
+            self.messages.append((status_name(status), cat, msg))  # errors: for FmuError
         if self._sink is not None:
             self._sink(status, cat, msg)
-        else:
-            self.messages.append((status_name(status), cat, msg))
 
     # -- variables -------------------------------------------------------------
 
@@ -122,7 +140,9 @@ class FmuInstance:
         return sig.values
 
     def write(self, sig: Signal, values: Iterable[float] | np.ndarray) -> None:
-        self.slave.setReal(sig.refs, list(np.asarray(values, dtype=float).reshape(-1)))
+        more = ", ..." if len(sig.names) > 3 else ""
+        with self.call(f"setting {', '.join(sig.names[:3])}{more}"):
+            self.slave.setReal(sig.refs, list(np.asarray(values, dtype=float).reshape(-1)))
 
     def get(self, name: str) -> float | int | bool:
         v = self.variables[name]
@@ -139,12 +159,13 @@ class FmuInstance:
         except KeyError:
             raise KeyError(f"{self.md.modelName} has no variable {name!r}") from None
         ref = [int(v.valueReference)]
-        if v.type == "Real":
-            self.slave.setReal(ref, [float(value)])
-        elif v.type == "Integer":
-            self.slave.setInteger(ref, [int(value)])
-        else:
-            self.slave.setBoolean(ref, [bool(value)])
+        with self.call(f"setting {name}"):
+            if v.type == "Real":
+                self.slave.setReal(ref, [float(value)])
+            elif v.type == "Integer":
+                self.slave.setInteger(ref, [int(value)])
+            else:
+                self.slave.setBoolean(ref, [bool(value)])
 
     def set_many(self, values: Mapping[str, float | int | bool]) -> None:
         for name, value in values.items():
@@ -152,17 +173,40 @@ class FmuInstance:
 
     # -- lifecycle -------------------------------------------------------------
 
-    def initialize(self, start_time: float = 0.0,
-                   parameters: Mapping[str, float | int | bool] | None = None) -> None:
-        self.slave.setupExperiment(startTime=start_time)
+    @contextmanager
+    def call(self, what: str) -> Iterator[None]:
+        """Turns fmpy's bare FMICallException ("fmi2X failed with status 3") into an
+        :class:`FmuError` carrying what the FMU logged during the call."""
+        first = len(self.messages)
+        try:
+            yield
+        except FMICallException:
+            logged = [m for s, _, m in self.messages[first:] if s in _FAILED]
+            raise FmuError(self.md.modelName, what, logged) from None
+
+    def enter_initialization(self, start_time: float = 0.0,
+                             parameters: Mapping[str, float | int | bool] | None = None) -> None:
+        """setupExperiment, the start values, enterInitializationMode."""
+        with self.call("fmi2SetupExperiment"):
+            self.slave.setupExperiment(startTime=start_time)
         if parameters:
             self.set_many(parameters)
-        self.slave.enterInitializationMode()
-        self.slave.exitInitializationMode()
+        with self.call("fmi2EnterInitializationMode"):
+            self.slave.enterInitializationMode()
         self.time = start_time
 
+    def exit_initialization(self) -> None:
+        with self.call("fmi2ExitInitializationMode"):
+            self.slave.exitInitializationMode()
+
+    def initialize(self, start_time: float = 0.0,
+                   parameters: Mapping[str, float | int | bool] | None = None) -> None:
+        self.enter_initialization(start_time, parameters)
+        self.exit_initialization()
+
     def step(self, h: float) -> None:
-        self.slave.doStep(currentCommunicationPoint=self.time, communicationStepSize=h)
+        with self.call(f"fmi2DoStep at t = {self.time:.6g} s"):
+            self.slave.doStep(currentCommunicationPoint=self.time, communicationStepSize=h)
         self.time += h
 
     def close(self) -> None:

@@ -11,8 +11,12 @@ Keys (units in brackets)
 ------------------------
 ``scenario``, ``airframe``
     Names from ``result.meta`` (None when absent).
+``outcome``, ``lost``
+    ``"completed"``, or ``"lost"`` when the master stopped the run because the vehicle was
+    lost (``orchestrator.outcome``); ``lost`` is then ``{"time" [s], "reason"}``, else None.
 ``n_samples`` [-], ``step`` [s], ``duration`` [s]
-    Rows recorded, communication step and simulated time (meta, else from ``time``).
+    Rows recorded, communication step and simulated time (meta, else from ``time``); a lost
+    run records up to the time it was lost.
 ``nonfinite_rows`` [-]
     Rows where ``plant.pos`` or ``plant.euler`` is not finite.
 ``position_error`` [m]
@@ -184,10 +188,18 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
     m: dict[str, Any] = {
         "scenario": meta.get("scenario"),
         "airframe": meta.get("airframe"),
+        "outcome": "completed",
+        "lost": None,
         "n_samples": int(t.size),
         "step": None if step is None else _num(step),
         "duration": None if duration is None else _num(duration),
     }
+
+    outcome = meta.get("outcome")
+    if isinstance(outcome, Mapping) and outcome.get("outcome") == "lost":
+        m["outcome"] = "lost"
+        m["lost"] = {"time": _num(outcome.get("time", math.nan)),
+                     "reason": str(outcome.get("reason", ""))}
 
     pos, pos_ref = _opt(result, "plant.pos"), _opt(result, "ref.pos_ref")
     euler = _opt(result, "plant.euler")
@@ -252,26 +264,34 @@ def _dig(metrics: Mapping[str, Any], *keys: str) -> Any:
 
 
 def _claim(what: str, paper: str, ours: float | None, limit: float, fmt: str,
-           unit: str, missing: str = "not recorded") -> str:
+           unit: str, missing: str = "not recorded", not_comparable: str | None = None) -> str:
+    if not_comparable is not None:
+        shown = "" if ours is None else f"{ours:{fmt}} {unit}, "
+        return f"{what}: paper {paper}; ours {shown}not comparable ({not_comparable})"
     if ours is None:
         return f"{what}: paper {paper}; ours: {missing}"
     verdict = "meets the claim" if ours <= limit else "EXCEEDS the claim"
     return f"{what}: paper {paper}; ours {ours:{fmt}} {unit} ({verdict})"
 
 
-def compare_with_paper(metrics: Mapping[str, Any], scenario_name: str) -> list[str]:
+def compare_with_paper(metrics: Mapping[str, Any], scenario_name: str, *,
+                       not_comparable: str | None = None) -> list[str]:
     """Lines stating the paper's claims (Section IV) next to our metrics for its scenarios.
 
     ``scenario_name`` is the scenario's name or file path; scenarios other than the paper's
     three (``hover_varying_orientation``, ``translation_frequency_sweep``,
-    ``full_pose_with_disturbances``) give an empty list.
+    ``full_pose_with_disturbances``) give an empty list.  ``not_comparable`` says why this
+    run's conditions are not the paper's (shorter, other parameters, vehicle lost): the
+    claims are then stated as "not comparable" instead of met or exceeded.
     """
     name = Path(str(scenario_name)).stem
+    nc = not_comparable
     lines: list[str] = []
     if name == "hover_varying_orientation":
         lines.append(_claim(
             "Scenario 1 (Fig. 4) max position error", f"<= {PAPER_MAX_POSITION_ERROR} m",
-            _dig(metrics, "position_error", "max"), PAPER_MAX_POSITION_ERROR, ".4f", "m"))
+            _dig(metrics, "position_error", "max"), PAPER_MAX_POSITION_ERROR, ".4f", "m",
+            not_comparable=nc))
         inf = _dig(metrics, "infeasible_fraction")
         sat_a = _dig(metrics, "saturation", "any_alpha")
         sat_b = _dig(metrics, "saturation", "any_beta")
@@ -286,18 +306,19 @@ def compare_with_paper(metrics: Mapping[str, Any], scenario_name: str) -> list[s
             "Scenario 2 (Fig. 7) max attitude error |mu_m - mu_ref| per axis",
             f"within +-{PAPER_MAX_ATTITUDE_ERROR} deg",
             _dig(metrics, "attitude_error_vs_mu_ref", "max_axis"), PAPER_MAX_ATTITUDE_ERROR,
-            ".3f", "deg"))
+            ".3f", "deg", not_comparable=nc))
         lines.append(_claim(
             "Scenario 2 (Fig. 7) max attitude error |mu_m - mu_c| per axis (for reference)",
             f"within +-{PAPER_MAX_ATTITUDE_ERROR} deg",
             _dig(metrics, "attitude_error_vs_mu_c", "max_axis"), PAPER_MAX_ATTITUDE_ERROR,
-            ".3f", "deg"))
+            ".3f", "deg", not_comparable=nc))
     elif name == "full_pose_with_disturbances":
         lines.append(_claim(
             "Scenario 3 (Fig. 8) max guidance allocation solve time",
             f"{PAPER_MAX_GUIDANCE_TIME:.1e} s (MATLAB lsqlin, Intel i7 12th gen)",
             _dig(metrics, "timing", "t_guid", "max"), PAPER_MAX_GUIDANCE_TIME, ".3e", "s",
-            missing="not measured (run with the controller parameter timing = true)"))
+            missing="not measured (run with the controller parameter timing = true)",
+            not_comparable=nc))
         alloc = _dig(metrics, "timing", "t_alloc", "max")
         if alloc is not None:
             lines.append(f"Scenario 3 inner allocation solve time (no claim in the paper): "

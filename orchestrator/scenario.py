@@ -55,6 +55,15 @@ Override values must match the FMU variable type (Real: a number, Integer: an in
 Boolean: true/false) and name a variable whose causality is ``parameter``.  The vehicle
 starts at the reference pose at t = 0 (:meth:`Scenario.initial_pose`) unless ``[plant]``
 overrides ``pos0``/``euler0``.
+
+Plausible units (docs/scenarios.md, "Plausibility checks"): a roll or pitch reference
+leaving the controller's bounds ``euler_min``/``euler_max`` (FMU defaults +-60 deg, or the
+scenario's ``[controller]`` values) is an error naming the most specific field, with the
+value in rad and deg and, for a radian value that reads as degrees, the hint to use
+``[reference.attitude_deg]``; yaw is not bounded (any angle), but a radian sine or chirp
+yaw amplitude above a full turn is an error too.  A position axis moving more than
+``POSITION_WARN_DISTANCE`` m and ``POSITION_WARN_RATIO`` times the rest of the trajectory's
+size is a warning in :attr:`Scenario.warnings`.
 """
 
 from __future__ import annotations
@@ -73,7 +82,23 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from orchestrator.signals import ZERO, FieldReader, Scaled, ScenarioError, Signal, parse_signal
+from orchestrator.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
+from orchestrator.signals import (
+    ZERO,
+    Chirp,
+    Constant,
+    FieldReader,
+    Ramp,
+    Scaled,
+    ScenarioError,
+    Signal,
+    Sine,
+    Steps,
+    Sum,
+    Waypoints,
+    parse_signal,
+    value_range,
+)
 from plant import Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
 
@@ -106,7 +131,7 @@ ATTITUDE_AXES = ("roll", "pitch", "yaw")
 DISTURBANCES = {"force": "f_d", "torque": "tau_d", "acceleration": "a_d"}
 _REL_TOL = 1e-9
 _TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "reference",
-             "disturbance", "fault", "fault_detection", "plant", "controller")
+             "disturbance", "fault", "fault_detection", "lost", "plant", "controller")
 
 ParamValue = float | int | bool
 Vec3 = tuple[Signal, Signal, Signal]
@@ -123,7 +148,8 @@ class Fault:
 
 @dataclass(frozen=True, eq=False)
 class Scenario:
-    """A validated scenario.  Signals are in SI units and radians."""
+    """A validated scenario.  Signals are in SI units and radians.  ``warnings``: the
+    plausibility warnings of loading (``file: field '...': reason``), for a CLI to print."""
 
     name: str
     description: str
@@ -141,6 +167,8 @@ class Scenario:
     fault_detection: float | None = 0.0  # delay (s) until the controller knows; None: never
     plant_parameters: dict[str, ParamValue] = field(default_factory=dict)
     controller_parameters: dict[str, ParamValue] = field(default_factory=dict)
+    warnings: tuple[str, ...] = ()  # plausibility warnings (file: field '...': reason)
+    lost: LostCriteria = field(default_factory=LostCriteria)  # when a run is lost and stops
 
     @property
     def n_steps(self) -> int:
@@ -256,8 +284,8 @@ class Scenario:
                 raise ScenarioError(where, "duration", f"expected a number, got {duration!r}")
             new_duration = float(duration)
         _check_timing(self.source, self.step, new_duration, plant_p, ctrl_p)
-        return replace(self, duration=new_duration, plant_parameters=plant_p,
-                       controller_parameters=ctrl_p)
+        return _checked(replace(self, duration=new_duration, plant_parameters=plant_p,
+                                controller_parameters=ctrl_p))
 
 
 def _column_times(t: ArrayLike) -> np.ndarray:
@@ -275,14 +303,25 @@ def _stack(axes: Vec3, t: np.ndarray, order: int) -> np.ndarray:
 
 
 @cache
-def _fmu_variables(model: str) -> dict[str, tuple[str, str]]:
-    """name -> (causality, type) of an installed FMU's model variables."""
+def _model_variables(model: str) -> dict[str, Any]:
+    """name -> fmpy ScalarVariable of an installed FMU."""
     from fmpy import read_model_description
 
     from plant import fmu_path
 
     md = read_model_description(str(fmu_path(model)))
-    return {v.name: (v.causality, v.type) for v in md.modelVariables}
+    return {v.name: v for v in md.modelVariables}
+
+
+@cache
+def _fmu_variables(model: str) -> dict[str, tuple[str, str]]:
+    """name -> (causality, type) of an installed FMU's model variables."""
+    return {name: (v.causality, v.type) for name, v in _model_variables(model).items()}
+
+
+def _start_value(model: str, name: str) -> float:
+    """The start (default) value of a Real variable, from the FMU's modelDescription."""
+    return float(_model_variables(model)[name].start)
 
 
 _INDEX = re.compile(r"\[(\d+)(?:,(\d+))?\]$")
@@ -420,6 +459,185 @@ def _check_timing(source: str, step: float, duration: float,
 
 
 # ---------------------------------------------------------------------------
+# Plausibility: units (docs/scenarios.md, "Plausibility checks")
+
+POSITION_WARN_DISTANCE = 100.0
+"""m: a position axis moving farther than this from its value at t = 0 ..."""
+POSITION_WARN_RATIO = 50.0
+"""... and farther than this many times the rest of the trajectory's size is a warning."""
+_DEG = math.pi / 180.0
+_ANGLE_TOL = 1e-9  # rad: a reference exactly at a bound (say 60 deg converted) is inside
+_BOUNDED_AXES = {"roll": 1, "pitch": 2}  # the guidance bounds [phi_c, theta_c]; yaw is free
+
+
+def _checked(sc: Scenario) -> Scenario:
+    """``sc`` after the plausibility checks: errors raised, warnings recorded."""
+    _check_attitude(sc)
+    return replace(sc, warnings=_position_warnings(sc))
+
+
+def _rad(x: float) -> str:
+    return f"{x:.5g} rad ({x / _DEG:.5g} deg)"
+
+
+def _euler_bounds(sc: Scenario, index: int) -> tuple[float, float, bool]:
+    """(euler_min[index], euler_max[index], set in [controller]): the guidance's attitude
+    bounds, the FMU's defaults unless the scenario overrides them."""
+    names = (f"euler_min[{index}]", f"euler_max[{index}]")
+    p = sc.controller_parameters
+    lo, hi = (float(p.get(n, _start_value(CONTROLLER_FMU, n))) for n in names)
+    for name, value in zip(names, (lo, hi), strict=True):
+        if name in p and not abs(value) < math.pi / 2:
+            raise ScenarioError(sc.source, f"controller.{name}", "expected a bound inside "
+                                f"(-pi/2, pi/2) rad (-90..90 deg, exclusive), got {value!r}")
+    if lo > hi:
+        shown = [f"{n} = {v!r}" + ("" if n in p else " (the FMU's default)")
+                 for n, v in zip(names, (lo, hi), strict=True)]
+        raise ScenarioError(sc.source, f"controller.{names[0] if names[0] in p else names[1]}",
+                            f"expected {names[0]} <= {names[1]}, got {shown[0]} > {shown[1]}")
+    return lo, hi, any(n in p for n in names)
+
+
+def _beyond(signal: Signal, t: np.ndarray, lo: float,
+            hi: float) -> tuple[float, float | None] | None:
+    """The value of ``signal`` (rad) farthest outside [lo, hi] and its first time, sampled at
+    ``t``; when the samples stay inside, the end of its closed-form range outside (time None:
+    after the run); None when inside."""
+    v = signal.value(t)
+    excess = np.maximum(lo - v, v - hi)
+    k = int(np.argmax(excess))
+    if excess[k] > _ANGLE_TOL:
+        return float(v[k]), float(t[k])
+    ends = value_range(signal)
+    if ends is not None:
+        worst = max(ends, key=lambda x: max(lo - x, x - hi))
+        if max(lo - worst, worst - hi) > _ANGLE_TOL:
+            return worst, None
+    return None
+
+
+def _parameters(signal: Signal) -> list[tuple[str, float, bool]]:
+    """The keys of a signal setting its values: (key, value, swings +-value); key "" for a
+    constant (the signal's own field)."""
+    if isinstance(signal, Constant):
+        return [("", signal.level, False)]
+    if isinstance(signal, (Sine, Chirp)):
+        return [("amplitude", signal.amplitude, True), ("offset", signal.offset, False)]
+    if isinstance(signal, Ramp):
+        return [("from", signal.start, False), ("to", signal.end, False)]
+    if isinstance(signal, (Steps, Waypoints)):
+        out = [(f"values[{i + 1}]", v, False) for i, v in enumerate(signal.values)]
+        if isinstance(signal, Steps) and signal.times[0] > 0.0:
+            out.insert(0, ("initial", signal.initial, False))
+        return out
+    return []
+
+
+def _culprit(signal: Signal, field_name: str, unit: float, t: np.ndarray, lo: float,
+             hi: float) -> tuple[str, float | None]:
+    """The most specific field taking the reference ``signal`` (file units, ``unit`` rad
+    each) outside [lo, hi] rad: a term of a sum that leaves the bounds on its own, then the
+    key whose value does (an amplitude, a ramp's end, a step's value), with that value."""
+    if isinstance(signal, Sum):
+        for k, term in enumerate(signal.terms):
+            if _beyond(Scaled(unit, term), t, lo, hi) is not None:
+                return _culprit(term, f"{field_name}{signal.spelling}[{k + 1}]", unit, t, lo, hi)
+        return field_name, None
+    for key, value, swings in _parameters(signal):
+        low, high = (-abs(value), abs(value)) if swings else (value, value)
+        if low * unit < lo - _ANGLE_TOL or high * unit > hi + _ANGLE_TOL:
+            return (f"{field_name}.{key}" if key else field_name), value
+    return field_name, None
+
+
+def _check_attitude(sc: Scenario) -> None:
+    """Roll and pitch references inside the controller's bounds over the whole run (and
+    beyond, as far as the signals' parameters say), yaw amplitudes within a turn (rad)."""
+    degrees = any(isinstance(s, Scaled) and s.factor == _DEG for s in sc.attitude)
+    table = "attitude_deg" if degrees else "attitude"
+    t = sc.times()
+    for axis, index in _BOUNDED_AXES.items():
+        lo, hi, overridden = _euler_bounds(sc, index)
+        signal = sc.attitude[index - 1]
+        found = _beyond(signal, t, lo, hi)
+        if found is None:
+            continue
+        peak, when = found
+        inner = signal.signal if isinstance(signal, Scaled) else signal
+        unit = _DEG if degrees else 1.0
+        field_name, value = _culprit(inner, f"reference.{table}.{axis}", unit, t, lo, hi)
+        where = f"at t = {when:.5g} s" if when is not None else \
+            f"after this run's {sc.duration:g} s"
+        names = f"euler_min[{index}], euler_max[{index}]" + \
+            (" as overridden" if overridden else "")
+        if degrees:
+            head = f"{value:.5g} deg: " if value is not None else ""
+            head = "" if head == f"{peak / _DEG:.5g} deg: " else head
+            reason = (f"{head}the {axis} reference reaches {peak / _DEG:.5g} deg {where}, "
+                      f"outside the controller's {axis} bounds {lo / _DEG:.5g}..{hi / _DEG:.5g} "
+                      f"deg ({names} = {lo:.5g}..{hi:.5g} rad; [controller] can set them, "
+                      "in rad, inside (-pi/2, pi/2))")
+        else:
+            head = f"{_rad(value)}: " if value is not None and _rad(value) != _rad(peak) else ""
+            reason = (f"{head}the {axis} reference reaches {_rad(peak)} {where}, outside the "
+                      f"controller's {axis} bounds {lo:.5g}..{hi:.5g} rad "
+                      f"({lo / _DEG:.5g}..{hi / _DEG:.5g} deg; {names})")
+            if abs(peak) <= 360.0:
+                reason += "; if you meant degrees, use [reference.attitude_deg]"
+                if not lo - _ANGLE_TOL <= peak * _DEG <= hi + _ANGLE_TOL:
+                    reason += f" ({peak:.5g} deg is outside the bounds too)"
+        raise ScenarioError(sc.source, field_name, reason)
+    if not degrees:
+        _check_yaw(sc.source, sc.attitude[2], "reference.attitude.yaw")
+
+
+def _check_yaw(source: str, signal: Signal, field_name: str) -> None:
+    """The controller does not bound yaw (psi_c = psi_ref, the heading unwrapped), so any
+    yaw angle is valid; but a sine or chirp swinging it by more than a full turn each way
+    is not radians."""
+    if isinstance(signal, Sum):
+        for k, term in enumerate(signal.terms):
+            _check_yaw(source, term, f"{field_name}{signal.spelling}[{k + 1}]")
+    elif isinstance(signal, (Sine, Chirp)) and abs(signal.amplitude) > 2.0 * math.pi:
+        reason = (f"{_rad(signal.amplitude)} swings the yaw reference by more than a full "
+                  "turn (2 pi rad = 360 deg) each way, not plausible in radians (yaw angles "
+                  "themselves are not bounded)")
+        if abs(signal.amplitude) <= 360.0:
+            reason += "; if you meant degrees, use [reference.attitude_deg]"
+        raise ScenarioError(source, f"{field_name}.amplitude", reason)
+
+
+def _position_warnings(sc: Scenario) -> tuple[str, ...]:
+    """A position axis moving (from its value at t = 0) more than POSITION_WARN_DISTANCE and
+    more than POSITION_WARN_RATIO times the rest of the trajectory's size (the largest
+    distance of the other two axes from the origin) -- a step of 1000 m on a vehicle flown
+    at 3 m: probably not metres."""
+    t = sc.times()
+    p = np.column_stack([s.value(t) for s in sc.position])
+    out: list[str] = []
+    for a, axis in enumerate(POSITION_AXES):
+        x = p[:, a]
+        moves = np.abs(x - x[0])
+        k = int(np.argmax(moves))
+        excursion = float(moves[k])
+        rest = float(np.max(np.linalg.norm(np.delete(p, a, axis=1), axis=1)))
+        if excursion <= POSITION_WARN_DISTANCE or excursion <= POSITION_WARN_RATIO * rest:
+            continue
+        jumps = np.abs(np.diff(x))
+        j = int(np.argmax(jumps))
+        if jumps[j] > 0.5 * excursion:
+            what = (f"a step of {jumps[j]:.5g} m (from {x[j]:.5g} to {x[j + 1]:.5g} m at "
+                    f"t = {t[j + 1]:.5g} s)")
+        else:
+            what = (f"an excursion of {excursion:.5g} m (from {x[0]:.5g} m at t = 0 to "
+                    f"{x[k]:.5g} m at t = {t[k]:.5g} s)")
+        stays = f"within {rest:.3g} m of the origin" if rest > 0.0 else "at the origin"
+        out.append(f"{sc.source}: field 'reference.position.{axis}': {what} while the rest "
+                   f"of the trajectory stays {stays}; is this the intended unit (m)?")
+    return tuple(out)
+
+
+# ---------------------------------------------------------------------------
 # Loading
 
 
@@ -536,6 +754,19 @@ def _faults(top: FieldReader, n_rotors: int) -> tuple[Fault, ...]:
     return tuple(faults)
 
 
+def _lost(top: FieldReader) -> LostCriteria:
+    """``[lost]``: ``position_error`` (m, > 0) and ``tilt_deg`` (0 < tilt <= 180)."""
+    table = top.table("lost")
+    if table is None:
+        return LostCriteria()
+    error = table.number("position_error", DEFAULT_POSITION_ERROR, positive=True)
+    tilt = table.number("tilt_deg", DEFAULT_TILT_DEG, positive=True)
+    if tilt > 180.0:
+        raise table.fail("tilt_deg", f"expected an angle in (0, 180] deg, got {tilt:g}")
+    table.reject_unknown(lambda _k: " (expected position_error, tilt_deg)")
+    return LostCriteria(position_error=error, tilt_deg=tilt)
+
+
 def _fault_detection(top: FieldReader) -> float | None:
     """``fault_detection``: "immediate" (default), "none", or a delay in seconds."""
     raw = top.raw("fault_detection")
@@ -588,11 +819,12 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
 
     faults = _faults(top, airframe.n_rotors)
     detection = _fault_detection(top)
+    lost = _lost(top)
     plant_p = _overrides(top, "plant", PLANT_FMU)
     ctrl_p = _overrides(top, "controller", CONTROLLER_FMU)
     _check_timing(source, step, duration, plant_p, ctrl_p)
 
-    return Scenario(
+    return _checked(Scenario(
         name=name,
         description=description,
         source=source,
@@ -604,7 +836,8 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         attitude=attitude,
         faults=faults,
         fault_detection=detection,
+        lost=lost,
         plant_parameters=plant_p,
         controller_parameters=ctrl_p,
         **dist,
-    )
+    ))

@@ -41,7 +41,8 @@ Signal types (TOML spelling in brackets; every number must be finite):
     The sum of its terms.
 
 ``Scaled`` (a factor times a signal) is not written in files; the scenario loader uses it for
-unit conversions (degrees to radians).
+unit conversions (degrees to radians).  :func:`value_range` gives a signal's range over all
+t >= 0 in closed form (the scenario's plausibility checks look beyond the run's end).
 
 :func:`parse_signal` turns a TOML value into a signal; errors are :class:`ScenarioError` naming
 the file, the full dotted field (``reference.attitude_deg.roll.amplitude``) and what is expected.
@@ -53,6 +54,7 @@ import math
 from abc import ABC, abstractmethod
 from collections.abc import Callable
 from dataclasses import dataclass
+from dataclasses import field as dataclass_field
 from itertools import pairwise
 
 import numpy as np
@@ -249,7 +251,11 @@ class Waypoints(Signal):
 
 @dataclass(frozen=True)
 class Sum(Signal):
+    """The sum of ``terms``.  ``spelling`` records how a file wrote them, to name a term's
+    field: ``""`` for an array (``x[2]``), ``".terms"`` for a sum table (``x.terms[2]``)."""
+
     terms: tuple[Signal, ...]
+    spelling: str = dataclass_field(default="", compare=False)
 
     def _eval(self, t: np.ndarray, order: int) -> np.ndarray:
         out = np.zeros(t.shape)
@@ -270,6 +276,52 @@ class Scaled(Signal):
 
 
 ZERO = Constant(0.0)
+
+
+def value_range(signal: Signal) -> tuple[float, float] | None:
+    """``(min, max)`` (bounds, inf/sup) of the signal's values over all t >= 0 in closed form,
+    or None when there is none -- a sum of more than one time-varying term (sines of
+    different frequencies, ramps that cancel: sample it instead) or a chirp that stops
+    oscillating (``omega1 = 0``).
+
+    A sine (``omega != 0``) or a chirp (``omega1 != 0``) sweeps ``offset +- |amplitude|``;
+    steps, ramps and waypoints are monotone between their corners, so their range is that of
+    the value at t = 0 and the corner values after it.
+    """
+    if isinstance(signal, Constant):
+        return signal.level, signal.level
+    if isinstance(signal, (Sine, Chirp)):
+        if (signal.omega if isinstance(signal, Sine) else signal.omega1) != 0.0:
+            a = abs(signal.amplitude)
+            return signal.offset - a, signal.offset + a
+        if isinstance(signal, Chirp) and signal.omega0 != 0.0:
+            return None
+        return _span(signal, [])
+    if isinstance(signal, (Steps, Waypoints)):
+        later = zip(signal.times, signal.values, strict=True)
+        return _span(signal, [v for t, v in later if t > 0.0])
+    if isinstance(signal, Ramp):
+        return _span(signal, [signal.end])
+    if isinstance(signal, Scaled):
+        inner = value_range(signal.signal)
+        if inner is None:
+            return None
+        ends = sorted((signal.factor * inner[0], signal.factor * inner[1]))
+        return ends[0], ends[1]
+    if isinstance(signal, Sum):
+        ranges = [value_range(term) for term in signal.terms]
+        if any(r is None for r in ranges):
+            return None
+        known = [r for r in ranges if r is not None]
+        if sum(r[0] != r[1] for r in known) > 1:
+            return None
+        return sum(r[0] for r in known), sum(r[1] for r in known)
+    return None
+
+
+def _span(signal: Signal, corners: list[float]) -> tuple[float, float]:
+    values = [float(signal.value(np.zeros(1))[0]), *corners]
+    return min(values), max(values)
 
 
 # ---------------------------------------------------------------------------
@@ -400,5 +452,7 @@ def parse_signal(raw: object, source: str, field: str) -> Signal:
         terms = r.raw("terms")
         if not isinstance(terms, list) or not terms:
             raise r.fail("terms", f"expected a non-empty array of signals ({_SIGNAL_HELP})")
-        signal = parse_signal(terms, source, f"{field}.terms")
+        inner = parse_signal(terms, source, f"{field}.terms")
+        assert isinstance(inner, Sum)
+        signal = Sum(inner.terms, spelling=".terms")
     return signal

@@ -51,11 +51,16 @@ source, and how this module deals with it:
   spin down by ~10 % for 2 ms) and the controller zero measurements (the vehicle seems to be
   at the origin, at rest, rotors stopped), whose commands the plant then applies in the
   second step.  The start-up dip that follows grows with the distance of ``pos0`` from the
-  origin (2 ms steps, measured): 1.24 mm peak near t = 0.37 s at [0, 0, -3] (paper
-  hexacopter and quadrotor alike; 4 um left at t = 2 s), 13 mm (hexacopter) / 18 mm
-  (quadrotor) at [1, -2, -5], 31 mm at [0, 0, -10]; it always dies out.  When the t = 0
-  inputs are the SSV start values instead (what the archive describes), the same archive
-  holds the hover to ~1e-15 m (tests/test_ssp.py shows both).
+  origin (2 ms steps, shipped H-infinity gains, measured): 1.61 mm peak near t = 0.42 s at
+  [0, 0, -3] (paper hexacopter and quadrotor alike; 0.12 mm left at t = 1.5 s, 39 um at
+  t = 2 s, decaying at ~2.4/s through the blocks' slow lag states), 13 mm (hexacopter) /
+  18 mm (quadrotor) at [1, -2, -5], 30 mm (hexacopter) at [0, 0, -10].  The hexacopter's
+  dies out (below 0.06 mm at t = 2 s at all three points); the quadrotor at [1, -2, -5],
+  which corrects the lateral jump through its attitude, still has 0.5 mm left at t = 2 s.
+  (With the prototype's hand-tuned P blocks: 1.24 mm near t = 0.37 s at [0, 0, -3], 4 um
+  left at t = 2 s.)  When the t = 0 inputs are the SSV start values instead (what the
+  archive describes), the same archive holds the hover to ~1e-15 m (tests/test_ssp.py
+  shows both).
 * Unconnected inputs must not be declared as connectors: they would be forced to 0.0 every
   step (pos_ref = 0 would fly the vehicle to the origin), and its connection resolution fails
   for an input connector without a connection.  Left undeclared, they keep the start values

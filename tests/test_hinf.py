@@ -202,7 +202,7 @@ def test_controller_fmu_ships_the_synthesized_gains():
 
 def test_velocity_loop_stays_slower_than_attitude_loop(designs):
     """An under-actuated vehicle (quadrotor, or any vehicle at an infeasible attitude) gets
-    its lateral force through its attitude: the prototype's lesson (DESIGN.md) that the
+    its lateral force through its attitude: the prototype's lesson (docs/architecture.md) that the
     velocity loop must not outrun the attitude loop, which the translation's robustness
     weight (w_T at the attitude bandwidth) enforces."""
     vel = designs["translation"].bandwidth["vel"]

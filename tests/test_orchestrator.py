@@ -86,9 +86,12 @@ def test_every_exchanged_signal_is_recorded():
     r = run(prepare("hover", duration=0.2))
     n = 101
     assert r.data.shape[0] == n and np.allclose(r.time, np.arange(n) * 0.002)
-    for group, width in [("ref.pos_ref", 3), ("dist.efficiency", 8), ("plant.pos", 3),
-                         ("plant.omega", 8), ("ctrl.omega_cmd", 8), ("ctrl.mu_c", 3)]:
+    # the hexacopter's six rotors only: no constant columns for the FMUs' rotors 7 and 8
+    for group, width in [("ref.pos_ref", 3), ("ref.rotor_health", 6), ("dist.efficiency", 6),
+                         ("plant.pos", 3), ("plant.omega", 6), ("plant.alpha", 6),
+                         ("ctrl.omega_cmd", 6), ("ctrl.beta_cmd", 6), ("ctrl.mu_c", 3)]:
         assert r.get(group).shape == (n, width)
+    assert not [c for c in r.columns if c.endswith(("[7]", "[8]"))]
     for scalar in ("ctrl.feasible", "ctrl.guid_iter", "ctrl.sat_flags", "plant.sat_flags"):
         assert r.get(scalar).shape == (n,)
     # what the plant was commanded at step k is what the controller output at step k

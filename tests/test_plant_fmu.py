@@ -2,8 +2,9 @@
 
 Every check talks to the FMU through FMI (orchestrator.fmu.FmuInstance, the way users'
 tools do, and raw fmpy FMU2Slave calls where the exact call sequence matters).  The
-expected values are computed here from the documented conventions (PAPER.md eq. 1-3,
-fmu_src/common/multirotor.h), never taken from the C code.
+expected values are computed here from the documented conventions (eq. 1-3 of *Full-Pose
+Tracking via Robust Control for Over-Actuated Multirotors*, fmu_src/common/multirotor.h),
+never taken from the C code.
 """
 
 from __future__ import annotations

@@ -2,7 +2,7 @@
 
 Derivatives are checked against central finite differences of the values on a fine grid
 and, for sines and chirps, against closed forms written here; the shipped scenarios against
-the paper's formulas (PAPER.md section IV) evaluated here; bad files must fail at load time
+the paper's formulas (Sec. IV-A to IV-C) evaluated here; bad files must fail at load time
 with an error naming the file, the dotted field and the expectation.
 """
 
@@ -32,6 +32,7 @@ from orchestrator.signals import (
     Sum,
     Waypoints,
     parse_signal,
+    value_range,
 )
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -591,3 +592,203 @@ def test_documented_example_loads(tmp_path):
     assert sc.faults and sc.plant_parameters and sc.controller_parameters
     ref = sc.references(np.linspace(0, sc.duration, 11))
     assert np.isfinite(np.concatenate(list(ref.values()), axis=1)).all()
+
+
+# ---------------------------------------------------------------------------
+# Plausibility checks (units): the oracle for the controller's Euler bounds is the installed
+# FMU's modelDescription (its documented defaults are +-60 deg, docs/controller.md)
+
+DEG = math.pi / 180.0
+
+
+def _controller_start(name: str) -> float:
+    from fmpy import read_model_description
+
+    from plant import fmu_path
+
+    md = read_model_description(str(fmu_path("FullPoseController")))
+    return float(next(v.start for v in md.modelVariables if v.name == name))
+
+
+def _bounds(index: int) -> tuple[float, float]:
+    return _controller_start(f"euler_min[{index}]"), _controller_start(f"euler_max[{index}]")
+
+
+def _rejected(tmp_path: Path, text: str) -> ScenarioError:
+    path = write(tmp_path, BASE + text)
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(path)
+    assert str(info.value).startswith(f"{path}: field '{info.value.field}': "), info.value
+    return info.value
+
+
+def test_euler_bound_oracle_is_the_documented_default():
+    for index in (1, 2):
+        lo, hi = _bounds(index)
+        assert lo == pytest.approx(-60 * DEG) and hi == pytest.approx(60 * DEG)
+
+
+def test_radian_roll_amplitude_that_reads_as_degrees_is_an_error(tmp_path):
+    err = _rejected(tmp_path, """
+[reference.attitude]
+roll = { type = "sine", amplitude = 40.0, omega = 0.5 }
+""")
+    lo, hi = _bounds(1)
+    assert err.field == "reference.attitude.roll.amplitude"
+    msg = str(err)
+    assert "40 rad" in msg and f"{40 / DEG:.5g} deg" in msg, msg
+    assert f"{lo:.5g}..{hi:.5g} rad" in msg and f"{lo / DEG:.5g}..{hi / DEG:.5g} deg" in msg, msg
+    assert "if you meant degrees, use [reference.attitude_deg]" in msg, msg
+
+
+def test_radian_attitude_inside_the_bounds_passes(tmp_path):
+    sc = load_scenario(write(tmp_path, BASE + """
+[reference.attitude]
+roll = { type = "sine", amplitude = 0.5, omega = 0.5 }
+pitch = [0.2, { type = "sine", amplitude = -0.5, omega = 0.3 }]
+yaw = { type = "ramp", from = 0.0, to = 30.0, t0 = 0.0, t1 = 10.0 }
+"""))
+    assert sc.warnings == ()
+    # yaw is not bounded by the controller: any angle, many turns
+    assert sc.references(np.array([10.0]))["euler_ref"][0, 2] == 30.0
+
+
+@pytest.mark.parametrize("t1", [5.0, 100.0])
+def test_ramp_past_the_bound_is_an_error_even_after_the_run(tmp_path, t1):
+    err = _rejected(tmp_path, f"""
+[reference.attitude]
+pitch = {{ type = "ramp", from = 0.0, to = 2.0, t0 = 1.0, t1 = {t1} }}
+""")
+    hi = _bounds(2)[1]
+    assert 2.0 > hi
+    assert err.field == "reference.attitude.pitch.to"
+    msg = str(err)
+    assert f"2 rad ({2 / DEG:.5g} deg)" in msg and f"{hi / DEG:.5g} deg" in msg, msg
+    assert ("at t = 5 s" if t1 == 5.0 else "after this run's 10 s") in msg, msg
+    assert "[reference.attitude_deg]" in msg  # 2 read as degrees is inside the bounds
+
+
+def test_radian_value_out_of_bounds_also_in_degrees_says_so(tmp_path):
+    msg = str(_rejected(tmp_path, "[reference.attitude]\nroll = 80.0\n"))
+    assert "'reference.attitude.roll'" in msg
+    assert "use [reference.attitude_deg] (80 deg is outside the bounds too)" in msg, msg
+    far = _rejected(tmp_path, "[reference.attitude]\nroll = 400.0\n")
+    assert "attitude_deg" not in str(far)  # 400 is no plausible angle in degrees either
+
+
+def test_degree_attitude_inside_the_bounds_passes_and_outside_fails(tmp_path):
+    lo, hi = _bounds(1)
+    sc = load_scenario(write(tmp_path, BASE + f"""
+[reference.attitude_deg]
+roll = {{ type = "sine", amplitude = 40.0, omega = 0.5 }}
+pitch = {hi / DEG!r}
+"""))
+    assert sc.warnings == ()
+    err = _rejected(tmp_path, """
+[reference.attitude_deg]
+roll = { type = "sine", amplitude = 80.0, omega = 0.5 }
+""")
+    assert err.field == "reference.attitude_deg.roll.amplitude"
+    msg = str(err)
+    assert "80 deg" in msg and f"{lo / DEG:.5g}..{hi / DEG:.5g} deg" in msg, msg
+    assert "euler_min[1], euler_max[1]" in msg and "use [reference.attitude_deg]" not in msg
+
+
+def test_most_specific_field_of_a_sum(tmp_path):
+    err = _rejected(tmp_path, """
+[reference.attitude]
+roll = [0.1, { type = "steps", times = [1.0, 2.0], values = [0.2, 30.0] }]
+""")
+    assert err.field == "reference.attitude.roll[2].values[2]"
+    err = _rejected(tmp_path, """
+[reference.attitude]
+pitch = { type = "sum", terms = [0.1, { type = "sine", amplitude = 40.0, omega = 1.0 }] }
+""")
+    assert err.field == "reference.attitude.pitch.terms[2].amplitude"
+    # neither term alone leaves the bounds: the sum's own field
+    err = _rejected(tmp_path, """
+[reference.attitude]
+roll = [0.5, { type = "sine", amplitude = 0.7, omega = 0.5 }]
+""")
+    assert err.field == "reference.attitude.roll"
+
+
+def test_controller_override_of_the_bounds_is_honoured(tmp_path):
+    text = "[reference.attitude_deg]\nroll = 70.0\n"
+    assert 70 * DEG > _bounds(1)[1]
+    assert _rejected(tmp_path, text).field == "reference.attitude_deg.roll"
+    sc = load_scenario(write(tmp_path, BASE + text + "[controller]\n"
+                             "euler_min = [-1.3, -1.0]\neuler_max = [1.3, 1.0]\n"))
+    assert sc.controller_parameters["euler_max[1]"] == 1.3
+    # a narrower bound given on top of a valid scenario is checked too
+    paper = load_scenario("hover_varying_orientation")  # roll amplitude 0.7 rad
+    with pytest.raises(ScenarioError) as info:
+        paper.with_overrides(settings=["controller.euler_max[1]=0.5"])
+    assert info.value.field == "reference.attitude.roll.amplitude"
+    assert "euler_min[1], euler_max[1] as overridden" in str(info.value)
+    err = _rejected(tmp_path, "[controller]\n\"euler_max[2]\" = 2.0\n")
+    assert err.field == "controller.euler_max[2]" and "(-pi/2, pi/2)" in str(err)
+
+
+def test_yaw_is_unbounded_but_a_radian_swing_beyond_a_turn_is_an_error(tmp_path):
+    err = _rejected(tmp_path, """
+[reference.attitude]
+yaw = { type = "sine", amplitude = 90.0, omega = 0.5 }
+""")
+    assert err.field == "reference.attitude.yaw.amplitude"
+    assert "full turn" in str(err) and "use [reference.attitude_deg]" in str(err)
+    for ok in ("yaw = 7.0", 'yaw = { type = "sine", amplitude = 3.0, omega = 0.5, offset = 20.0 }',
+               'yaw = { type = "steps", times = [1.0], values = [90.0] }'):
+        assert load_scenario(write(tmp_path, BASE + "[reference.attitude]\n" + ok + "\n"))
+    assert load_scenario(write(tmp_path, BASE + """
+[reference.attitude_deg]
+yaw = { type = "sine", amplitude = 90.0, omega = 0.5 }
+"""))
+
+
+def test_far_position_step_is_a_warning_naming_the_field(tmp_path):
+    path = write(tmp_path, BASE.replace("z = -3.0", "z = -3.0\nx = { type = \"steps\", "
+                                        "times = [5.0], values = [1000.0] }"))
+    sc = load_scenario(path)
+    assert sc.warnings == (
+        f"{path}: field 'reference.position.x': a step of 1000 m (from 0 to 1000 m at t = 5 s) "
+        "while the rest of the trajectory stays within 3 m of the origin; is this the "
+        "intended unit (m)?",)
+    assert sc.with_overrides(settings=["plant.noise_pos=0.01"]).warnings == sc.warnings
+    assert sc.with_overrides(duration=4.0).warnings == ()  # the step is after the run
+    near = load_scenario(write(tmp_path, BASE.replace("z = -3.0", "z = -3.0\nx = { type = "
+                                                      "\"steps\", times = [5.0], values = "
+                                                      "[2.0] }")))
+    assert near.warnings == ()
+
+
+def test_large_but_proportionate_trajectory_is_no_warning(tmp_path):
+    sc = load_scenario(write(tmp_path, BASE.replace("z = -3.0", """\
+x = { type = "waypoints", times = [0.0, 10.0], values = [0.0, 400.0] }
+y = { type = "sine", amplitude = 20.0, omega = 0.5 }
+z = -30.0""")))
+    assert sc.warnings == ()
+
+
+def test_shipped_and_documented_scenarios_have_no_warnings(tmp_path):
+    for sc in list_scenarios():
+        assert sc.warnings == (), sc.name
+    text = (ROOT / "docs" / "scenarios.md").read_text()
+    block = re.search(r"```toml\n(.*?)```", text, re.S)
+    assert block is not None
+    assert load_scenario(write(tmp_path, block.group(1))).warnings == ()
+
+
+def test_value_range_bounds_the_samples():
+    t = np.linspace(0.0, 400.0, 400001)
+    for name, (signal, _) in SIGNALS.items():
+        ends = value_range(signal)
+        v = signal.value(t)
+        if name == "sum":  # a sine and a ramp: two varying terms, no closed form
+            assert ends is None
+            continue
+        assert ends is not None, name
+        assert ends[0] <= v.min() + 1e-12 and v.max() <= ends[1] + 1e-12, name
+        assert v.min() == pytest.approx(ends[0], abs=1e-6), name
+        assert v.max() == pytest.approx(ends[1], abs=1e-6), name
+    assert value_range(Sum((Constant(0.5), Sine(0.7, 1.0)))) == (pytest.approx(-0.2), 1.2)

@@ -2,7 +2,18 @@
 
 #include <stdarg.h>
 #include <stdio.h>
+#include <stdlib.h>
 #include <string.h>
+
+const char *fp_real_text(char *buf, double x) {
+    int digits;
+    for (digits = 15; digits < 17; digits++) {
+        snprintf(buf, FP_REAL_TEXT, "%.*g", digits, x);
+        if (strtod(buf, NULL) == x) return buf;
+    }
+    snprintf(buf, FP_REAL_TEXT, "%.17g", x);
+    return buf;
+}
 
 void fp_log(const FpLogger *logger, FpStatus status, FpLogCategory category, const char *fmt, ...) {
     char message[512];

@@ -65,7 +65,12 @@ typedef struct {
     void *env;
 } FpLogger;
 
-/* printf-style helper on top of FpLogger (defined in fp_log.c). */
+/* A real number as a message shows it: the shortest of %.15g, %.16g, %.17g that reads back
+ * as the same double ("-0.8", not "-0.80000000000000004").  buf holds FP_REAL_TEXT chars. */
+#define FP_REAL_TEXT 32
+const char *fp_real_text(char *buf, double x);
+
+/* printf-style helper on top of FpLogger (defined in fp_model.c). */
 void fp_log(const FpLogger *logger, FpStatus status, FpLogCategory category, const char *fmt, ...)
 #if defined(__GNUC__)
     __attribute__((format(printf, 4, 5)))

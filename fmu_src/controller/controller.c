@@ -8,7 +8,8 @@
  *   2. Guidance: first-order blocks K_xi, K_xidot with velocity/acceleration
  *      feed-forward give the commanded acceleration; outer INDI (eq. 14-15)
  *      and the WLS guidance QP (eq. 17-23) over [dfx, dfy, dfz, dphi, dtheta]
- *      give mu_c and df_b_c.  psi_c = psi_ref (outside the QP: see DESIGN.md).
+ *      give mu_c and df_b_c.  psi_c = psi_ref (outside the QP: see
+ *      docs/architecture.md, "Design decisions").
  *   3. Stabilization: attitude and rate blocks, INDI on the rotational
  *      dynamics: dtau_c = I (dOmega_c - dOmega_m).
  *   4. Inner allocation: WLS on the analytic B''(u_a,m) (eq. 12-13) with
@@ -211,10 +212,11 @@ typedef struct {
 } Check;
 
 static void bad(Check *c, const char *name, int index, double value, const char *why) {
-    char label[48];
+    char label[48], text[FP_REAL_TEXT];
     if (index > 0) snprintf(label, sizeof label, "%s[%d]", name, index);
     else snprintf(label, sizeof label, "%s", name);
-    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %.17g: %s", label, value, why);
+    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %s: %s", label,
+           fp_real_text(text, value), why);
     c->errors++;
 }
 
@@ -361,11 +363,8 @@ static void check_polytope(ControllerModel *m, Check *c) {
         c->errors++;
         return;
     }
-    if (!(m->poly_margin > 0.0 && m->poly_margin <= 1.0)) {
-        fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-               "parameter poly_margin = %.17g: must be in (0, 1]", m->poly_margin);
-        c->errors++;
-    }
+    if (!(m->poly_margin > 0.0 && m->poly_margin <= 1.0))
+        bad(c, "poly_margin", 0, m->poly_margin, "must be in (0, 1]");
     for (i = 0; i < m->n_rotors; i++)
         if (m->fail_poly_n[i] != 0 &&
             (m->fail_poly_n[i] < 4 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS)) {

@@ -229,8 +229,10 @@ typedef struct {
 
 static void bad(Check *c, const char *fmt, const char *name, double value, const char *why) {
     char label[64];
+    char text[FP_REAL_TEXT];
     snprintf(label, sizeof label, fmt, name);
-    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %.17g: %s", label, value, why);
+    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %s: %s", label,
+           fp_real_text(text, value), why);
     c->errors++;
 }
 
