@@ -5,18 +5,25 @@
 
 The header is fmu_src/controller/default_fail_polytopes.h: for the paper hexacopter and
 each rotor i, S(tau = 0) of the vehicle without rotor i (controller.failures), at most
-FAIL_FACETS facets each, numbers printed with "%.17g" (deterministic computation).
+FAIL_FACETS facets each in canonical order, numbers printed with "%.17g" (deterministic
+computation).  ``--check`` compares like ``python -m controller.polytope_defaults --check``:
+the text outside the numbers must be the template's and each rotor's polytope the fresh one
+as a set (:func:`controller.force_sets.same_polytope`), never byte for byte.
 """
 
 from __future__ import annotations
 
 import argparse
+import re
 import sys
+from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
 from controller.failures import FAIL_FACETS, MAX_ROTORS, failure_polytopes, hover_possible
+from controller.force_sets import Polytope, same_polytope
+from controller.polytope_defaults import skeleton
 from plant import load_airframe
 
 AIRFRAME = "paper_hexacopter"
@@ -29,9 +36,10 @@ def _numbers(values: np.ndarray) -> str:
     return ",\n".join(f"    {float(v):.17g}" for v in values.reshape(-1))
 
 
-def render() -> str:
+def render(polys: Sequence[Polytope | None] | None = None) -> str:
+    """The header text; ``polys`` (one per rotor) defaults to a fresh computation."""
     af = load_airframe(AIRFRAME)
-    polys = failure_polytopes(af)
+    polys = failure_polytopes(af) if polys is None else polys
     counts = [0 if p is None else len(p.b) for p in polys] + [0] * (MAX_ROTORS - len(polys))
     A = np.zeros((MAX_ROTORS * FAIL_FACETS, 3))
     b = np.zeros(MAX_ROTORS * FAIL_FACETS)
@@ -45,7 +53,7 @@ def render() -> str:
     return f"""\
 /*
  * GENERATED FILE - do not edit.  Regenerate with:   {COMMAND}
- * Freshness: {COMMAND} --check (tests/test_failures.py runs the check).
+ * Freshness: {COMMAND} --check (tests/test_multirotor_classes.py runs the check).
  *
  * Default single-rotor-failure polytopes of the FullPoseController: for the airframe
  * "{AIRFRAME}" and each rotor i, S(tau = 0) of the vehicle that has lost rotor i, as
@@ -72,20 +80,67 @@ static const double fp_default_fail_b[{MAX_ROTORS * FAIL_FACETS}] = {{
 """
 
 
+def parse(text: str) -> list[tuple[np.ndarray, np.ndarray]]:
+    """Per rotor slot (MAX_ROTORS of them) the (A, b) of its polytope, read from a header."""
+    def array(name: str) -> np.ndarray:
+        m = re.search(rf"{name}\[[^\]]*\] = \{{([^}}]*)\}}", text)
+        if m is None:
+            raise ValueError(f"{name} not found")
+        return np.array([float(x) for x in m.group(1).split(",") if x.strip()])
+
+    counts = array("fp_default_fail_n").astype(int)
+    A = array("fp_default_fail_A").reshape(-1, 3)
+    b = array("fp_default_fail_b")
+    if counts.size != MAX_ROTORS or b.size != MAX_ROTORS * FAIL_FACETS or len(A) != b.size \
+            or np.any(counts < 0) or np.any(counts > FAIL_FACETS):
+        raise ValueError("array sizes or facet counts do not fit FP_FAIL_POLYTOPE_FACETS")
+    rows = [slice(i * FAIL_FACETS, i * FAIL_FACETS + int(n)) for i, n in enumerate(counts)]
+    return [(A[r], b[r]) for r in rows]
+
+
+def compare(old: str, fresh: str) -> tuple[bool, str]:
+    """(same, reason): two header texts as generated data (each rotor's polytope as a set)."""
+    try:
+        if skeleton(old) != skeleton(fresh):
+            return False, "its text is not the generator's (template changed or file edited)"
+        problems = []
+        for i, ((A0, b0), (A1, b1)) in enumerate(zip(parse(old), parse(fresh), strict=True)):
+            if len(b0) == 0 or len(b1) == 0:  # an empty slot: no rotor, or an empty set
+                if len(b0) != len(b1):
+                    problems.append(f"rotor {i + 1}: {len(b0)} facets, a fresh {len(b1)}")
+                continue
+            same, why = same_polytope(A0, b0, A1, b1, names=("the file's set", "a fresh one"))
+            if not same:
+                problems.append(f"rotor {i + 1}: {why}")
+    except ValueError as exc:
+        return False, f"it is not in the generated format ({exc})"
+    if problems:
+        return False, "; ".join(problems)
+    return True, "every rotor's polytope is the fresh one as a set"
+
+
+def check(path: Path = HEADER, fresh: str | None = None) -> tuple[bool, str]:
+    """(up to date, message): the file against a fresh rendering (:func:`compare`)."""
+    text = render() if fresh is None else fresh
+    if not path.is_file():
+        return False, f"{path} is missing: run {COMMAND}"
+    ok, why = compare(path.read_text(encoding="utf-8"), text)
+    if ok:
+        return True, f"{path} is fresh ({why})"
+    return False, f"{path} is stale: {why}: run {COMMAND}"
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--check", action="store_true", help="exit 1 if the header is stale")
+    parser.add_argument("--check", action="store_true",
+                        help="exit 1 if the header is stale (polytopes compared as sets)")
     parser.add_argument("--output", type=Path, default=HEADER, help=f"default: {HEADER}")
     args = parser.parse_args(argv)
-    text = render()
     if args.check:
-        current = args.output.read_text() if args.output.is_file() else ""
-        if current != text:
-            print(f"{args.output} is stale: run {COMMAND}", file=sys.stderr)
-            return 1
-        print(f"{args.output} is fresh")
-        return 0
-    args.output.write_text(text)
+        ok, message = check(args.output)
+        print(message, file=sys.stdout if ok else sys.stderr)
+        return 0 if ok else 1
+    args.output.write_text(render(), encoding="utf-8")
     print(f"wrote {args.output}")
     return 0
 

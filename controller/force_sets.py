@@ -44,6 +44,10 @@ Method (deterministic; no randomness anywhere)
   opposite facets (an equality as two inequalities) plus facets in its affine hull, so the
   H-representation stays bounded and exact in the flat directions.
 * An empty S(tau) raises :class:`EmptyForceSetError`; LP failures raise RuntimeError.
+* Facets are returned in a canonical order (:func:`canonical_facets`: sorted by normal, then
+  offset), so round-off differences between library versions do not permute them; compare
+  two polytopes as sets with :func:`same_polytope` (support LPs, tolerance scaled to the set),
+  never row by row.
 
 Rows of ``A`` are unit vectors (body FRD, dimensionless), ``b`` is in newtons.  The paper
 hexacopter's S(0) (64 facets) is about 1.5 s; :mod:`controller.polytope_defaults` writes it as
@@ -602,6 +606,7 @@ def _build(af: Airframe, torque: Array | None, n_directions: int, grid: int) -> 
     z_hi = _lp_extreme(A, b, np.array([0.0, 0.0, 1.0]), minimise=False)
     inner_pts = _dedupe(inner, tol)
     dist = _distances(verts, inner_pts)
+    A, b = canonical_facets(A, b, n_flat)
     rel = dist / (np.linalg.norm(verts, axis=1) + FLOOR * oracle.scale)
     return Polytope(
         kind="AFS" if torque is None else "S(tau)",
@@ -611,6 +616,95 @@ def _build(af: Airframe, torque: Array | None, n_directions: int, grid: int) -> 
         relative_gap=float(rel.max()), z_range=(z_lo, z_hi), scale=oracle.scale,
         torque=_frozen(np.zeros(3) if torque is None else torque),
     )
+
+
+def canonical_facets(A: Array, b: Array, n_flat: int = 0) -> tuple[Array, Array]:
+    """The facets (A, b) in a canonical order, so that round-off does not permute them.
+
+    The first ``n_flat`` rows (pairs of opposite normals, see :class:`Polytope`) stay first,
+    each pair ordered and the pairs sorted like the others; the remaining rows are sorted
+    lexicographically by their unit normal rounded to :data:`REL_TOL` (so that components
+    equal up to round-off, e.g. 0 and 1e-17, tie) and then by their offset.
+    """
+    A, b = np.asarray(A, dtype=float), np.asarray(b, dtype=float)
+    decimals = round(-math.log10(REL_TOL))  # 9
+    key = np.round(A / np.linalg.norm(A, axis=1, keepdims=True), decimals) + 0.0  # no -0.0
+    # flat pairs: the lexicographically larger normal of each pair first, then pairs sorted
+    pairs = []
+    for j in range(0, n_flat, 2):
+        first, second = (j, j + 1) if tuple(key[j]) >= tuple(key[j + 1]) else (j + 1, j)
+        pairs.append((tuple(key[first]), first, second))
+    flat = [r for _, first, second in sorted(pairs) for r in (first, second)]
+    rest = n_flat + np.lexsort((b[n_flat:], *key[n_flat:].T[::-1]))  # last key is primary
+    order = np.concatenate([np.array(flat, dtype=int), rest])
+    return A[order], b[order]
+
+
+def same_polytope(A1: ArrayLike, b1: ArrayLike, A2: ArrayLike, b2: ArrayLike,
+                  rtol: float = REL_TOL, names: tuple[str, str] = ("the first set",
+                                                                   "the second set"),
+                  ) -> tuple[bool, str]:
+    """Whether {x : A1 x <= b1} and {x : A2 x <= b2} are the same set: (same, reason).
+
+    Compared as sets, never row by row: each set must lie inside every facet of the other,
+    i.e. its support function h(a_i) = max a_i . x at each unit facet normal a_i of the other
+    set stays below that facet's offset b_i / |a_i| + tol (an LP per facet; for bounded
+    polytopes this is exact set equality up to tol).  Facet order, scaling of a row, and
+    redundant facets do not matter.  ``tol = rtol * size``, with size the largest |x_k| over
+    both sets (their bounding boxes; N, like every polytope here).  ``reason`` names the worst
+    violated facet each way, by how much and along which normal.
+    """
+    sets = []
+    for A, b in ((A1, b1), (A2, b2)):
+        A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.asarray(b, dtype=float).ravel()
+        if A.shape != (b.size, A.shape[1]):
+            return False, f"inconsistent shapes: A {A.shape}, b {b.shape}"
+        sets.append((A, b))
+    (A1, b1), (A2, b2) = sets
+    if A1.shape[1] != A2.shape[1]:
+        return False, f"dimension {A1.shape[1]} of {names[0]} differs from {A2.shape[1]}"
+    axes = np.vstack([np.eye(A1.shape[1]), -np.eye(A1.shape[1])])
+    reach = [[_set_support(A, b, c) for c in axes] for A, b in sets]
+    empty = [any(h is None for h in r) for r in reach]
+    if empty[0] or empty[1]:
+        if empty[0] and empty[1]:
+            return True, "both sets are empty"
+        return False, f"{names[0] if empty[0] else names[1]} is empty, the other is not"
+    size = max(abs(h) for r in reach for h in r if h is not None)
+    if not math.isfinite(size):
+        return False, "an unbounded set cannot be compared with a tolerance scaled to it"
+    tol = rtol * size
+    problems = []
+    for (A, b), (Ao, bo), who, other in (((A1, b1), (A2, b2), names[0], names[1]),
+                                         ((A2, b2), (A1, b1), names[1], names[0])):
+        norms = np.linalg.norm(Ao, axis=1)
+        worst, at = -math.inf, -1
+        for i in np.flatnonzero(norms > 0.0):
+            h = _set_support(A, b, Ao[i] / norms[i])
+            excess = math.inf if h is None else h - bo[i] / norms[i]
+            if excess > worst:
+                worst, at = excess, int(i)
+        if worst > tol:
+            n = Ao[at] / norms[at]
+            problems.append(
+                f"{who} reaches {worst:.3g} N beyond facet {at} of {other} (normal "
+                f"[{', '.join(f'{x:.4f}' for x in n)}], offset {bo[at] / norms[at]:.6g} N)")
+    if problems:
+        return False, "; ".join(problems) + f" (tolerance {tol:.2g} N)"
+    return True, f"same set within {tol:.2g} N ({A1.shape[0]} and {A2.shape[0]} facets)"
+
+
+def _set_support(A: Array, b: Array, c: Array) -> float | None:
+    """max c . x over {x : A x <= b}: inf if unbounded, None if empty."""
+    res = linprog(-c, A_ub=A, b_ub=b, bounds=(None, None), method="highs-ds",
+                  options=_LP_OPTIONS)
+    if res.status == 2:
+        return None
+    if res.status == 3:
+        return math.inf
+    if res.status != 0:
+        raise RuntimeError(f"support LP failed ({res.status}): {res.message}")
+    return -float(res.fun)
 
 
 def _dedupe(points: Array, tol: float) -> Array:
@@ -656,8 +750,10 @@ def feasible_force_set(
 ) -> Polytope:
     """S(tau) of paper eq. (5)-(6) (default tau = 0) as an outer H-representation.
 
-    At most ``n_directions`` (<= :data:`MAX_FACETS`) facets; deterministic (same inputs give
-    bit-identical arrays).  Raises EmptyForceSetError when no admissible input gives tau.
+    At most ``n_directions`` (<= :data:`MAX_FACETS`) facets, in the canonical order of
+    :func:`canonical_facets`; deterministic (same inputs give bit-identical arrays; other
+    library versions may move the numbers by round-off: compare with :func:`same_polytope`).
+    Raises EmptyForceSetError when no admissible input gives tau.
     """
     tau = np.asarray(torque, dtype=float).reshape(-1)
     if tau.size != 3 or not np.all(np.isfinite(tau)):

@@ -8,22 +8,30 @@ fp_default_K_{pos,vel,att,rate}_{A,B,C,D}[3] (same block on the three axes: afte
 axes have the same design model), printed with "%.17g", plus the achieved gammas and margins in
 the header comment.  The synthesis (controller/hinf.py) is deterministic: fixed starts and a
 seeded generator; it takes ~30-60 s, so ``--check`` does not rerun it by default: the header
-records a hash of the synthesis inputs (the hinf.py/lti.py sources and this file), and
-``--check`` recomputes the hash and verifies that the header's numbers match the cached result
-file next to it (default_gains.json, written by the command).  ``--check --full`` reruns the
-synthesis and compares the numbers (relative 1e-6).
+records a hash of the synthesis inputs, and ``--check`` recomputes the hash and verifies that
+the header's numbers match the cached result file next to it (default_gains.json, written by
+the command).  The hash covers the hinf.py/lti.py sources and this file, and the values the
+synthesis reads at run time (:func:`synthesis_inputs`: sample time, filter, actuator time
+constant, every loop spec with its weights and model set, the default arguments such as the
+grid size, iterations and seed), so that changing any of them, in the source or at run time,
+makes the check fail.  ``--check --full`` reruns the synthesis and compares the numbers
+(relative 1e-6).
 """
 
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import hashlib
+import inspect
 import json
 import math
 import sys
 from pathlib import Path
 
-from controller import hinf
+import numpy as np
+
+from controller import hinf, lti
 
 COMMAND = "python -m controller.gains_defaults"
 ROOT = Path(__file__).resolve().parents[1]
@@ -34,11 +42,58 @@ LOOPS = (("pos", "translation", "outer"), ("vel", "translation", "inner"),
          ("att", "rotation", "outer"), ("rate", "rotation", "inner"))
 
 
+def synthesis_inputs() -> dict[str, object]:
+    """Every value the synthesis reads from hinf and lti at run time: their module constants
+    (upper-case names: TS, TAU_ACT, FILT_WN, FILT_ZETA, the LoopSpecs with their weights, model
+    sets and actuator tau, ...) and the default arguments of their functions and methods
+    (grid size, rounds, iterations, seed, norm tolerances, the Ts defaults, ...)."""
+    out: dict[str, object] = {}
+    for mod in (hinf, lti):
+        for name, value in vars(mod).items():
+            where = f"{mod.__name__}.{name}"
+            if name.isupper() and not callable(value):  # (not the imported class SS)
+                out[where] = value
+            elif inspect.isclass(value) and value.__module__ == mod.__name__:
+                for attr, member in vars(value).items():
+                    if not attr.startswith("__"):
+                        _add_defaults(out, f"{where}.{attr}", member)
+            else:
+                _add_defaults(out, where, value)
+    return out
+
+
+def _add_defaults(out: dict[str, object], where: str, obj: object) -> None:
+    func = inspect.unwrap(getattr(obj, "__func__", obj))  # staticmethod, lru_cache
+    if inspect.isfunction(func) and func.__module__ in (hinf.__name__, lti.__name__):
+        defaults = {p.name: p.default for p in inspect.signature(func).parameters.values()
+                    if p.default is not inspect.Parameter.empty}
+        if defaults:
+            out[f"{where}()"] = defaults
+
+
+def _canonical(value: object) -> str:
+    """Text of a value for the hash; floats to 12 significant digits, so that a last-digit
+    difference of a platform's libm (math.log in the specs' start points) does not count."""
+    if value is None or isinstance(value, (bool, int, str)):
+        return repr(value)
+    if isinstance(value, float):
+        return format(value, ".12g")
+    if dataclasses.is_dataclass(value) and not isinstance(value, type):
+        value = {f.name: getattr(value, f.name) for f in dataclasses.fields(value)}
+    if isinstance(value, dict):
+        return "{" + ", ".join(f"{k}: {_canonical(v)}" for k, v in sorted(value.items())) + "}"
+    if isinstance(value, (tuple, list, np.ndarray)):
+        return "[" + ", ".join(_canonical(v) for v in value) + "]"
+    raise TypeError(f"synthesis input of type {type(value).__name__}: add it to _canonical")
+
+
 def inputs_hash() -> str:
     h = hashlib.sha256()
     for rel in SOURCES:
         h.update(rel.encode())
         h.update((ROOT / rel).read_bytes().replace(b"\r\n", b"\n"))
+    for name, value in sorted(synthesis_inputs().items()):
+        h.update(f"{name} = {_canonical(value)}\n".encode())
     return h.hexdigest()[:16]
 
 

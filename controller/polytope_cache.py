@@ -16,6 +16,7 @@ unreadable or corrupt entry is recomputed, an unwritable folder only costs the c
 from __future__ import annotations
 
 import hashlib
+import importlib.util
 import json
 import math
 import os
@@ -29,7 +30,9 @@ from plant import Airframe
 
 Parameters = dict[str, float | int]
 
-_GENERATORS = ("force_sets.py", "failures.py", "polytope_cache.py")
+_GENERATORS = ("controller.force_sets", "controller.failures", "controller.polytope_cache",
+               "plant.effectiveness")
+"""The modules whose code decides the sets: their source is part of every key."""
 _FORMAT = 1
 
 
@@ -50,9 +53,11 @@ def cache_dir() -> Path:
 @cache
 def _generator_digest() -> str:
     h = hashlib.sha256()
-    here = Path(__file__).resolve().parent
     for name in _GENERATORS:
-        h.update((here / name).read_bytes())
+        spec = importlib.util.find_spec(name)
+        if spec is None or spec.origin is None:  # pragma: no cover - part of this package
+            raise ImportError(f"{name} not found")
+        h.update(Path(spec.origin).read_bytes())
     return h.hexdigest()
 
 

@@ -7,11 +7,13 @@ The header is fmu_src/controller/default_polytope.h.
 
 The polytope is S(tau = 0) of the paper hexacopter (paper eq. 6), computed by
 :func:`controller.force_sets.feasible_force_set` with its defaults, written as an
-H-representation {f_b : A f_b <= b} (body FRD, N; rows of A are unit normals).  Numbers are
-printed with "%.17g", so a regenerated file is byte-identical to the committed one as long as
-the computation is (same platform and library versions; the computation itself is
-deterministic).  ``--check`` compares bytes and, when they differ, also says whether only
-floating-point noise (relative 1e-9) or the polytope itself changed.
+H-representation {f_b : A f_b <= b} (body FRD, N; rows of A are unit normals) with its facets in
+the canonical order of :func:`controller.force_sets.canonical_facets`, numbers printed with
+"%.17g" (they round-trip).  ``--check`` does not compare bytes: other platforms and library
+versions move the numbers by round-off.  It requires the text outside the numbers to be the
+template's, the facet count to match the arrays, and the polytope (and its f_bz range) to be
+the fresh one *as a set*, within :data:`controller.force_sets.REL_TOL` times the set's size
+(:func:`controller.force_sets.same_polytope`); otherwise it says what differs.
 """
 
 from __future__ import annotations
@@ -23,7 +25,14 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.force_sets import DEFAULT_GRID, MAX_FACETS, Polytope, feasible_force_set
+from controller.force_sets import (
+    DEFAULT_GRID,
+    MAX_FACETS,
+    REL_TOL,
+    Polytope,
+    feasible_force_set,
+    same_polytope,
+)
 
 AIRFRAME = "paper_hexacopter"
 COMMAND = "python -m controller.polytope_defaults"
@@ -86,34 +95,64 @@ def compute() -> Polytope:
     return feasible_force_set(AIRFRAME)
 
 
-def parse(text: str) -> tuple[np.ndarray, np.ndarray]:
-    """(A, b) read back from a header text (for diagnostics and tests)."""
-    def block(name: str) -> np.ndarray:
-        m = re.search(rf"{name}\[[^\]]*\] = \{{([^}}]*)\}}", text)
-        if m is None:
-            raise ValueError(f"{name} not found")
-        return np.array([float(x) for x in m.group(1).replace("\n", " ").split(",") if x.strip()])
+def _array(text: str, name: str) -> np.ndarray:
+    m = re.search(rf"{name}\[[^\]]*\] = \{{([^}}]*)\}}", text)
+    if m is None:
+        raise ValueError(f"{name} not found")
+    return np.array([float(x) for x in m.group(1).replace("\n", " ").split(",") if x.strip()])
 
-    return block("fp_default_polytope_A").reshape(-1, 3), block("fp_default_polytope_b")
+
+def parse(text: str) -> tuple[np.ndarray, np.ndarray]:
+    """(A, b) read back from a header text (for the check and tests)."""
+    A = _array(text, "fp_default_polytope_A").reshape(-1, 3)
+    return A, _array(text, "fp_default_polytope_b")
+
+
+def skeleton(text: str) -> str:
+    """A generated text without its numbers: array contents dropped, other numbers as '#'."""
+    text = re.sub(r"= \{[^}]*\}", "= {}", text)
+    return re.sub(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?", "#", text)
+
+
+def _define(text: str, name: str) -> int:
+    m = re.search(rf"^#define {name} (\d+)$", text, re.MULTILINE)
+    if m is None:
+        raise ValueError(f"{name} not found")
+    return int(m.group(1))
+
+
+def compare(old: str, fresh: str) -> tuple[bool, str]:
+    """(same, reason): two header texts as generated data - same template, same polytope
+    (as a set, tolerance scaled to it), same f_bz range, consistent facet count."""
+    try:
+        if skeleton(old) != skeleton(fresh):
+            return False, "its text is not the generator's (template changed or file edited)"
+        (A0, b0), (A1, b1) = parse(old), parse(fresh)
+        if _define(old, "FP_POLYTOPE_MAX_FACETS") != _define(fresh, "FP_POLYTOPE_MAX_FACETS"):
+            return False, "FP_POLYTOPE_MAX_FACETS differs"
+        if _define(old, "FP_DEFAULT_POLYTOPE_FACETS") != len(b0) or A0.shape != (len(b0), 3):
+            return False, "FP_DEFAULT_POLYTOPE_FACETS does not match its arrays"
+        same, why = same_polytope(A0, b0, A1, b1, names=("the file's polytope", "a fresh one"))
+        if not same:
+            return False, why
+        z0, z1 = (_array(t, "fp_default_polytope_fz_range") for t in (old, fresh))
+        size = float(np.max(np.abs(np.concatenate([z0, z1]))))
+        if z0.shape != z1.shape or not np.allclose(z0, z1, rtol=0.0, atol=REL_TOL * size):
+            return False, f"the f_bz range {z0} differs from a fresh {z1}"
+    except ValueError as exc:
+        return False, f"it is not in the generated format ({exc})"
+    return True, why
 
 
 def check(path: Path = HEADER, fresh: str | None = None) -> tuple[bool, str]:
-    """(up to date, message): compares the file with a fresh computation byte for byte."""
+    """(up to date, message): the file against a fresh rendering (:func:`compare`)."""
     text = render(compute()) if fresh is None else fresh
     if not path.is_file():
         return False, f"{path} is missing: run {COMMAND}"
-    old = path.read_text(encoding="utf-8")
-    if old == text:
-        return True, f"{path} is up to date"
-    why = "the polytope changed"
-    try:
-        (A0, b0), (A1, b1) = parse(old), parse(text)
-        if A0.shape == A1.shape and np.allclose(A0, A1, rtol=1e-9, atol=1e-12) and \
-                np.allclose(b0, b1, rtol=1e-9, atol=1e-9):
-            why = "numbers differ only by floating-point noise (platform or library versions)"
-    except ValueError:
-        why = "the file is not in the generated format"
-    return False, f"{path} is stale ({why}): run {COMMAND}"
+    ok, why = compare(path.read_text(encoding="utf-8"), text)
+    if ok:
+        return True, f"{path} is up to date ({why})"
+    return False, f"{path} is stale: {why}: run {COMMAND}"
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -121,7 +160,8 @@ def main(argv: list[str] | None = None) -> int:
         prog=COMMAND, description="Write the controller FMU's default S(0) polytope "
         f"({AIRFRAME}) as C source, or check that the committed file is fresh.")
     parser.add_argument("--check", action="store_true",
-                        help="do not write; exit 1 if the file differs from a fresh computation")
+                        help="do not write; exit 1 if the file is not a fresh computation's "
+                        "polytope (compared as a set, see above)")
     parser.add_argument("--output", type=Path, default=HEADER, help=f"default: {HEADER}")
     args = parser.parse_args(argv)
     text = render(compute())

@@ -69,6 +69,8 @@ def check_output_dir(out_dir: Path) -> None:
     probe = parent
     while not probe.exists() and probe != probe.parent:
         probe = probe.parent
+    if not probe.is_dir():
+        raise OutputError(f"{out_dir}: cannot create it, {probe} is a file, not a folder")
     if not os.access(probe, os.W_OK | os.X_OK):
         raise OutputError(f"{out_dir}: cannot write into {probe} (permission denied)")
 

@@ -550,12 +550,23 @@ def _culprit(signal: Signal, field_name: str, unit: float, t: np.ndarray, lo: fl
     return field_name, None
 
 
+_CHECK_SAMPLES = 1_000_001
+"""At most this many samples per signal for the load-time checks (a 2000 s run at 2 ms):
+a longer run is checked at every k-th step, so checking never costs more memory than a
+short run (the closed-form ranges of the signals still cover every instant)."""
+
+
+def _check_times(sc: Scenario) -> np.ndarray:
+    stride = -(-(sc.n_steps + 1) // _CHECK_SAMPLES)
+    return np.arange(0, sc.n_steps + 1, stride, dtype=np.float64) * sc.step
+
+
 def _check_attitude(sc: Scenario) -> None:
     """Roll and pitch references inside the controller's bounds over the whole run (and
     beyond, as far as the signals' parameters say), yaw amplitudes within a turn (rad)."""
     degrees = any(isinstance(s, Scaled) and s.factor == _DEG for s in sc.attitude)
     table = "attitude_deg" if degrees else "attitude"
-    t = sc.times()
+    t = _check_times(sc)
     for axis, index in _BOUNDED_AXES.items():
         lo, hi, overridden = _euler_bounds(sc, index)
         signal = sc.attitude[index - 1]
@@ -612,7 +623,7 @@ def _position_warnings(sc: Scenario) -> tuple[str, ...]:
     more than POSITION_WARN_RATIO times the rest of the trajectory's size (the largest
     distance of the other two axes from the origin) -- a step of 1000 m on a vehicle flown
     at 3 m: probably not metres."""
-    t = sc.times()
+    t = _check_times(sc)
     p = np.column_stack([s.value(t) for s in sc.position])
     out: list[str] = []
     for a, axis in enumerate(POSITION_AXES):

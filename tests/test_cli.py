@@ -2,17 +2,21 @@
 
 import csv
 import json
-import shutil
+import os
 import subprocess
-import sys
+import sysconfig
+from pathlib import Path
 
 import pytest
 
-FULLPOSE = shutil.which("fullpose")
+# the command installed beside the running interpreter, never one a PATH happens to find
+FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
 
 
 def run(*args, check=True):
-    cmd = [FULLPOSE, *args] if FULLPOSE else [sys.executable, "-m", "orchestrator.cli", *args]
+    if not FULLPOSE.is_file():
+        pytest.fail(f"{FULLPOSE} missing: `pip install .` installs the fullpose command")
+    cmd = [str(FULLPOSE), *args]
     return subprocess.run(cmd, capture_output=True, text=True, check=check, timeout=300)
 
 

@@ -10,6 +10,8 @@ Oracles used here, none of which goes through controller.force_sets:
 
 from __future__ import annotations
 
+import dataclasses
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -25,9 +27,11 @@ from controller.force_sets import (
     MAX_FACETS,
     EmptyForceSetError,
     attainable_force_set,
+    canonical_facets,
     feasible_force_set,
     hover_force,
     is_feasible,
+    same_polytope,
 )
 from controller.plots_force_sets import plot_force_sets
 from plant.effectiveness import thrust_direction
@@ -321,14 +325,143 @@ def test_deterministic_bit_identical():
 
 
 def test_default_header_is_fresh():
-    text = polytope_defaults.render(s0_of("paper_hexacopter"))
+    p = s0_of("paper_hexacopter")
+    text = polytope_defaults.render(p)
     ok, message = polytope_defaults.check(SHIPPED_HEADER, text)
     assert ok, message
+    # compared as sets (other library versions move the numbers by round-off), not bytes
     A, b = polytope_defaults.parse(SHIPPED_HEADER.read_text())
-    p = s0_of("paper_hexacopter")
-    assert A.tobytes() == p.A.tobytes() and b.tobytes() == p.b.tobytes()  # %.17g round-trips
+    assert A.shape == (p.n_facets, 3)
+    assert same_polytope(A, b, p.A, p.b)[0]
     assert f"#define FP_POLYTOPE_MAX_FACETS {MAX_FACETS}\n" in text
     assert f"#define FP_DEFAULT_POLYTOPE_FACETS {p.n_facets}\n" in text
+
+
+# ---------------------------------------------------------------------------
+# (5b) canonical facet order, and polytopes compared as sets
+
+
+def _rounded_key(A, b):
+    """The documented order, written out independently: unit normal to 9 decimals, offset."""
+    return [(*(round(float(x), 9) + 0.0 for x in a / np.linalg.norm(a)), float(c))
+            for a, c in zip(A, b, strict=True)]
+
+
+def _shuffled(A, b, rng, rel=1e-12):
+    """The same facets permuted, each row (a_i, b_i) scaled by a positive factor and moved by
+    relative round-off ``rel`` (what another library version may produce)."""
+    perm = rng.permutation(len(b))
+    k = rng.uniform(0.5, 2.0, len(b))[:, None]
+    A2 = k * A[perm] * (1.0 + rel * rng.standard_normal(A.shape))
+    b2 = k[:, 0] * b[perm] * (1.0 + rel * rng.standard_normal(len(b)))
+    return A2, b2
+
+
+@pytest.mark.parametrize("name", AIRFRAMES)
+def test_facets_come_in_canonical_order(name):
+    p = s0_of(name)
+    key = _rounded_key(p.A[p.n_flat:], p.b[p.n_flat:])
+    assert key == sorted(key)
+    flat = _rounded_key(p.A[:p.n_flat], p.b[:p.n_flat])
+    assert all(flat[j] >= flat[j + 1] for j in range(0, p.n_flat, 2))  # larger normal first
+    # round-off and a permutation of the input do not change the order
+    rng = np.random.default_rng(7)
+    A2, b2 = _shuffled(p.A[p.n_flat:], p.b[p.n_flat:], rng)
+    norms = np.linalg.norm(A2, axis=1)
+    A3, b3 = canonical_facets(A2 / norms[:, None], b2 / norms)
+    np.testing.assert_allclose(A3, p.A[p.n_flat:], rtol=0, atol=1e-11)
+    np.testing.assert_allclose(b3, p.b[p.n_flat:], rtol=1e-11)
+
+
+@pytest.mark.parametrize("name", AIRFRAMES)
+def test_same_polytope_ignores_order_round_off_and_redundant_facets(name):
+    p = s0_of(name)
+    A2, b2 = _shuffled(p.A, p.b, np.random.default_rng(1))
+    same, why = same_polytope(p.A, p.b, A2, b2)
+    assert same, why
+    # a redundant facet (a facet moved outward) and a duplicate do not change the set
+    A3, b3 = np.vstack([A2, p.A[:1], p.A[:1]]), np.concatenate([b2, p.b[:1] + 1.0, p.b[:1]])
+    assert same_polytope(A3, b3, p.A, p.b)[0]
+
+
+def test_same_polytope_reports_a_moved_facet():
+    """Moving one (non-redundant) facet outward by delta: the moved set reaches exactly delta
+    beyond that facet of the original, and the message says so; inward: the other way."""
+    p = s0_of("paper_hexacopter")
+    delta = 1e-6 * p.scale  # far above round-off, far below anything physical
+    k = int(np.argmin(p.A[:, 2]))  # the facet of the largest upward thrust: never redundant
+    b2 = p.b.copy()
+    b2[k] += delta
+    same, why = same_polytope(p.A, b2, p.A, p.b, names=("moved", "original"))
+    assert not same
+    m = re.fullmatch(r"moved reaches (\S+) N beyond facet (\d+) of original .*", why)
+    assert m is not None, why
+    assert int(m.group(2)) == k and float(m.group(1)) == pytest.approx(delta, rel=1e-3)
+    b2[k] -= 2.0 * delta
+    same, why = same_polytope(p.A, b2, p.A, p.b, names=("moved", "original"))
+    assert not same and why.startswith(f"original reaches {delta:.3g} N beyond facet {k} ")
+    # an empty set differs from a non-empty one
+    b_empty = p.b.copy()
+    b_empty[k] = -p.b[int(np.argmax(p.A[:, 2]))] - 1.0  # below the set's lowest f_z
+    assert same_polytope(p.A, b_empty, p.A, p.b) == \
+        (False, "the first set is empty, the other is not")
+
+
+def _slower_rotors_s0():
+    """S(0) of the paper hexacopter with every rotor's omega_max 1 % lower (a real change)."""
+    if ("slow", "S0") not in _CACHE:
+        af = plant.load_airframe("paper_hexacopter")
+        _CACHE[("slow", "S0")] = feasible_force_set(
+            dataclasses.replace(af, omega_max=0.99 * af.omega_max))
+    return _CACHE[("slow", "S0")]
+
+
+def test_check_accepts_a_reordered_rounded_header(tmp_path):
+    p = s0_of("paper_hexacopter")
+    A2, b2 = _shuffled(p.A, p.b, np.random.default_rng(2))
+    norms = np.linalg.norm(A2, axis=1)  # rows stay unit normals in a header
+    header = tmp_path / "default_polytope.h"
+    header.write_text(polytope_defaults.render(
+        dataclasses.replace(p, A=A2 / norms[:, None], b=b2 / norms)))
+    ok, message = polytope_defaults.check(header, polytope_defaults.render(p))
+    assert ok, message
+
+
+def test_check_rejects_an_edited_airframe(tmp_path):
+    """Rotors 1 % slower (thrust -2 %): the check fails and its message names a facet and by
+    how much the file's polytope crosses it, which an LP written here confirms."""
+    header = tmp_path / "default_polytope.h"
+    header.write_text(SHIPPED_HEADER.read_text())
+    fresh = _slower_rotors_s0()
+    ok, message = polytope_defaults.check(header, polytope_defaults.render(fresh))
+    assert not ok and "stale" in message
+    m = re.search(r"the file's polytope reaches (\S+) N beyond facet (\d+) of a fresh one", message)
+    assert m is not None, message
+    excess, k = float(m.group(1)), int(m.group(2))
+    assert excess > 1e-3 * fresh.scale  # about the 2 % thrust change, not round-off
+    A, b = polytope_defaults.parse(SHIPPED_HEADER.read_text())
+    res = linprog(-fresh.A[k], A_ub=A, b_ub=b, bounds=(None, None), method="highs")
+    assert -res.fun - fresh.b[k] == pytest.approx(excess, rel=2e-3)  # message: 3 digits
+
+
+def test_check_rejects_another_poly_margin(tmp_path):
+    """The polytope shrunk about the hover force h like the controller's poly_margin m does
+    (b_i -> a_i . h + m (b_i - a_i . h)): the shipped one crosses facet i of the shrunk one
+    by exactly (1 - m)(b_i - a_i . h), largest where the set reaches farthest from hover."""
+    p = s0_of("paper_hexacopter")
+    h, m = hover_force("paper_hexacopter"), 0.9
+    shrunk = p.A @ h + m * (p.b - p.A @ h)
+    header = tmp_path / "default_polytope.h"
+    header.write_text(SHIPPED_HEADER.read_text())
+    ok, message = polytope_defaults.check(header, polytope_defaults.render(
+        dataclasses.replace(p, b=shrunk)))
+    assert not ok
+    got = re.search(r"the file's polytope reaches (\S+) N beyond facet (\d+) of a fresh", message)
+    assert got is not None, message
+    expected = (1 - m) * (p.b - p.A @ h)
+    excess, k = float(got.group(1)), int(got.group(2))
+    assert excess == pytest.approx(expected.max(), rel=2e-3)  # message: 3 digits
+    assert expected[k] == pytest.approx(expected.max(), rel=1e-9)  # symmetric facets tie
 
 
 def test_check_command_detects_a_stale_file(tmp_path):

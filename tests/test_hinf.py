@@ -3,6 +3,7 @@ stability and margins, and the freshness of the shipped gains header."""
 
 from __future__ import annotations
 
+import inspect
 import json
 import math
 
@@ -168,6 +169,60 @@ def test_shipped_header_is_fresh():
     res = subprocess.run([sys.executable, "-m", "controller.gains_defaults", "--check"],
                          cwd=root, capture_output=True, text=True, check=False)
     assert res.returncode == 0, res.stdout + res.stderr
+
+
+def _spec(which: str, **change: object) -> tuple[hinf.LoopSpec, ...]:
+    return tuple(hinf.replace(s, **change) if s.name == which else s for s in hinf.SPECS)
+
+
+INPUT_CHANGES = {
+    "sample time": lambda: ("TS", 0.0025),
+    "filter frequency": lambda: ("FILT_WN", 55.0),
+    "filter damping": lambda: ("FILT_ZETA", 0.6),
+    "actuator constant": lambda: ("TAU_ACT", 1.0 / 50.0),
+    "actuator tau of a spec": lambda: ("SPECS", _spec("translation",
+                                                      tau=1.1 * hinf.TRANSLATION.tau)),
+    "a weight": lambda: ("SPECS", _spec("rotation", u_max=80.0)),
+    "a model set": lambda: ("SPECS", _spec("translation", k_range=(0.8, 1.4))),
+    "the computational delay": lambda: ("SPECS", _spec("rotation", delay=1)),
+}
+
+
+@pytest.mark.parametrize("change", sorted(INPUT_CHANGES))
+def test_inputs_hash_covers_every_synthesis_number(change, monkeypatch):
+    """Each number the synthesis reads, changed at run time (the sources unchanged), changes
+    the hash: the quick --check then says the shipped gains are stale."""
+    shipped = _shipped()["hash"]
+    assert gains_defaults.inputs_hash() == shipped
+    name, value = INPUT_CHANGES[change]()
+    monkeypatch.setattr(hinf, name, value)
+    assert gains_defaults.inputs_hash() != shipped
+    ok, msg = gains_defaults.check()
+    assert not ok and "synthesis inputs changed" in msg
+
+
+@pytest.mark.parametrize(("func", "param", "value"), [
+    (hinf.synthesize, "seed", 1), (hinf.synthesize, "maxiter", 1000),
+    (hinf.default_grid, "n", 200), (hinf.hinf_norm, "rtol", 1e-6),
+])
+def test_inputs_hash_covers_default_arguments(func, param, value, monkeypatch):
+    shipped = _shipped()["hash"]
+    names = [p.name for p in inspect.signature(func).parameters.values()
+             if p.default is not inspect.Parameter.empty]
+    defaults = list(func.__defaults__)
+    defaults[names.index(param)] = value
+    monkeypatch.setattr(func, "__defaults__", tuple(defaults))
+    assert gains_defaults.inputs_hash() != shipped
+
+
+def test_inputs_hash_ignores_last_digit_round_off(monkeypatch):
+    """A last-digit (1e-15 relative) difference, e.g. another platform's libm in the specs'
+    start points, is no input change: inputs are hashed to 12 significant digits."""
+    shipped = _shipped()["hash"]
+    monkeypatch.setattr(hinf, "FILT_WN", hinf.FILT_WN * (1.0 + 2e-15))
+    monkeypatch.setattr(hinf, "SPECS", _spec("rotation", start=tuple(
+        tuple(x * (1.0 + 2e-15) for x in s) for s in hinf.ROTATION.start)))
+    assert gains_defaults.inputs_hash() == shipped
 
 
 @pytest.mark.slow

@@ -1,6 +1,6 @@
 """The Python sources are ruff-clean (configuration in pyproject.toml)."""
 
-import shutil
+import importlib.util
 import subprocess
 import sys
 from pathlib import Path
@@ -11,12 +11,11 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_ruff_clean():
-    ruff = shutil.which("ruff")
-    if ruff is None:
+    if importlib.util.find_spec("ruff") is None:
         pytest.fail("ruff is a test dependency: pip install '.[test]'")
     targets = ["plant", "controller", "orchestrator", "mavlink_bridge", "tests"]
-    res = subprocess.run([ruff, "check", *targets], cwd=ROOT, capture_output=True, text=True,
-                         check=False)
+    res = subprocess.run([sys.executable, "-m", "ruff", "check", *targets], cwd=ROOT,
+                         capture_output=True, text=True, check=False)
     assert res.returncode == 0, res.stdout + res.stderr
 
 

@@ -5,10 +5,10 @@ MAVProxy test); each test picks free UDP ports at runtime and every wait is boun
 """
 
 import os
-import shutil
 import socket
 import subprocess
 import sys
+import sysconfig
 import threading
 import time
 from pathlib import Path
@@ -43,9 +43,10 @@ def finish(bridge, thread):
 
 
 def test_mavproxy_headless_sees_mode_attitude_and_position(tmp_path):
-    exe = shutil.which("mavproxy.py")
-    if exe is None:
-        pytest.fail("MAVProxy is a test dependency: pip install '.[test]'")
+    # the script installed beside the running interpreter, not one found on PATH
+    exe = Path(sysconfig.get_path("scripts")) / "mavproxy.py"
+    if not exe.is_file():
+        pytest.fail(f"{exe} missing: MAVProxy is a test dependency: pip install '.[test]'")
     port = free_port()
     fly = subprocess.Popen(
         [sys.executable, "-m", "orchestrator.cli", "fly", "--gcs", f"udpout:127.0.0.1:{port}",

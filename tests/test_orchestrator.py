@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import shutil
+import os
 import subprocess
-import sys
+import sysconfig
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -17,11 +18,14 @@ from orchestrator.results import RunResult
 from orchestrator.runner import prepare, run_scenario
 
 PAPER = ["hover_varying_orientation", "translation_frequency_sweep", "full_pose_with_disturbances"]
-FULLPOSE = shutil.which("fullpose")
+# the command installed beside the running interpreter, never one a PATH happens to find
+FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
 
 
 def cli(*args, check=False):
-    cmd = [FULLPOSE, *args] if FULLPOSE else [sys.executable, "-m", "orchestrator.cli", *args]
+    if not FULLPOSE.is_file():
+        pytest.fail(f"{FULLPOSE} missing: `pip install .` installs the fullpose command")
+    cmd = [str(FULLPOSE), *args]
     return subprocess.run(cmd, capture_output=True, text=True, check=check, timeout=600)
 
 
