@@ -1,1 +1,1 @@
-"""MAVLink bridge: fly the co-simulation from ground tools (issue: MAVLink bridge)."""
+"""MAVLink bridge: fly the co-simulation from ground tools (MAVLink 2 on UDP, docs/mavlink.md)."""

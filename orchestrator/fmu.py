@@ -37,15 +37,18 @@ def status_name(status: int) -> str:
     return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
 
 
-class FmuError(RuntimeError):
+class FmuError(FMICallException, RuntimeError):
     """An FMI call failed.  The message is the FMU's own: what it logged (naming the
     variable, value and reason) for the failing call, e.g.
-    ``FullPoseController: parameter K_vel_A[1] = 1.2: must be in (0, 1)``."""
+    ``FullPoseController: parameter poly_margin = 2: must be in (0, 1]``.  It is an
+    fmpy ``FMICallException`` too, so code written against fmpy keeps catching it."""
 
-    def __init__(self, model: str, call: str, messages: list[str]) -> None:
+    def __init__(self, model: str, call: str, messages: list[str],
+                 function: str = "", status: int = 3) -> None:
         self.model, self.call, self.messages = model, call, messages
+        self.function, self.status = function, status  # as fmpy's FMICallException
         text = "; ".join(messages) if messages else f"{call} failed (the FMU logged no reason)"
-        super().__init__(f"{model}: {text}")
+        Exception.__init__(self, f"{model}: {text}")
 
 
 @dataclass
@@ -93,7 +96,8 @@ class FmuInstance:
             self.slave.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
         except Exception:  # fmpy raises a bare Exception when fmi2Instantiate returns NULL
             logged = [m for s, _, m in self.messages if s in _FAILED]
-            raise FmuError(self.md.modelName, "fmi2Instantiate", logged) from None
+            raise FmuError(self.md.modelName, "fmi2Instantiate", logged,
+                           "fmi2Instantiate") from None
         self.time = 0.0
 
     # -- logging ---------------------------------------------------------------
@@ -180,9 +184,9 @@ class FmuInstance:
         first = len(self.messages)
         try:
             yield
-        except FMICallException:
+        except FMICallException as e:
             logged = [m for s, _, m in self.messages[first:] if s in _FAILED]
-            raise FmuError(self.md.modelName, what, logged) from None
+            raise FmuError(self.md.modelName, what, logged, e.function, e.status) from None
 
     def enter_initialization(self, start_time: float = 0.0,
                              parameters: Mapping[str, float | int | bool] | None = None) -> None:

@@ -130,7 +130,7 @@ def test_position_step_settles_without_big_overshoot(loop_factory, axis):
     out = loop_factory().run(6.0, constant(pos=target))
     x = out["pos"][:, axis] - HOVER[axis]
     overshoot = x.max() - 1.0
-    assert overshoot < 0.10  # issue: at most 10 %
+    assert overshoot < 0.10  # a well-damped position loop: at most 10 % overshoot
     assert abs(x[-1] - 1.0) < 0.01  # settled
     others = [i for i in range(3) if i != axis]
     assert np.abs(out["pos"][:, others] - HOVER[others]).max() < 0.02

@@ -88,7 +88,7 @@ def test_shipped_gamma(designs):
 
 
 def test_model_sets_cover_the_campaign():
-    """The multi-model sets span the spec's ranges: mass +-30 %, inertia +-50 %, tau +-30 %."""
+    """The multi-model sets span the certified ranges: mass +-30 %, inertia +-50 %, tau +-30 %."""
     assert hinf.TRANSLATION.k_range == pytest.approx((1 / 1.3, 1 / 0.7))
     assert hinf.ROTATION.k_range == pytest.approx((1 / 1.5, 1 / 0.5))
     for spec in hinf.SPECS:

@@ -95,7 +95,7 @@ def piqp_solve(prob: dict, eps: float = 1e-10, scale_cost: bool = False):
     return str(status), None
 
 
-# Oracle runs, in order, until ours agrees: the brief's tolerances first; at
+# Oracle runs, in order, until ours agrees: eps = 1e-10 first; at
 # 1e7 weight ratios piqp's residuals (relative to ||P|| ~ 1e11) leave up to
 # ~1e-4 relative error in the objective, so tighter runs follow.
 ORACLE_RUNS = ({"eps": 1e-10}, {"eps": 1e-13}, {"eps": 1e-13, "scale_cost": True})
