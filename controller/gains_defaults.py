@@ -37,7 +37,7 @@ COMMAND = "python -m controller.gains_defaults"
 ROOT = Path(__file__).resolve().parents[1]
 HEADER = ROOT / "fmu_src" / "controller" / "default_gains.h"
 CACHE = ROOT / "controller" / "default_gains.json"
-SOURCES = ("controller/hinf.py", "controller/lti.py", "controller/gains_defaults.py")
+SOURCES = ("controller/hinf.py", "controller/lti.py")  # the code that computes the gains
 LOOPS = (("pos", "translation", "outer"), ("vel", "translation", "inner"),
          ("att", "rotation", "outer"), ("rate", "rotation", "inner"))
 
@@ -171,11 +171,16 @@ def controller_parameters(blocks: dict | None = None) -> dict[str, float]:
 
 
 def check(full: bool = False) -> tuple[bool, str]:
-    if not HEADER.is_file() or not CACHE.is_file():
-        return False, f"{HEADER.name} or {CACHE.name} is missing: run {COMMAND}"
+    """(up to date, message).  The synthesis inputs are compared first: they and the shipped
+    gains file are in the installed package too, the C header only in a checkout."""
+    if not CACHE.is_file():
+        return False, f"{CACHE.name} is missing: run {COMMAND}"
     cached = json.loads(CACHE.read_text())
     if cached.get("hash") != inputs_hash():
         return False, f"synthesis inputs changed since {HEADER.name} was generated: run {COMMAND}"
+    if not HEADER.is_file():
+        return False, (f"{HEADER} is missing (an installed package has no fmu_src/: check "
+                       f"from a checkout): run {COMMAND}")
     if HEADER.read_text() != render(cached):
         return False, f"{HEADER} does not match {CACHE.name}: run {COMMAND}"
     if full:

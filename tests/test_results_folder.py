@@ -1,0 +1,134 @@
+"""Results folders are whole or absent; S(0) is cached by content; paper claims are only
+judged for runs in the paper's conditions."""
+
+import dataclasses
+import json
+
+import numpy as np
+import pytest
+
+from controller import polytope_cache
+from controller.force_sets import feasible_force_set, same_polytope
+from orchestrator.runner import OutputError, paper_conditions, prepare, publish
+from plant import load_airframe
+
+# -- publish -----------------------------------------------------------------
+
+
+def fill(files):
+    def write(folder):
+        for name, text in files.items():
+            (folder / name).write_text(text)
+    return write
+
+
+def test_publish_replaces_the_whole_folder(tmp_path):
+    out = tmp_path / "res"
+    publish(out, fill({"metrics.json": "{}", "tracking.png": "old figure"}))
+    publish(out, fill({"metrics.json": '{"new": 1}'}))
+    assert sorted(p.name for p in out.iterdir()) == ["metrics.json"]  # no figure of the old run
+    assert json.loads((out / "metrics.json").read_text()) == {"new": 1}
+    assert [p.name for p in tmp_path.iterdir()] == ["res"]  # no temporary folder left
+
+
+def test_a_failing_write_leaves_the_previous_results(tmp_path):
+    out = tmp_path / "res"
+    publish(out, fill({"metrics.json": "previous"}))
+
+    def broken(folder):
+        (folder / "metrics.json").write_text("half")
+        raise RuntimeError("disk full")
+
+    with pytest.raises(RuntimeError, match="disk full"):
+        publish(out, broken)
+    assert (out / "metrics.json").read_text() == "previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["res"]
+
+
+def test_publish_never_replaces_a_folder_that_is_not_results(tmp_path):
+    mine = tmp_path / "mine"
+    mine.mkdir()
+    (mine / "thesis.tex").write_text("years of work")
+    with pytest.raises(OutputError, match="does not hold fullpose results"):
+        publish(mine, fill({"metrics.json": "{}"}))
+    assert (mine / "thesis.tex").read_text() == "years of work"
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    publish(empty, fill({"metrics.json": "{}"}))  # an empty folder is fine
+    assert (empty / "metrics.json").is_file()
+
+
+# -- the polytope cache ----------------------------------------------------------
+
+
+@pytest.fixture
+def cache(tmp_path, monkeypatch):
+    monkeypatch.setenv("FULLPOSE_CACHE_DIR", str(tmp_path / "cache"))
+    return tmp_path / "cache"
+
+
+def test_cache_computes_once_per_airframe_content(cache):
+    af = load_airframe("paper_hexacopter")
+    calls = []
+
+    def compute(a):
+        calls.append(a.name)
+        return {"poly_n": 4, "x": 0.1 + 0.2}
+
+    first = polytope_cache.cached_parameters("t", af, compute)
+    renamed = dataclasses.replace(af, name="same numbers, another name")
+    again = polytope_cache.cached_parameters("t", renamed, compute)
+    assert first == again == {"poly_n": 4, "x": 0.1 + 0.2}  # floats round-trip exactly
+    assert calls == [af.name]
+    heavier = dataclasses.replace(af, mass=af.mass * 1.01)  # an edited airframe
+    polytope_cache.cached_parameters("t", heavier, compute)
+    assert len(calls) == 2
+
+
+def test_a_corrupt_entry_is_recomputed(cache):
+    af = load_airframe("paper_hexacopter")
+    polytope_cache.cached_parameters("t", af, lambda a: {"v": 1.0})
+    (entry,) = cache.iterdir()
+    entry.write_text('{"parameters": {"v": NaN}}')
+    assert polytope_cache.cached_parameters("t", af, lambda a: {"v": 2.0}) == {"v": 2.0}
+    entry.write_text("garbage")
+    assert polytope_cache.cached_parameters("t", af, lambda a: {"v": 3.0}) == {"v": 3.0}
+
+
+def test_an_unwritable_cache_only_costs_the_caching(tmp_path, monkeypatch):
+    blocker = tmp_path / "a_file"
+    blocker.write_text("")
+    monkeypatch.setenv("FULLPOSE_CACHE_DIR", str(blocker / "cache"))
+    af = load_airframe("paper_hexacopter")
+    assert polytope_cache.cached_parameters("t", af, lambda a: {"v": 1.0}) == {"v": 1.0}
+
+
+def test_cached_s0_is_the_airframes_s0(cache):
+    """Oracle: the set computed directly by controller.force_sets."""
+    af = load_airframe("quadrotor")
+    params = polytope_cache.polytope_parameters(af)
+    params = polytope_cache.polytope_parameters(af)  # from the cache this time
+    n = int(params["poly_n"])
+    A = np.array([[params[f"poly_A[{i + 1},{j + 1}]"] for j in range(3)] for i in range(n)])
+    b = np.array([params[f"poly_b[{i + 1}]"] for i in range(n)])
+    poly = feasible_force_set(af)
+    same, why = same_polytope(A, b, poly.A, poly.b)
+    assert same, why
+
+
+# -- paper conditions ------------------------------------------------------------
+
+
+def test_paper_claims_are_judged_only_in_the_papers_conditions(tmp_path):
+    assert paper_conditions(prepare("hover_varying_orientation")) is None
+    assert "20 s run; the paper's is 100 s" in paper_conditions(
+        prepare("hover_varying_orientation", duration=20.0))
+    assert "controller.K_pos_D[1]" in paper_conditions(
+        prepare("hover_varying_orientation", settings=["controller.K_pos_D[1]=3"]))
+    assert paper_conditions(prepare("hover")) is None  # no claims at all
+    copy = tmp_path / "hover_varying_orientation.toml"
+    shipped = prepare("hover_varying_orientation").source
+    copy.write_text(open(shipped).read())
+    assert paper_conditions(prepare(copy)) is None  # the same file elsewhere is the same
+    copy.write_text(open(shipped).read() + "\n[plant]\nnoise_pos = 0.05\n")
+    assert "differs from the shipped scenario file" in paper_conditions(prepare(copy))
