@@ -89,18 +89,22 @@ def publish(out_dir: Path, write: Callable[[Path], None]) -> None:
     except OSError as e:
         raise OutputError(f"{out_dir}: cannot create the results folder: "
                           f"{e.strerror or e}") from None
+    old: Path | None = None
     try:
         write(tmp)
         if out_dir.exists():
             old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=parent))
             os.replace(out_dir, old / out_dir.name)  # a folder cannot replace a folder on
-            os.replace(tmp, out_dir)                 # every OS: move the old one aside first
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(tmp, out_dir)
+        os.replace(tmp, out_dir)                     # every OS: move the old one aside first
     except BaseException:
+        if old is not None and not out_dir.exists() and (old / out_dir.name).exists():
+            os.replace(old / out_dir.name, out_dir)  # interrupted between the two moves
         shutil.rmtree(tmp, ignore_errors=True)
+        if old is not None:
+            shutil.rmtree(old, ignore_errors=True)
         raise
+    if old is not None:
+        shutil.rmtree(old, ignore_errors=True)
 
 
 def paper_conditions(scenario: Scenario) -> str | None:

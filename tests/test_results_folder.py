@@ -3,6 +3,7 @@ judged for runs in the paper's conditions."""
 
 import dataclasses
 import json
+import os
 
 import numpy as np
 import pytest
@@ -132,3 +133,23 @@ def test_paper_claims_are_judged_only_in_the_papers_conditions(tmp_path):
     assert paper_conditions(prepare(copy)) is None  # the same file elsewhere is the same
     copy.write_text(open(shipped).read() + "\n[plant]\nnoise_pos = 0.05\n")
     assert "differs from the shipped scenario file" in paper_conditions(prepare(copy))
+
+
+def test_a_failure_between_the_two_moves_restores_the_previous_results(tmp_path, monkeypatch):
+    out = tmp_path / "res"
+    publish(out, fill({"metrics.json": "previous"}))
+    real = os.replace
+    calls = []
+
+    def second_move_fails(src, dst):
+        calls.append((src, dst))
+        if len(calls) == 2:  # the new folder into place: interrupted here
+            raise KeyboardInterrupt
+        real(src, dst)
+
+    monkeypatch.setattr(os, "replace", second_move_fails)
+    with pytest.raises(KeyboardInterrupt):
+        publish(out, fill({"metrics.json": "new"}))
+    monkeypatch.setattr(os, "replace", real)
+    assert (out / "metrics.json").read_text() == "previous"
+    assert [p.name for p in tmp_path.iterdir()] == ["res"]
