@@ -11,6 +11,10 @@ inside divergence:
 * tilt (angle between body z and world z, cos = cos(phi) cos(theta)) > 90 deg: upside down,
   beyond what the controller's Euler bounds (+-60 deg each: at most 75.5 deg) command;
 * any non-finite plant output or controller command.
+
+The recording then ends at the lost sample, or, when that sample is not finite, at the last
+finite one before it (so every recorded number stays finite); the reported time is the lost
+sample's.
 """
 
 from __future__ import annotations
