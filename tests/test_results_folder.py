@@ -153,3 +153,29 @@ def test_a_failure_between_the_two_moves_restores_the_previous_results(tmp_path,
     monkeypatch.setattr(os, "replace", real)
     assert (out / "metrics.json").read_text() == "previous"
     assert [p.name for p in tmp_path.iterdir()] == ["res"]
+
+
+# -- the lost-vehicle rule ---------------------------------------------------------
+
+
+def test_first_lost_finds_the_first_sample_beyond_any_bound():
+    from orchestrator.outcome import LostCriteria, first_lost
+
+    n = 10
+    t = np.arange(n) * 0.002
+    ref = np.zeros((n, 3))
+    pos = np.zeros((n, 3))
+    euler = np.zeros((n, 3))
+    finite = np.ones(n, dtype=bool)
+    crit = LostCriteria(position_error=1.0, tilt_deg=60.0)
+    assert first_lost(t, pos, ref, euler, finite, crit) is None
+    pos[7] = [0.6, 0.6, 0.6]  # |e| = 1.04 m > 1 m
+    euler[5] = [np.radians(40.0), np.radians(40.0), 3.0]  # tilt 54 deg; yaw does not tilt
+    assert first_lost(t, pos, ref, euler, finite, crit).row == 7
+    euler[4] = [np.radians(50.0), np.radians(45.0), 0.0]  # tilt 63 deg
+    lost = first_lost(t, pos, ref, euler, finite, crit)
+    assert (lost.row, lost.nonfinite) == (4, False) and "tilt 63" in lost.reason
+    finite[2] = False
+    pos[2] = np.nan
+    lost = first_lost(t, pos, ref, euler, finite, crit)
+    assert lost.row == 2 and lost.nonfinite and lost.time == pytest.approx(0.004)
