@@ -14,7 +14,6 @@ as a set (:func:`controller.force_sets.same_polytope`), never byte for byte.
 from __future__ import annotations
 
 import argparse
-import re
 import sys
 from collections.abc import Sequence
 from pathlib import Path
@@ -23,7 +22,7 @@ import numpy as np
 
 from controller.failures import FAIL_FACETS, MAX_ROTORS, failure_polytopes, hover_possible
 from controller.force_sets import Polytope, same_polytope
-from controller.polytope_defaults import skeleton
+from controller.polytope_defaults import check_header, read_array, skeleton
 from plant import load_airframe
 
 AIRFRAME = "paper_hexacopter"
@@ -82,15 +81,9 @@ static const double fp_default_fail_b[{MAX_ROTORS * FAIL_FACETS}] = {{
 
 def parse(text: str) -> list[tuple[np.ndarray, np.ndarray]]:
     """Per rotor slot (MAX_ROTORS of them) the (A, b) of its polytope, read from a header."""
-    def array(name: str) -> np.ndarray:
-        m = re.search(rf"{name}\[[^\]]*\] = \{{([^}}]*)\}}", text)
-        if m is None:
-            raise ValueError(f"{name} not found")
-        return np.array([float(x) for x in m.group(1).split(",") if x.strip()])
-
-    counts = array("fp_default_fail_n").astype(int)
-    A = array("fp_default_fail_A").reshape(-1, 3)
-    b = array("fp_default_fail_b")
+    counts = read_array(text, "fp_default_fail_n").astype(int)
+    A = read_array(text, "fp_default_fail_A").reshape(-1, 3)
+    b = read_array(text, "fp_default_fail_b")
     if counts.size != MAX_ROTORS or b.size != MAX_ROTORS * FAIL_FACETS or len(A) != b.size \
             or np.any(counts < 0) or np.any(counts > FAIL_FACETS):
         raise ValueError("array sizes or facet counts do not fit FP_FAIL_POLYTOPE_FACETS")
@@ -121,13 +114,7 @@ def compare(old: str, fresh: str) -> tuple[bool, str]:
 
 def check(path: Path = HEADER, fresh: str | None = None) -> tuple[bool, str]:
     """(up to date, message): the file against a fresh rendering (:func:`compare`)."""
-    text = render() if fresh is None else fresh
-    if not path.is_file():
-        return False, f"{path} is missing: run {COMMAND}"
-    ok, why = compare(path.read_text(encoding="utf-8"), text)
-    if ok:
-        return True, f"{path} is fresh ({why})"
-    return False, f"{path} is stale: {why}: run {COMMAND}"
+    return check_header(path, render() if fresh is None else fresh, compare, COMMAND)
 
 
 def main(argv: list[str] | None = None) -> int:

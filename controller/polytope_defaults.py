@@ -21,6 +21,7 @@ from __future__ import annotations
 import argparse
 import re
 import sys
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -95,7 +96,8 @@ def compute() -> Polytope:
     return feasible_force_set(AIRFRAME)
 
 
-def _array(text: str, name: str) -> np.ndarray:
+def read_array(text: str, name: str) -> np.ndarray:
+    """The numbers of the C array ``name`` in a generated header."""
     m = re.search(rf"{name}\[[^\]]*\] = \{{([^}}]*)\}}", text)
     if m is None:
         raise ValueError(f"{name} not found")
@@ -104,8 +106,8 @@ def _array(text: str, name: str) -> np.ndarray:
 
 def parse(text: str) -> tuple[np.ndarray, np.ndarray]:
     """(A, b) read back from a header text (for the check and tests)."""
-    A = _array(text, "fp_default_polytope_A").reshape(-1, 3)
-    return A, _array(text, "fp_default_polytope_b")
+    A = read_array(text, "fp_default_polytope_A").reshape(-1, 3)
+    return A, read_array(text, "fp_default_polytope_b")
 
 
 def skeleton(text: str) -> str:
@@ -135,7 +137,7 @@ def compare(old: str, fresh: str) -> tuple[bool, str]:
         same, why = same_polytope(A0, b0, A1, b1, names=("the file's polytope", "a fresh one"))
         if not same:
             return False, why
-        z0, z1 = (_array(t, "fp_default_polytope_fz_range") for t in (old, fresh))
+        z0, z1 = (read_array(t, "fp_default_polytope_fz_range") for t in (old, fresh))
         size = float(np.max(np.abs(np.concatenate([z0, z1]))))
         if z0.shape != z1.shape or not np.allclose(z0, z1, rtol=0.0, atol=REL_TOL * size):
             return False, f"the f_bz range {z0} differs from a fresh {z1}"
@@ -144,15 +146,20 @@ def compare(old: str, fresh: str) -> tuple[bool, str]:
     return True, why
 
 
-def check(path: Path = HEADER, fresh: str | None = None) -> tuple[bool, str]:
-    """(up to date, message): the file against a fresh rendering (:func:`compare`)."""
-    text = render(compute()) if fresh is None else fresh
+def check_header(path: Path, fresh: str, compare: Callable[[str, str], tuple[bool, str]],
+                 command: str) -> tuple[bool, str]:
+    """(up to date, message): a generated file against a fresh rendering, by ``compare``."""
     if not path.is_file():
-        return False, f"{path} is missing: run {COMMAND}"
-    ok, why = compare(path.read_text(encoding="utf-8"), text)
+        return False, f"{path} is missing: run {command}"
+    ok, why = compare(path.read_text(encoding="utf-8"), fresh)
     if ok:
         return True, f"{path} is up to date ({why})"
-    return False, f"{path} is stale: {why}: run {COMMAND}"
+    return False, f"{path} is stale: {why}: run {command}"
+
+
+def check(path: Path = HEADER, fresh: str | None = None) -> tuple[bool, str]:
+    """(up to date, message): the file against a fresh rendering (:func:`compare`)."""
+    return check_header(path, render(compute()) if fresh is None else fresh, compare, COMMAND)
 
 
 def main(argv: list[str] | None = None) -> int:

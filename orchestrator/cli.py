@@ -12,6 +12,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from collections.abc import Iterable
 from pathlib import Path
 
 import numpy as np
@@ -41,8 +42,8 @@ def _fmt(value: object, spec: str, unit: str = "") -> str:
     return f"{value:{spec}}{' ' + unit if unit else ''}"
 
 
-def _warn(lines: object) -> None:
-    for line in lines if isinstance(lines, (list, tuple)) else ():
+def _warn(lines: Iterable[str]) -> None:
+    for line in lines:
         print(f"fullpose: warning: {line}", file=sys.stderr)
 
 
@@ -51,7 +52,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from orchestrator.runner import prepare, run_scenario
 
     scenario = prepare(args.scenario, args.duration, args.set)
-    _warn(getattr(scenario, "warnings", ()))
+    _warn(scenario.warnings)
     out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
     print(f"running {scenario.name} ({scenario.duration:g} s, airframe {scenario.airframe.name}, "
           f"{scenario.coupling}) -> {out}")
@@ -95,7 +96,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from orchestrator.runner import prepare
 
     sc = prepare(args.file, args.duration, args.set)
-    _warn(getattr(sc, "warnings", ()))
+    _warn(sc.warnings)
     # both FMUs instantiated and initialized with the scenario's values: whatever they
     # would refuse at the start of a run is reported here too
     CoSimulation(sc).initialize_only()

@@ -181,6 +181,9 @@ class _Plan:
         self.c_plant = self.c_ref + len(self.ref_names)
         self.c_dist = self.c_plant + len(self.plant_order)
         self.c_ctrl = self.c_dist + len(self.dist_names)
+        # first columns of plant.pos, ref.pos_ref, plant.euler: what the lost check reads
+        self.pose_columns = tuple(self.columns.index(f"{g}[1]")
+                                  for g in ("plant.pos", "ref.pos_ref", "plant.euler"))
         self.p_ints, self.c_ints = plant.outputs("Integer", n), ctrl.outputs("Integer", n)
         self.c_bools = ctrl.outputs("Boolean", n)
         self.int_columns = ([f"plant.{v}" for v in self.p_ints]
@@ -335,10 +338,7 @@ class _Plan:
         """The first lost row among rows first..last (inclusive) of the recording."""
         rows = slice(first, last + 1)
         d = self.data
-        c = self.columns
-        pos = d[rows, c.index("plant.pos[1]"):c.index("plant.pos[1]") + 3]
-        ref = d[rows, c.index("ref.pos_ref[1]"):c.index("ref.pos_ref[1]") + 3]
-        euler = d[rows, c.index("plant.euler[1]"):c.index("plant.euler[1]") + 3]
+        pos, ref, euler = (d[rows, c:c + 3] for c in self.pose_columns)
         finite = np.all(np.isfinite(d[rows, self.c_plant:self.c_dist]), axis=1)
         # the controller's commands of a row exist once the row has been stepped
         stepped = slice(first, min(last + 1, self.rows - 1))

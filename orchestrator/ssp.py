@@ -84,7 +84,7 @@ from fmpy.model_description import ModelDescription
 from fmpy.ssp.ssd import Parameter, ParameterSet, System, read_ssd
 from lxml import etree
 
-from controller.force_sets import feasible_force_set
+from controller.polytope_cache import polytope_parameters
 from orchestrator.fmu import FmuInstance
 from plant import fmu_path, load_airframe
 
@@ -211,12 +211,7 @@ def component_parameters(airframe: str | Path = "paper_hexacopter",
     plant["init_trim"] = True
     ctrl: dict[str, Value] = {k: v for k, v in af.fmu_parameters().items()
                               if k not in _PLANT_ONLY}
-    poly = feasible_force_set(af)
-    ctrl["poly_n"] = len(poly.b)
-    for i in range(len(poly.b)):
-        for j in range(3):
-            ctrl[f"poly_A[{i + 1},{j + 1}]"] = float(poly.A[i, j])
-        ctrl[f"poly_b[{i + 1}]"] = float(poly.b[i])
+    ctrl.update(polytope_parameters(af))
     for ref in _REFERENCES:
         for i in range(3):
             ctrl[f"{ref}[{i + 1}]"] = p0[i] if ref == "pos_ref" else 0.0
