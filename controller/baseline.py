@@ -20,6 +20,7 @@ import numpy as np
 from scipy import optimize
 
 from controller import hinf
+from controller.fmu_parameters import block_parameters
 
 CACHE = Path(__file__).resolve().with_name("default_gains.json")
 
@@ -69,14 +70,7 @@ def compute_gains() -> dict[str, float]:
 def controller_parameters(gains: dict[str, float] | None = None) -> dict[str, float]:
     """The baseline as controller FMU parameter overrides."""
     gains = compute_gains() if gains is None else gains
-    out = {}
-    for loop, k in gains.items():
-        for name in "ABC":
-            for i in range(3):
-                out[f"K_{loop}_{name}[{i + 1}]"] = 0.0
-        for i in range(3):
-            out[f"K_{loop}_D[{i + 1}]"] = float(k)
-    return out
+    return block_parameters({loop: hinf.Block.p(k).fmu() for loop, k in gains.items()})
 
 
 if __name__ == "__main__":

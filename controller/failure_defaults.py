@@ -20,7 +20,8 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.failures import FAIL_FACETS, MAX_ROTORS, failure_polytopes, hover_possible
+from controller.failures import failure_polytopes, hover_possible
+from controller.fmu_parameters import FAIL_FACETS, MAX_ROTORS
 from controller.force_sets import Polytope, same_polytope
 from controller.polytope_defaults import check_header, read_array, skeleton
 from plant import load_airframe

@@ -12,13 +12,9 @@ from collections.abc import Iterable
 
 import numpy as np
 
+from controller.fmu_parameters import FAIL_FACETS
 from controller.force_sets import EmptyForceSetError, Polytope, feasible_force_set
 from plant import Airframe
-
-FAIL_FACETS = 32
-"""Facet cap of each single-failure polytope (the FMU's fail_poly_A holds 8 x 32 rows)."""
-
-MAX_ROTORS = 8
 
 
 def airframe_without(af: Airframe, lost: Iterable[int]) -> Airframe:
@@ -42,23 +38,6 @@ def failure_polytopes(af: Airframe, n_directions: int = FAIL_FACETS) -> list[Pol
         except EmptyForceSetError:
             out.append(None)
     return out
-
-
-def failure_parameters(af: Airframe) -> dict[str, float | int]:
-    """Controller FMU parameter values (fail_poly_n, fail_poly_A, fail_poly_b) for ``af``."""
-    params: dict[str, float | int] = {}
-    for i, poly in enumerate(failure_polytopes(af)):
-        n = 0 if poly is None else len(poly.b)
-        params[f"fail_poly_n[{i + 1}]"] = n
-        for k in range(n):
-            row = i * FAIL_FACETS + k + 1
-            assert poly is not None
-            for j in range(3):
-                params[f"fail_poly_A[{row},{j + 1}]"] = float(poly.A[k, j])
-            params[f"fail_poly_b[{row}]"] = float(poly.b[k])
-    for i in range(af.n_rotors, MAX_ROTORS):
-        params[f"fail_poly_n[{i + 1}]"] = 0
-    return params
 
 
 def hover_possible(poly: Polytope | None, af: Airframe) -> bool:

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 
 from controller import hinf, lti
+from controller.fmu_parameters import block_parameters
 
 COMMAND = "python -m controller.gains_defaults"
 ROOT = Path(__file__).resolve().parents[1]
@@ -162,12 +163,7 @@ def controller_parameters(blocks: dict | None = None) -> dict[str, float]:
     """The shipped gains as controller FMU parameter overrides {"K_pos_A[1]": ...}."""
     if blocks is None:
         blocks = json.loads(CACHE.read_text())["blocks"]
-    out = {}
-    for loop, vals in blocks.items():
-        for name, v in zip("ABCD", vals, strict=True):
-            for i in range(3):
-                out[f"K_{loop}_{name}[{i + 1}]"] = float(v)
-    return out
+    return block_parameters(blocks)
 
 
 def check(full: bool = False) -> tuple[bool, str]:

@@ -26,12 +26,11 @@ from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 
+from controller.fmu_parameters import Parameters, failure_parameters, s0_parameters
 from plant import Airframe
 
-Parameters = dict[str, float | int]
-
-_GENERATORS = ("controller.force_sets", "controller.failures", "controller.polytope_cache",
-               "plant.effectiveness")
+_GENERATORS = ("controller.force_sets", "controller.failures", "controller.fmu_parameters",
+               "controller.polytope_cache", "plant.effectiveness")
 """The modules whose code decides the sets: their source is part of every key."""
 _FORMAT = 1
 
@@ -114,18 +113,16 @@ def polytope_parameters(airframe: Airframe) -> Parameters:
 
 def failure_set_parameters(airframe: Airframe) -> Parameters:
     """The ``fail_poly_*`` parameters: S(0) after each single-rotor loss."""
-    from controller.failures import failure_parameters
-
-    return cached_parameters("failures", airframe, failure_parameters)
+    return cached_parameters("failures", airframe, _failure_parameters)
 
 
 def _s0_parameters(airframe: Airframe) -> Parameters:
     from controller.force_sets import feasible_force_set
 
-    poly = feasible_force_set(airframe)
-    params: Parameters = {"poly_n": len(poly.b)}
-    for i in range(len(poly.b)):
-        for j in range(3):
-            params[f"poly_A[{i + 1},{j + 1}]"] = float(poly.A[i, j])
-        params[f"poly_b[{i + 1}]"] = float(poly.b[i])
-    return params
+    return s0_parameters(feasible_force_set(airframe))
+
+
+def _failure_parameters(airframe: Airframe) -> Parameters:
+    from controller.failures import failure_polytopes
+
+    return failure_parameters(failure_polytopes(airframe))

@@ -3,7 +3,7 @@
 This is the first main job of the product (before the controller exists): it
 exercises the installed plant FMU end to end and reports how well the trim
 holds.  The plant starts at trim (init_trim) and its measured actuator states
-are fed back as constant commands.
+are held as its commands, stepped by the same C engine as every closed loop.
 """
 
 from __future__ import annotations
@@ -16,10 +16,14 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator.engine import Connections, Recording, make_engine
 from orchestrator.fmu import FmuInstance
+from orchestrator.start_values import Pose, plant_start_values
 from plant import fmu_path, load_airframe
 
 STEP = 0.002  # s, the co-simulation rate of 500 Hz
+COMMANDS = ("omega_cmd", "alpha_cmd", "beta_cmd")
+OUTPUTS = ("pos", "vel", "euler")
 
 
 @dataclass
@@ -42,28 +46,27 @@ def run_hover(airframe: str = "paper_hexacopter", duration: float = 10.0,
     if not duration > 0:
         raise ValueError(f"duration must be positive, got {duration}")
     af = load_airframe(airframe)
-    params = af.fmu_parameters()
-    params.update({f"pos0[{i + 1}]": v for i, v in enumerate(pos0)})
-    params["init_trim"] = True
+    params = plant_start_values(af, Pose.of(pos0), overrides={"init_trim": True})
     n = af.n_rotors
     steps = round(duration / STEP)
     with FmuInstance(fmu_path("MultirotorPlant"), "plant") as fmu:
-        fmu.initialize(parameters=params)
-        meas = fmu.signal(["omega", "alpha", "beta"])
-        cmd = fmu.signal(["omega_cmd", "alpha_cmd", "beta_cmd"])
-        outputs = fmu.signal(["pos", "vel", "euler"])
-        trim = fmu.read(meas).copy()
-        fmu.write(cmd, trim)
-        table = np.empty((steps + 1, 1 + outputs.values.size))
-        table[0, 0] = 0.0
-        table[0, 1:] = fmu.read(outputs)
+        conn = Connections.open_loop(fmu, COMMANDS)
+        rec = Recording(conn, steps + 1)
+        engine = make_engine("native", fmu, None, conn, rec, STEP)
+        engine.initialize(params, {}, np.zeros(0))
+        # the commands: the trim the plant initialized to, held; the disturbances at rest
+        rec.commands[:] = rec.plant[0, [conn.plant_out.index(c.replace("_cmd[", "["))
+                                        for c in conn.commands]]
+        rec.dist[:] = [float(fmu.variables[v].start) for v in conn.dist_names]
+        rec.time[:] = np.arange(steps + 2) * STEP
         t0 = time.perf_counter()
-        for k in range(1, steps + 1):
-            fmu.step(STEP)
-            table[k, 0] = k * STEP
-            table[k, 1:] = fmu.read(outputs)
+        engine.steps(0, steps, 0.0)
         wall = time.perf_counter() - t0
-    names = ["time", *outputs.names]
+        trim = rec.commands[0, :n]
+        outputs = [c for g in OUTPUTS for c in range(*rec.columns_of(f"plant.{g}").indices(
+            len(rec.columns)))]
+        table = rec.data[:steps + 1][:, [0, *outputs]].copy()
+        names = ["time", *(rec.columns[c].split(".", 1)[1] for c in outputs)]
     drift = np.linalg.norm(table[:, 1:4] - np.asarray(pos0), axis=1)
     summary = HoverSummary(
         airframe=af.name,

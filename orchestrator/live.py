@@ -12,15 +12,17 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from orchestrator.fmu import FmuInstance
-from orchestrator.master import (
+from orchestrator.engine import (
     COUPLINGS,
     DIST_INPUTS,
     ENGINES,
     REF_INPUTS,
-    _Plan,
-    controller_parameters,
+    Connections,
+    Recording,
+    make_engine,
 )
+from orchestrator.fmu import FmuInstance
+from orchestrator.start_values import Pose, start_values
 from plant import Airframe, fmu_path, load_airframe
 
 
@@ -50,41 +52,32 @@ class LiveSession:
         self.plant_inst = FmuInstance(fmu_path("MultirotorPlant"), "plant")
         self.ctrl_inst = FmuInstance(fmu_path("FullPoseController"), "controller")
         try:
-            p_params: dict[str, object] = dict(self.airframe.fmu_parameters())
-            for i in range(3):
-                p_params[f"pos0[{i + 1}]"] = float(pos0[i])
-                p_params[f"euler0[{i + 1}]"] = float(euler0[i])
-            p_params["timing"] = timing
-            p_params.update(plant_parameters or {})
-            c_params: dict[str, object] = dict(controller_parameters(self.airframe,
-                                                                     self.ctrl_inst))
-            c_params["timing"] = timing
-            c_params.update(controller_parameters_ or {})
+            start = start_values(self.airframe, Pose.of(pos0, euler0), timing=timing,
+                                 plant_overrides=plant_parameters,
+                                 controller_overrides=controller_parameters_)
+            conn = Connections.closed_loop(self.plant_inst, self.ctrl_inst)
+            self.rec = Recording(conn, chunk + 1)
+            self.engine = make_engine(engine, self.plant_inst, self.ctrl_inst, conn, self.rec,
+                                      step, coupling)
             self.reference = np.concatenate([np.asarray(pos0, float), np.asarray(euler0, float),
                                              np.zeros(9), np.ones(8)])  # + rotor_health
-            self.plan = _Plan.build(self.plant_inst, self.ctrl_inst, chunk + 1, p_params,
-                                    c_params, self.reference)
-            widths = [len(self.plant_inst.expand(g)) for g in DIST_INPUTS]
-            self.disturbance = np.zeros(sum(widths))
-            self.disturbance[-widths[-1]:] = 1.0  # rotor efficiencies
-            jacobi = coupling == "jacobi"
-            self._runner = (self.plan.native_runner(step, jacobi) if engine == "native"
-                            else self.plan.python_runner(step, jacobi))
-            self._ref_slices = self._slices(self.ctrl_inst, REF_INPUTS, self.plan.c_ref)
-            self._dist_slices = self._slices(self.plant_inst, DIST_INPUTS, self.plan.c_dist)
+            self.engine.initialize(start.plant, start.controller, self.reference)
+            self.disturbance = np.zeros(self.rec.dist.shape[1])
+            self.disturbance[-len(conn.dist[-1]):] = 1.0  # rotor efficiencies
+            self._ref_slices = self._slices(conn.ref, REF_INPUTS)
+            self._dist_slices = self._slices(conn.dist, DIST_INPUTS)
             # controller outputs before the first step: its initial ones (spare row)
-            self._last_ctrl_row = self.plan.rows
+            self._last_ctrl_row = self.rec.spare
         except Exception:
             self.close()
             raise
 
     @staticmethod
-    def _slices(inst: FmuInstance, groups: Sequence[str], first: int) -> dict[str, slice]:
+    def _slices(blocks: Sequence[Sequence[str]], groups: Sequence[str]) -> dict[str, slice]:
         out, col = {}, 0
-        for g in groups:
-            width = len(inst.expand(g))
-            out[g] = slice(col, col + width)
-            col += width
+        for g, names in zip(groups, blocks, strict=True):
+            out[g] = slice(col, col + len(names))
+            col += len(names)
         return out
 
     # -- inputs --------------------------------------------------------------
@@ -131,19 +124,19 @@ class LiveSession:
         n = self.chunk if steps is None else steps
         if not 1 <= n <= self.chunk:
             raise ValueError(f"steps must be in 1..{self.chunk}")
-        plan, data = self.plan, self.plan.data
+        rec = self.rec
         h = self.step_size
-        data[:n, 0] = self.time + np.arange(n) * h
-        data[:n, plan.c_ref:plan.c_plant] = self.reference
-        data[:n, plan.c_dist:plan.c_ctrl] = self.disturbance
-        self._runner(0, n, self.time)
+        rec.time[:n] = self.time + np.arange(n) * h
+        rec.ref[:n] = self.reference
+        rec.dist[:n] = self.disturbance
+        self.engine.steps(0, n, self.time)
         # roll over: y at the new time becomes row 0; u_{n-1} the Jacobi spare row
-        data[0, plan.c_plant:plan.c_dist] = data[n, plan.c_plant:plan.c_dist]
-        n_pint = len(plan.p_ints)
-        plan.ints[0, :n_pint] = plan.ints[n, :n_pint]
-        data[plan.rows, plan.c_ctrl:] = data[n - 1, plan.c_ctrl:]
-        plan.ints[plan.rows, n_pint:] = plan.ints[n - 1, n_pint:]
-        self._last_ctrl_row = plan.rows
+        rec.plant[0] = rec.plant[n]
+        rec.int_block("plant")[0] = rec.int_block("plant")[n]
+        rec.ctrl[rec.spare] = rec.ctrl[n - 1]
+        rec.ints[rec.spare, rec.int_blocks["plant"].stop:] = \
+            rec.ints[n - 1, rec.int_blocks["plant"].stop:]
+        self._last_ctrl_row = rec.spare
         self.steps_done += n
 
     @property
@@ -154,17 +147,14 @@ class LiveSession:
     def state(self) -> dict[str, dict[str, np.ndarray]]:
         """Latest outputs by FMU and variable group: ``state()["plant"]["pos"]`` (at
         ``time``), ``state()["ctrl"]["mu_c"]`` (the controller's latest answer)."""
-        plan = self.plan
-        rows = {"plant": (plan.data[0], plan.ints[0]),
-                "ctrl": (plan.data[self._last_ctrl_row], plan.ints[self._last_ctrl_row])}
+        rec, conn = self.rec, self.engine.conn
+        rows = {"plant": (rec.plant[0], rec.ints[0]),
+                "ctrl": (rec.ctrl[self._last_ctrl_row], rec.ints[self._last_ctrl_row])}
         out: dict[str, dict[str, list[float]]] = {"plant": {}, "ctrl": {}}
-        for i, name in enumerate(plan.plant_order):
-            out["plant"].setdefault(name.split("[")[0], []).append(float(rows["plant"][0][
-                plan.c_plant + i]))
-        for i, name in enumerate(plan.ctrl_order):
-            out["ctrl"].setdefault(name.split("[")[0], []).append(float(rows["ctrl"][0][
-                plan.c_ctrl + i]))
-        for i, column in enumerate(plan.int_columns):
+        for fmu, names in (("plant", conn.plant_out), ("ctrl", conn.ctrl_out)):
+            for i, name in enumerate(names):
+                out[fmu].setdefault(name.split("[")[0], []).append(float(rows[fmu][0][i]))
+        for i, column in enumerate(rec.int_columns):
             fmu, name = column.split(".", 1)
             out[fmu].setdefault(name.split("[")[0], []).append(float(rows[fmu][1][i]))
         return {fmu: {k: np.array(v) for k, v in d.items()} for fmu, d in out.items()}

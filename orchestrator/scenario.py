@@ -101,6 +101,7 @@ from orchestrator.signals import (
 )
 from plant import Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
+from plant.model_description import model_variables, start_value
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -303,25 +304,9 @@ def _stack(axes: Vec3, t: np.ndarray, order: int) -> np.ndarray:
 
 
 @cache
-def _model_variables(model: str) -> dict[str, Any]:
-    """name -> fmpy ScalarVariable of an installed FMU."""
-    from fmpy import read_model_description
-
-    from plant import fmu_path
-
-    md = read_model_description(str(fmu_path(model)))
-    return {v.name: v for v in md.modelVariables}
-
-
-@cache
 def _fmu_variables(model: str) -> dict[str, tuple[str, str]]:
     """name -> (causality, type) of an installed FMU's model variables."""
-    return {name: (v.causality, v.type) for name, v in _model_variables(model).items()}
-
-
-def _start_value(model: str, name: str) -> float:
-    """The start (default) value of a Real variable, from the FMU's modelDescription."""
-    return float(_model_variables(model)[name].start)
+    return {name: (v.causality, v.type) for name, v in model_variables(model).items()}
 
 
 _INDEX = re.compile(r"\[(\d+)(?:,(\d+))?\]$")
@@ -485,7 +470,7 @@ def _euler_bounds(sc: Scenario, index: int) -> tuple[float, float, bool]:
     bounds, the FMU's defaults unless the scenario overrides them."""
     names = (f"euler_min[{index}]", f"euler_max[{index}]")
     p = sc.controller_parameters
-    lo, hi = (float(p.get(n, _start_value(CONTROLLER_FMU, n))) for n in names)
+    lo, hi = (float(p.get(n, start_value(CONTROLLER_FMU, n))) for n in names)
     for name, value in zip(names, (lo, hi), strict=True):
         if name in p and not abs(value) < math.pi / 2:
             raise ScenarioError(sc.source, f"controller.{name}", "expected a bound inside "

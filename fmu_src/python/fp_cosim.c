@@ -30,8 +30,9 @@ enum { O_REF, O_PLANT, O_DIST, O_CTRL, O_CINT, O_CBOOL, O_PINT, O_COUNT };
  * Steps k = first .. last-1 of a run (time t0 + k h): the controller samples [r_k, y_k] (row k),
  * its outputs go to row k; the plant integrates with [dist_k, u_k] (Gauss-Seidel)
  * or u_{k-1} (Jacobi; row -1 is the spare row `spare`), its outputs go to row
- * k+1.  Offsets are in elements of their matrix.  Returns 0, or the first FMI
- * status above fmi2Warning with *failed_step set to its step.
+ * k+1.  Offsets are in elements of their matrix.  With comps[0] == NULL (the plant alone)
+ * the controller is not called and the plant's commands are read from the rows as written.
+ * Returns 0, or the first FMI status above fmi2Warning with *failed_step set to its step.
  */
 FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
                           const unsigned int *const vrs[V_COUNT], const size_t counts[V_COUNT],
@@ -59,6 +60,10 @@ FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
     p_geti = (fmi2GetIntegerTYPE *)fns[F_P_GETI];
     cc = comps[0];
     pc = comps[1];
+    if (pc == NULL || p_set == NULL || p_step == NULL || p_get == NULL || p_geti == NULL ||
+        (cc != NULL && (c_set == NULL || c_step == NULL || c_get == NULL || c_geti == NULL ||
+                        c_getb == NULL)))
+        return (int)fmi2Error;
     for (k = first; k < last; k++) {
         double *row = data + k * stride;
         int32_t *irow = ints + k * istride;
@@ -73,11 +78,13 @@ FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
             return (int)st_;                            \
         }                                               \
     } while (0)
-        FP_CALL(c_set(cc, vrs[V_C_IN], counts[V_C_IN], row + offsets[O_REF]));
-        FP_CALL(c_step(cc, t, h, fmi2True));
-        FP_CALL(c_get(cc, vrs[V_C_OUT], counts[V_C_OUT], row + offsets[O_CTRL]));
-        FP_CALL(c_geti(cc, vrs[V_C_INT], counts[V_C_INT], irow + offsets[O_CINT]));
-        FP_CALL(c_getb(cc, vrs[V_C_BOOL], counts[V_C_BOOL], irow + offsets[O_CBOOL]));
+        if (cc != NULL) { /* open loop (no controller): the commands are held in the rows */
+            FP_CALL(c_set(cc, vrs[V_C_IN], counts[V_C_IN], row + offsets[O_REF]));
+            FP_CALL(c_step(cc, t, h, fmi2True));
+            FP_CALL(c_get(cc, vrs[V_C_OUT], counts[V_C_OUT], row + offsets[O_CTRL]));
+            FP_CALL(c_geti(cc, vrs[V_C_INT], counts[V_C_INT], irow + offsets[O_CINT]));
+            FP_CALL(c_getb(cc, vrs[V_C_BOOL], counts[V_C_BOOL], irow + offsets[O_CBOOL]));
+        }
         if (jacobi) {
             const double *prev = (k > 0 ? row - stride : spare) + offsets[O_CTRL];
             FP_CALL(p_set(pc, vrs[V_P_CMD], counts[V_P_CMD], prev));

@@ -1,0 +1,95 @@
+"""The two FMUs' start values from an airframe, a design, a pose and the failures to handle.
+
+This is the one road from the design tools to the FMUs: scenario runs, live sessions, sweep
+cases, the open-loop hover demo and the SSP export all build their parameters here.
+
+* plant: the airframe's numbers (``Airframe.fmu_parameters``), the initial pose, then the
+  caller's overrides;
+* controller: the airframe numbers the controller also has (the names both FMUs share), the
+  airframe's S(0) (always passed explicitly, computed once per airframe content by
+  ``controller.polytope_cache``), with ``failures`` also S(0) after each single-rotor loss,
+  the design's gains (``controller.fmu_parameters.block_parameters``; None keeps the gains
+  compiled into the FMU, i.e. the shipped synthesis), then the caller's overrides.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+
+from controller.polytope_cache import failure_set_parameters, polytope_parameters
+from plant import Airframe
+from plant.model_description import model_variables
+
+Value = float | int | bool
+Vec3 = tuple[float, float, float]
+
+
+def _vec3(name: str, v: Sequence[float]) -> Vec3:
+    if len(v) != 3:
+        raise ValueError(f"{name} must have 3 elements, got {len(v)}")
+    return (float(v[0]), float(v[1]), float(v[2]))
+
+
+@dataclass(frozen=True)
+class Pose:
+    """The vehicle's initial pose (NED, m; Euler angles phi, theta, psi, rad) and velocity."""
+
+    pos: Vec3 = (0.0, 0.0, -3.0)
+    euler: Vec3 = (0.0, 0.0, 0.0)
+    vel: Vec3 = (0.0, 0.0, 0.0)
+
+    @staticmethod
+    def of(pos: Sequence[float] = (0.0, 0.0, -3.0), euler: Sequence[float] = (0.0, 0.0, 0.0),
+           vel: Sequence[float] = (0.0, 0.0, 0.0)) -> Pose:
+        return Pose(_vec3("pos", pos), _vec3("euler", euler), _vec3("vel", vel))
+
+
+@dataclass
+class StartValues:
+    """Start values by FMU variable name, one dict per FMU."""
+
+    plant: dict[str, Value] = field(default_factory=dict)
+    controller: dict[str, Value] = field(default_factory=dict)
+
+
+def plant_start_values(airframe: Airframe, pose: Pose = Pose(), *,
+                       overrides: Mapping[str, Value] | None = None) -> dict[str, Value]:
+    """The plant's: the airframe, the initial pose, then ``overrides``."""
+    params: dict[str, Value] = dict(airframe.fmu_parameters())
+    for i in range(3):
+        params[f"pos0[{i + 1}]"] = pose.pos[i]
+        params[f"euler0[{i + 1}]"] = pose.euler[i]
+        params[f"vel0[{i + 1}]"] = pose.vel[i]
+    params.update(overrides or {})
+    return params
+
+
+def controller_start_values(airframe: Airframe, *, failures: bool = False,
+                            design: Mapping[str, float] | None = None,
+                            overrides: Mapping[str, Value] | None = None) -> dict[str, Value]:
+    """The controller's: shared airframe numbers, S(0) (and the single-failure sets), the
+    design's gains, then ``overrides``."""
+    variables = model_variables("FullPoseController")
+    params: dict[str, Value] = {k: v for k, v in airframe.fmu_parameters().items()
+                                if k in variables and variables[k].causality == "parameter"}
+    params.update(polytope_parameters(airframe))
+    if failures:
+        params.update(failure_set_parameters(airframe))
+    params.update(design or {})
+    params.update(overrides or {})
+    return params
+
+
+def start_values(airframe: Airframe, pose: Pose = Pose(), *, failures: bool = False,
+                 design: Mapping[str, float] | None = None, timing: bool = False,
+                 plant_overrides: Mapping[str, Value] | None = None,
+                 controller_overrides: Mapping[str, Value] | None = None) -> StartValues:
+    """Both FMUs' start values for a closed loop starting at ``pose``; ``timing`` switches
+    on the FMUs' self-timing outputs."""
+    return StartValues(
+        plant=plant_start_values(airframe, pose, overrides={"timing": timing,
+                                                            **(plant_overrides or {})}),
+        controller=controller_start_values(airframe, failures=failures, design=design,
+                                           overrides={"timing": timing,
+                                                      **(controller_overrides or {})}))
