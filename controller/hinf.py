@@ -83,11 +83,19 @@ import numpy as np
 from scipy import optimize, signal
 
 from controller.lti import SS, Diagram, Margins, hinf_norm, loop_margins
+from plant import load_airframe
+from plant.model_description import start_value
 
-TS = 0.002
-TAU_ACT = 1.0 / 53.94
-FILT_WN = 50.0
-FILT_ZETA = 0.55
+CONTROLLER_FMU = "FullPoseController"
+
+# The design constants, from the one place each is defined: the controller FMU's defaults
+# (sample time, measurement filter) and the shipped airframe (the actuator time constant), so
+# the synthesis can never design for another loop than the one the FMU runs.
+DESIGN_AIRFRAME = "paper_hexacopter"
+TS = start_value(CONTROLLER_FMU, "Ts")
+TAU_ACT = load_airframe(DESIGN_AIRFRAME).tau_motor
+FILT_WN = start_value(CONTROLLER_FMU, "filt_wn")
+FILT_ZETA = start_value(CONTROLLER_FMU, "filt_zeta")
 
 CHANNELS = ("S_outer", "S_inner", "T_input", "KS_noise", "disturbance", "KS_outer")
 # the closed-loop input of each channel in :func:`interconnection` ([do1, do2, di, n2, d])

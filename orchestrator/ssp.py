@@ -84,8 +84,8 @@ from fmpy.model_description import ModelDescription
 from fmpy.ssp.ssd import Parameter, ParameterSet, System, read_ssd
 from lxml import etree
 
-from controller.polytope_cache import polytope_parameters
 from orchestrator.fmu import FmuInstance
+from orchestrator.start_values import Pose, controller_start_values, plant_start_values
 from plant import fmu_path, load_airframe
 
 log = logging.getLogger(__name__)
@@ -104,7 +104,6 @@ STEP_ANNOTATION = "org.fullpose.fixedStepMaster"
 # fixed zip metadata: the same inputs give the same bytes
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 _REFERENCES = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref")
-_PLANT_ONLY = ("tau_motor", "tau_servo")
 
 Connection = tuple[str, str, str, str]
 Value = float | int | bool
@@ -196,22 +195,17 @@ def component_parameters(airframe: str | Path = "paper_hexacopter",
                          ) -> dict[str, dict[str, Value]]:
     """Start values per component (by FMU variable name) for a hover at ``pos0``.
 
-    Plant: the airframe, ``pos0``, ``init_trim = true`` and, for its connected command inputs,
-    the trim it initialises to.  Controller: the same airframe parameters (without the
-    actuator time constants), the airframe's feasible force set S(0) (``poly_n``,
-    ``poly_A``, ``poly_b``), the hover reference (pos_ref = pos0, everything else 0) and, for
+    Plant: its start values (``orchestrator.start_values``) at ``pos0``, ``init_trim = true``
+    and, for its connected command inputs, the trim it initialises to.  Controller: its start
+    values (the shared airframe numbers and S(0)), the hover reference (pos_ref = pos0, everything else 0) and, for
     its connected measurement inputs, the plant's initial outputs.
     """
     p0 = [float(x) for x in pos0]
     if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
         raise ValueError(f"pos0 must be 3 finite numbers, got {pos0!r}")
     af = load_airframe(airframe)
-    plant: dict[str, Value] = dict(af.fmu_parameters())
-    plant.update({f"pos0[{i + 1}]": x for i, x in enumerate(p0)})
-    plant["init_trim"] = True
-    ctrl: dict[str, Value] = {k: v for k, v in af.fmu_parameters().items()
-                              if k not in _PLANT_ONLY}
-    ctrl.update(polytope_parameters(af))
+    plant: dict[str, Value] = plant_start_values(af, Pose.of(p0), overrides={"init_trim": True})
+    ctrl: dict[str, Value] = controller_start_values(af)
     for ref in _REFERENCES:
         for i in range(3):
             ctrl[f"{ref}[{i + 1}]"] = p0[i] if ref == "pos_ref" else 0.0

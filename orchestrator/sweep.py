@@ -88,23 +88,20 @@ def designs() -> dict[str, dict[str, float]]:
 def run_case(case: dict[str, float], design: str, params: dict[str, float],
              duration: float) -> dict[str, Any]:
     """One closed-loop run; returns a table row."""
+    from orchestrator.engine import RunError
+    from orchestrator.fmu import FmuError
     from orchestrator.master import run
     from orchestrator.runner import prepare
     from orchestrator.signals import Steps
 
     t0 = time.perf_counter()
     sc = prepare("hover", duration)
-    pp = sc.airframe.fmu_parameters() if hasattr(sc.airframe, "fmu_parameters") else {}
-    plant: dict[str, Any] = {}
-    mass = float(pp.get("mass", 0.0)) or None
-    if mass is not None:
-        plant["mass"] = mass * case["mass_scale"]
+    af = sc.airframe
+    plant: dict[str, Any] = {"mass": af.mass * case["mass_scale"]}
     for i, key in enumerate(("ixx_scale", "iyy_scale", "izz_scale")):
-        name = f"inertia[{i + 1},{i + 1}]"
-        if name in pp:
-            plant[name] = float(pp[name]) * case[key]
-    for name, key in (("tau_motor", "tau_motor_scale"), ("tau_servo", "tau_servo_scale")):
-        plant[name] = (1.0 / 53.94) * case[key]
+        plant[f"inertia[{i + 1},{i + 1}]"] = float(af.inertia[i, i]) * case[key]
+    plant["tau_motor"] = af.tau_motor * case["tau_motor_scale"]
+    plant["tau_servo"] = af.tau_servo * case["tau_servo_scale"]
     for name, level in NOISE.items():
         plant[name] = level * case["noise_scale"]
     plant["noise_seed"] = int(case["seed"])
@@ -125,7 +122,7 @@ def run_case(case: dict[str, float], design: str, params: dict[str, float],
         t = np.asarray(res.time)
         err = np.linalg.norm(np.asarray(res.get("plant.pos")) - np.asarray(res.get("ref.pos_ref")),
                              axis=1)
-    except Exception:  # a diverged plant may make an FMU refuse a step
+    except (RunError, FmuError):  # a diverged plant may make an FMU refuse a step
         t, err = np.array([0.0]), np.array([np.inf])
     after = t >= T_ON
     e = err[after] if after.any() else err

@@ -264,3 +264,33 @@ def test_velocity_loop_stays_slower_than_attitude_loop(designs):
     att = designs["rotation"].bandwidth["att"]
     assert vel < att
     assert hinf.TRANSLATION.wT <= 1.5 * att
+
+
+def test_the_controller_fmu_runs_the_filter_and_sample_time_the_synthesis_designed_for():
+    """The synthesis' H(z) (``hinf._filter``, scipy's ZOH at ``hinf.TS``) against the FMU's
+    own: with K_pos = 0 and K_vel = 1 the commanded acceleration is -H[vel], so a unit step
+    on the measured velocity returns the FMU's filter step response in ``acc_c``."""
+    from orchestrator.fmu import FmuInstance
+    from plant import fmu_path
+
+    zero = {f"K_{loop}_{n}[{i}]": 0.0 for loop in ("pos", "vel") for n in "ABCD"
+            for i in (1, 2, 3)}
+    zero.update({f"K_vel_D[{i}]": 1.0 for i in (1, 2, 3)})
+    with FmuInstance(fmu_path("FullPoseController"), "ctrl") as c:
+        c.initialize(parameters=zero)
+        assert c.get("Ts") == hinf.TS
+        vel, acc_c = c.signal("vel"), c.signal("acc_c")
+        steps = 500
+        got = np.empty(steps)
+        c.write(vel, [1.0, 0.0, 0.0])
+        for k in range(steps):
+            c.step(hinf.TS)
+            got[k] = -c.read(acc_c)[0]
+    H = hinf._filter()
+    x = np.zeros((H.A.shape[0], 1))
+    want = np.empty(steps)
+    for k in range(steps):  # y_k = C x_k + D u_k (the FMU's output after its update)
+        want[k] = (H.C @ x + H.D * 1.0).item()
+        x = H.A @ x + H.B * 1.0
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-12)
+    assert want[-1] == pytest.approx(1.0, abs=1e-6)  # unit DC gain: H(1) = 1
