@@ -83,14 +83,13 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from orchestrator.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
+from orchestrator.scenario_reader import FieldReader, ScenarioError
 from orchestrator.signals import (
     ZERO,
     Chirp,
     Constant,
-    FieldReader,
     Ramp,
     Scaled,
-    ScenarioError,
     Signal,
     Sine,
     Steps,

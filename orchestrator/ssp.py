@@ -197,8 +197,9 @@ def component_parameters(airframe: str | Path = "paper_hexacopter",
 
     Plant: its start values (``orchestrator.start_values``) at ``pos0``, ``init_trim = true``
     and, for its connected command inputs, the trim it initialises to.  Controller: its start
-    values (the shared airframe numbers and S(0)), the hover reference (pos_ref = pos0, everything else 0) and, for
-    its connected measurement inputs, the plant's initial outputs.
+    values (the shared airframe numbers and S(0)), the hover reference (pos_ref = pos0,
+    everything else 0) and, for its connected measurement inputs, the plant's initial
+    outputs.
     """
     p0 = [float(x) for x in pos0]
     if len(p0) != 3 or not all(math.isfinite(x) for x in p0):

@@ -17,7 +17,7 @@ from typing import Any
 import numpy as np
 
 from plant.effectiveness import RotorSet
-from plant.toml_fields import FieldError, TomlTable
+from plant.toml_reader import FieldError, TomlTable
 
 if sys.version_info >= (3, 11):
     import tomllib
