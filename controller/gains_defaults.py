@@ -64,7 +64,7 @@ def synthesis_inputs() -> dict[str, object]:
 
 
 def _add_defaults(out: dict[str, object], where: str, obj: object) -> None:
-    func = inspect.unwrap(getattr(obj, "__func__", obj))  # staticmethod, lru_cache
+    func = inspect.unwrap(getattr(obj, "__func__", obj))  # type: ignore[arg-type]  # staticmethod, lru_cache
     if inspect.isfunction(func) and func.__module__ in (hinf.__name__, lti.__name__):
         defaults = {p.name: p.default for p in inspect.signature(func).parameters.values()
                     if p.default is not inspect.Parameter.empty}

@@ -184,7 +184,7 @@ SPECS = (TRANSLATION, ROTATION)
 
 
 @functools.lru_cache(maxsize=64)
-def _filter(Ts: float = TS) -> SS:
+def measurement_filter(Ts: float = TS) -> SS:
     """H(s) as controller.c discretizes it (exact ZOH; output after the update)."""
     a = np.array([[0.0, 1.0], [-FILT_WN ** 2, -2 * FILT_ZETA * FILT_WN]])
     b = np.array([[0.0], [FILT_WN ** 2]])
@@ -234,19 +234,6 @@ def weights(spec: LoopSpec, k: float = 1.0, Ts: float = TS) -> dict[str, SS]:
             "KS_outer": SS.gain(1 / spec.u1_max, Ts)}
 
 
-def weight_functions(spec: LoopSpec) -> dict[str, str]:
-    """Human-readable weights (continuous s)."""
-    return {
-        "S_outer": f"(s/{spec.ms:g} + {spec.w1:g}) / (s + {spec.eps * spec.w1:.3g})",
-        "S_inner": f"(s/{spec.ms:g} + {spec.w2:g}) / (s + {spec.eps * spec.w2:.3g})",
-        "T_input": f"(s/{spec.wT:g} + {spec.r0:g}) / (s/{spec.r_inf * spec.wT:g} + 1)",
-        "KS_noise": f"1/{spec.u_max:g}",
-        "disturbance": (f"(s + {spec.wd:g}) / ({spec.d_max:g} (s + {spec.eps * spec.wd:.3g}))"
-                        if spec.wd > 0 else f"1/{spec.d_max:g}"),
-        "KS_outer": f"1/{spec.u1_max:g}",
-    }
-
-
 def interconnection(spec: LoopSpec, k1: Block, k2: Block, k: float = 1.0,
                     tau: float | None = None, weighted: bool = True) -> SS:
     """Closed loop, inputs [do1, do2, di, n2, d], outputs the six requirement channels
@@ -258,15 +245,16 @@ def interconnection(spec: LoopSpec, k1: Block, k2: Block, k: float = 1.0,
     dg = Diagram(TS)
     dg.add(_plant(tau), ["udel", "d"], ["a_act", "v", "p"])
     dg.add(_delay(spec.delay), [{"u": k, "Hd": -k, "Ha": 1.0 - k}], ["udel"])
-    dg.add(_filter(), [{"p": 1.0, "do1": 1.0}], ["Hp"])
-    dg.add(_filter(), [{"v": 1.0, "do2": 1.0, "n2": 1.0}], ["Hv"])
-    dg.add(_filter(), ["d"], ["Hd"])
-    dg.add(_filter(), ["a_act"], ["Ha"])
+    dg.add(measurement_filter(), [{"p": 1.0, "do1": 1.0}], ["Hp"])
+    dg.add(measurement_filter(), [{"v": 1.0, "do2": 1.0, "n2": 1.0}], ["Hv"])
+    dg.add(measurement_filter(), ["d"], ["Hd"])
+    dg.add(measurement_filter(), ["a_act"], ["Ha"])
     dg.add(k1.ss(), [{"Hp": -1.0}], ["vc"])
     dg.add(k2.ss(), [{"vc": 1.0, "Hv": -1.0}], ["uk"])
     dg.add(SS.gain(1.0, TS), [{"uk": 1.0, "di": 1.0}], ["u"])
-    outs = [{"p": 1.0, "do1": 1.0}, {"v": 1.0, "do2": 1.0}, {"uk": -1.0}, {"uk": 1.0},
-            {"p": 1.0}, {"vc": 1.0}]
+    outs: list[str | dict[str, float]] = [
+        {"p": 1.0, "do1": 1.0}, {"v": 1.0, "do2": 1.0}, {"uk": -1.0}, {"uk": 1.0}, {"p": 1.0},
+        {"vc": 1.0}]
     if weighted:
         w = weights(spec, k)
         for name, o in zip(CHANNELS, outs, strict=True):
@@ -282,8 +270,8 @@ def inner_loop(spec: LoopSpec, k2: Block, k: float = 1.0, tau: float | None = No
     dg = Diagram(TS)
     dg.add(_plant(tau, position=False), ["udel", "d"], ["a_act", "v"])
     dg.add(_delay(spec.delay), [{"u": k, "Ha": 1.0 - k}], ["udel"])
-    dg.add(_filter(), [{"v": 1.0, "do2": 1.0}], ["Hv"])
-    dg.add(_filter(), ["a_act"], ["Ha"])
+    dg.add(measurement_filter(), [{"v": 1.0, "do2": 1.0}], ["Hv"])
+    dg.add(measurement_filter(), ["a_act"], ["Ha"])
     dg.add(k2.ss(), [{"Hv": -1.0}], ["u"])
     out: str | dict[str, float] = {"v": 1.0, "do2": 1.0}
     if weighted:
@@ -361,7 +349,7 @@ class FastEval:
         self.spec, self.w = spec, np.asarray(w, float)
         z = np.exp(1j * self.w * TS)
         self.z = z
-        h = _filter()
+        h = measurement_filter()
         self.nh, self.dh = _tf(h, 0, 0)
         self.H = np.polyval(self.nh, z) / np.polyval(self.dh, z)
         self.W = {}
@@ -481,16 +469,16 @@ def loops(spec: LoopSpec, k1: Block, k2: Block) -> dict[str, SS]:
     """Loop transfers of the nominal model, broken at the actuator input (both loops closed),
     at the inner block's input with the outer loop open, and at the outer block's output with
     the inner loop closed (negative-feedback convention L = -(return))."""
-    out = {}
+    out: dict[str, SS] = {}
     for where in ("input", "inner", "outer"):
         dg = Diagram(TS)
         if where == "inner":
             dg.add(_plant(spec.tau, position=False), ["udel", "d"], ["a_act", "v"])
         else:
             dg.add(_plant(spec.tau), ["udel", "d"], ["a_act", "v", "p"])
-            dg.add(_filter(), ["p"], ["Hp"])
+            dg.add(measurement_filter(), ["p"], ["Hp"])
         dg.add(_delay(spec.delay), ["u"], ["udel"])
-        dg.add(_filter(), ["v"], ["Hv"])
+        dg.add(measurement_filter(), ["v"], ["Hv"])
         if where == "input":
             dg.add(k1.ss(), [{"Hp": -1.0}], ["vc"])
             dg.add(k2.ss(), [{"vc": 1.0, "Hv": -1.0}], ["uk"])
@@ -522,7 +510,7 @@ def default_grid(n: int = 160) -> np.ndarray:
     return np.logspace(-2, np.log10(0.999 * math.pi / TS), n)
 
 
-def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
+def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float] | np.ndarray] | None = None,
                rounds: int = 3, maxiter: int = 1500, seed: int = 0) -> Design:
     """Multi-start Nelder-Mead on the grid objective, the grid refined with the exact peak
     frequencies between rounds.  Deterministic (fixed starts + seeded extra starts)."""
@@ -538,8 +526,8 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float]] | None = None,
         starts += [base * (1 + 0.3 * rng.standard_normal(6)) for _ in range(2)]
         starts += [np.array(x) for x in spec.start]
     best_x, best_f = None, math.inf
-    for x0 in starts:
-        x0 = np.asarray(x0, float)
+    for start in starts:
+        x0 = np.asarray(start, float)
         if _objective(x0, ev) >= 1e6:
             continue
         r = optimize.minimize(_objective, x0, args=(ev,), method="Nelder-Mead",

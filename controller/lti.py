@@ -18,6 +18,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from numpy.typing import ArrayLike
 from scipy import linalg, optimize, signal
 
 
@@ -32,7 +33,7 @@ class SS:
     Ts: float
 
     @staticmethod
-    def make(A: object, B: object, C: object, D: object, Ts: float) -> SS:
+    def make(A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, Ts: float) -> SS:
         D = np.atleast_2d(np.asarray(D, dtype=float))
         ny, nu = D.shape
         A = np.asarray(A, dtype=float).reshape(-1, int(np.sqrt(np.size(A))) or 0) \
@@ -48,7 +49,7 @@ class SS:
         return SS(np.zeros((0, 0)), np.zeros((0, D.shape[1])), np.zeros((D.shape[0], 0)), D, Ts)
 
     @staticmethod
-    def from_continuous(A: object, B: object, C: object, D: object, Ts: float,
+    def from_continuous(A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, Ts: float,
                         method: str = "zoh") -> SS:
         Ad, Bd, Cd, Dd, _ = signal.cont2discrete(
             (np.atleast_2d(A), np.atleast_2d(B), np.atleast_2d(C), np.atleast_2d(D)), Ts,

@@ -13,11 +13,13 @@ from __future__ import annotations
 
 import sys
 from pathlib import Path
+from typing import cast
 
 import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
+from mpl_toolkits.mplot3d import Axes3D
 from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 
 from controller.force_sets import (
@@ -48,7 +50,7 @@ def _faces(poly: Polytope) -> list[np.ndarray]:
     return faces
 
 
-def _draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bool,
+def draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bool,
                    label: str) -> None:
     if poly.dimension < 3:
         pts = poly.vertices
@@ -58,10 +60,10 @@ def _draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bo
     if alpha > 0:
         # callers set the limits from the vertices; mplot3d's autoscale from a fresh
         # axes' infinite data limits overflowed into NaN limits now and then
-        ax.add_collection3d(Poly3DCollection(faces, facecolor=color, alpha=alpha,
+        cast(Axes3D, ax).add_collection3d(Poly3DCollection(faces, facecolor=color, alpha=alpha,
                                              edgecolor="none"), autolim=False)
     if edges:
-        ax.add_collection3d(Line3DCollection([np.vstack([f, f[:1]]) for f in faces],
+        cast(Axes3D, ax).add_collection3d(Line3DCollection([np.vstack([f, f[:1]]) for f in faces],
                                              colors=color, linewidths=0.6), autolim=False)
     # legend proxy: a one-point line (draws nothing) at a real vertex, so that the
     # autoscale it triggers sees finite data (an empty line gave NaN limits)
@@ -97,8 +99,8 @@ def plot_force_sets(
     grid = fig.add_gridspec(1, 2, width_ratios=[1.1, 1.0], wspace=0.3, left=0.02, right=0.82,
                             top=0.9, bottom=0.08)
     ax = fig.add_subplot(grid[0], projection="3d")
-    _draw_polytope(ax, afs, GREEN, 0.18, False, f"AFS ({afs.n_facets} facets)")
-    _draw_polytope(ax, s0, BLUE, 0.0, True, f"S(0) ({s0.n_facets} facets)")
+    draw_polytope(ax, afs, GREEN, 0.18, False, f"AFS ({afs.n_facets} facets)")
+    draw_polytope(ax, s0, BLUE, 0.0, True, f"S(0) ({s0.n_facets} facets)")
     ring = _closed(pxy)
     ax.add_collection3d(Poly3DCollection([np.column_stack([pxy, np.full(len(pxy), z)])],
                                          facecolor=RED, alpha=0.45, edgecolor=RED),

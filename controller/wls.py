@@ -142,6 +142,8 @@ class WlsSolver:
         bb = _vector(b, m, 0.0, "b")
         lo = _vector(lb, n, -np.inf, "lb")
         hi = _vector(ub, n, np.inf, "ub")
+        cc: NDArray[np.float64] | None
+        dd: NDArray[np.float64] | None
         if p > 0:
             if C is None or d is None:
                 raise ValueError(f"C and d are needed for {p} constraints")
@@ -150,7 +152,7 @@ class WlsSolver:
                 raise ValueError(f"C must be {p}x{n}, got {cc.shape}")
             dd = _vector(d, p, 0.0, "d")
         else:
-            cc = dd = None
+            cc = dd = None  # no equality rows: NULL pointers
         rc = _lib().fp_wls_set_data_api(
             self._buf, _dptr(a), _dptr(bb), _dptr(lo), _dptr(hi), _dptr(cc), _dptr(dd)
         )

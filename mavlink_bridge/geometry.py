@@ -17,7 +17,7 @@ def euler_to_quat(phi: float, theta: float, psi: float) -> list[float]:
             cr * sp * cy + sr * cp * sy, cr * cp * sy - sr * sp * cy]
 
 
-def quat_to_euler(q: Sequence[float]) -> tuple[float, float, float]:
+def quat_to_euler(q: Sequence[float] | np.ndarray) -> tuple[float, float, float]:
     """(phi, theta, psi) of a unit quaternion [w, x, y, z]."""
     w, x, y, z = (float(v) for v in q)
     phi = math.atan2(2 * (w * x + y * z), 1 - 2 * (x * x + y * y))

@@ -35,11 +35,6 @@ def custom_mode(mode: str) -> int:
     return (main << 16) | (sub << 24)
 
 
-def decode_custom_mode(value: int) -> tuple[int, int]:
-    """(main mode, sub mode) of a PX4 custom_mode."""
-    return (value >> 16) & 0xFF, (value >> 24) & 0xFF
-
-
 def mode_from_main_sub(main: int, sub: int) -> str | None:
     """The bridge mode a DO_SET_MODE asks for, or None if not flown here."""
     if main == MAIN_OFFBOARD:

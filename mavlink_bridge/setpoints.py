@@ -131,9 +131,9 @@ def _limit(sp: PositionSetpoint, lim: Limits) -> None:
 
 def decode_attitude(msg: object, limits: Limits) -> AttitudeSetpoint:
     mask = int(msg.type_mask)  # type: ignore[attr-defined]
-    euler = None
+    euler: np.ndarray | None = None
     if not mask & ATTITUDE_IGNORE:
-        q = np.array([float(v) for v in msg.q], dtype=float)  # type: ignore[attr-defined]
+        q = np.array([float(v) for v in msg.q])  # type: ignore[attr-defined]
         if not np.all(np.isfinite(q)):
             raise Rejected("quaternion not finite")
         norm = float(np.linalg.norm(q))
@@ -214,9 +214,3 @@ class Reference:
     def as_inputs(self) -> dict[str, np.ndarray]:
         return {"pos_ref": self.pos, "euler_ref": self.euler, "vel_ref": self.vel,
                 "acc_ref": self.acc, "euler_rate_ref": self.euler_rate}
-
-
-def fmt_rejection(msg_name: str, reason: str) -> str:
-    text = f"{msg_name.replace('SET_', '').replace('_TARGET', '')} rejected: {reason}"
-    return text[:50]
-

@@ -5,6 +5,11 @@ refusing a value, an unwritable output folder, a run too long for memory), print
 short ``fullpose: error: ...`` line naming the file, field or variable and the reason; 3 a
 run that lost the vehicle (results are written, ``metrics.json`` says ``"outcome": "lost"``);
 130 interrupted (Ctrl-C).  Never a Python traceback for any of these.
+
+Commands of the packages built on the orchestrator (``fly``: the MAVLink bridge) join through
+the ``fullpose.commands`` entry-point group: each entry is a function taking the argparse
+subparsers and adding its command, so the CLI composes them without the orchestrator
+importing them.
 """
 
 from __future__ import annotations
@@ -13,11 +18,14 @@ import argparse
 import math
 import sys
 from collections.abc import Iterable
+from importlib.metadata import entry_points
 from pathlib import Path
 
 import numpy as np
 
 from plant import AirframeError, NativeBuildMissing, fmu_path, list_airframes, load_airframe
+
+COMMANDS_GROUP = "fullpose.commands"
 
 
 def _cmd_hover(args: argparse.Namespace) -> int:
@@ -148,54 +156,6 @@ def _cmd_fmus(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_fly(args: argparse.Namespace) -> int:
-    import math
-
-    from mavlink_bridge.bridge import DEFAULT_URLS, Bridge, BridgeConfig
-    from mavlink_bridge.links import load_key
-
-    if args.scenario is not None and args.airframe is not None:
-        raise ValueError("give a scenario or --airframe, not both")
-    speed = math.inf if args.speed.lower() == "max" else float(args.speed)
-    if not speed > 0:
-        raise ValueError("--speed must be positive or 'max'")
-    if args.duration is not None and not args.duration > 0:
-        raise ValueError("--duration must be positive")
-    config = BridgeConfig(urls=args.gcs or list(DEFAULT_URLS), speed=speed,
-                          duration=args.duration)
-    if args.scenario is not None:
-        from orchestrator.scenario import load_scenario
-
-        sc = load_scenario(args.scenario)
-        pos0, euler0 = sc.initial_pose()
-        config.airframe, config.pos0, config.euler0 = sc.airframe, tuple(pos0), tuple(euler0)
-        config.plant_parameters = sc.plant_parameters
-        config.controller_parameters = sc.controller_parameters
-        config.coupling = sc.coupling
-    elif args.airframe is not None:
-        config.airframe = args.airframe
-    if args.signing_key is not None:
-        try:
-            config.signing_key = load_key(args.signing_key)
-        except (OSError, UnicodeDecodeError) as e:
-            raise ValueError(f"signing key: {e}") from None
-    with Bridge(config) as bridge:
-        af = bridge.airframe
-        print(f"flying {af.name} from {tuple(float(x) for x in config.pos0)} "
-              f"(speed {args.speed}, signing {'on' if config.signing_key else 'off'})")
-        for ep in bridge.endpoints:
-            print(f"mavlink endpoint    {ep.url} (local {ep.sock.getsockname()[0]}:"
-                  f"{ep.sock.getsockname()[1]})")
-        sys.stdout.flush()
-        try:
-            stats = bridge.run()
-        except KeyboardInterrupt:
-            stats = bridge.stats
-        for line in stats.lines():
-            print(line)
-    return 0
-
-
 def _cmd_sweep(args: argparse.Namespace) -> int:
     import time
 
@@ -281,22 +241,6 @@ def build_parser() -> argparse.ArgumentParser:
     fs.add_argument("--plot", type=Path, default=None, help="write the Fig.-3-like plot (PNG)")
     fs.set_defaults(func=_cmd_force_set)
 
-    fly = sub.add_parser("fly", help="fly the vehicle in real time from MAVLink ground tools")
-    fly.add_argument("scenario", nargs="?", default=None,
-                     help="start from this scenario's airframe, pose and parameters")
-    fly.add_argument("--airframe", default=None,
-                     help="shipped airframe name or TOML file (default: paper_hexacopter)")
-    fly.add_argument("--gcs", action="append", default=[], metavar="URL",
-                     help="MAVLink endpoint, udpout:HOST:PORT or udpin:HOST:PORT (repeatable; "
-                          "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540)")
-    fly.add_argument("--speed", default="1", metavar="X",
-                     help="simulated seconds per wall second, or 'max' (default: 1)")
-    fly.add_argument("--signing-key", default=None, metavar="FILE",
-                     help="MAVLink 2 signing key: 32 bytes, 64 hex digits or a passphrase")
-    fly.add_argument("--duration", type=float, default=None, metavar="S",
-                     help="stop after S simulated seconds (default: run until Ctrl-C)")
-    fly.set_defaults(func=_cmd_fly)
-
     sw = sub.add_parser("sweep", help="Monte-Carlo robustness campaign: H-infinity vs baseline")
     sw.add_argument("--cases", type=int, default=50, help="sampled cases (default: 50)")
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
@@ -316,6 +260,8 @@ def build_parser() -> argparse.ArgumentParser:
 
     fmus = sub.add_parser("fmus", help="print where the installed FMUs are")
     fmus.set_defaults(func=_cmd_fmus)
+    for command in entry_points(group=COMMANDS_GROUP):
+        command.load()(sub)
     return parser
 
 

@@ -82,7 +82,7 @@ class LiveSession:
 
     # -- inputs --------------------------------------------------------------
 
-    def set_reference(self, **values: Sequence[float]) -> None:
+    def set_reference(self, **values: Sequence[float] | np.ndarray) -> None:
         """Any of ``pos_ref``, ``euler_ref``, ``vel_ref``, ``acc_ref``, ``euler_rate_ref``
         (3 values) and ``rotor_health`` (8 values, 0..1: what the controller knows)."""
         for name, value in values.items():
@@ -95,7 +95,7 @@ class LiveSession:
                                  f"got {value!r}")
             self.reference[sl] = v
 
-    def set_disturbance(self, **values: Sequence[float]) -> None:
+    def set_disturbance(self, **values: Sequence[float] | np.ndarray) -> None:
         """Any of ``f_d``, ``tau_d``, ``a_d`` (3 values) and ``efficiency`` (8)."""
         for name, value in values.items():
             if name not in self._dist_slices:

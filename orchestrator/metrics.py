@@ -102,7 +102,7 @@ def _rms(x: np.ndarray, axis: int | None = None) -> np.ndarray:
 def _error_stats(err: np.ndarray, axes: tuple[str, ...]) -> dict[str, Any]:
     """max/RMS of the norm of err (n, k) and per column of its absolute values."""
     norm = np.linalg.norm(err, axis=1)
-    out: dict[str, Any] = {"max": _num(np.max(norm)), "rms": _num(_rms(norm))}
+    out: dict[str, Any] = {"max": _num(float(np.max(norm))), "rms": _num(float(_rms(norm)))}
     per_max = np.max(np.abs(err), axis=0)
     per_rms = _rms(err, axis=0)
     for i, name in enumerate(axes):

@@ -348,13 +348,13 @@ def _forces_3d(ax3: Any, trajectories: list[tuple[np.ndarray, str, str]],
                afs: Polytope | None, s0: Polytope | None) -> None:
     bounds = []
     if afs is not None or s0 is not None:
-        from controller.plots_force_sets import BLUE, GREEN, _draw_polytope
+        from controller.plots_force_sets import BLUE, GREEN, draw_polytope
 
         if afs is not None:
-            _draw_polytope(ax3, afs, GREEN, 0.12, False, "attainable force set")
+            draw_polytope(ax3, afs, GREEN, 0.12, False, "attainable force set")
             bounds.append(afs.vertices)
         if s0 is not None:
-            _draw_polytope(ax3, s0, BLUE, 0.0, True, "S(tau = 0)")
+            draw_polytope(ax3, s0, BLUE, 0.0, True, "S(tau = 0)")
             bounds.append(s0.vertices)
     for pts, color, label in trajectories:
         ax3.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, lw=0.6, alpha=0.8)

@@ -651,7 +651,7 @@ def resolve_scenario(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         return path
-    shipped = resources.files("orchestrator").joinpath("scenarios", f"{name_or_path}.toml")
+    shipped = resources.files("orchestrator") / "scenarios" / f"{name_or_path}.toml"
     if shipped.is_file():
         return Path(str(shipped))
     raise ScenarioError(str(name_or_path), "", "no such file or shipped scenario (shipped: "
@@ -834,5 +834,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         lost=lost,
         plant_parameters=plant_p,
         controller_parameters=ctrl_p,
-        **dist,
+        force=dist.get("force", Scenario.force),
+        torque=dist.get("torque", Scenario.torque),
+        acceleration=dist.get("acceleration", Scenario.acceleration),
     ))

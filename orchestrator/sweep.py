@@ -107,13 +107,13 @@ def run_case(case: dict[str, float], design: str, params: dict[str, float],
     plant["noise_seed"] = int(case["seed"])
     t_off = T_ON + 0.5 * (duration - T_ON)
     amp = case["dist_amp"]
-    acc = tuple(Steps((T_ON, t_off), (amp * case[k], 0.0)) for k in ("dist_x", "dist_y",
-                                                                       "dist_z"))
+    acc_x, acc_y, acc_z = (Steps((T_ON, t_off), (amp * case[k], 0.0))
+                           for k in ("dist_x", "dist_y", "dist_z"))
     ctrl = {**sc.controller_parameters, **params}
     if design.endswith(MATCHED):
         ctrl.update({k: v for k, v in plant.items() if k == "mass" or k.startswith("inertia")})
-    sc = dataclasses.replace(sc, acceleration=acc, plant_parameters={**sc.plant_parameters,
-                                                                      **plant},
+    sc = dataclasses.replace(sc, acceleration=(acc_x, acc_y, acc_z),
+                             plant_parameters={**sc.plant_parameters, **plant},
                              controller_parameters=ctrl)
     row: dict[str, Any] = {k: case[k] for k in COLUMNS if k in case}
     row["design"] = design
@@ -169,7 +169,7 @@ def run_sweep(n: int, seed: int = 0, duration: float = 6.0, workers: int = 1,
     if dask is not None:
         from dask.distributed import Client, as_completed
 
-        client = dask if hasattr(dask, "submit") else Client(dask)
+        client: Any = dask if hasattr(dask, "submit") else Client(dask)
         try:
             futs = [client.submit(_task, t, pure=False) for t in tasks]
             for f in as_completed(futs):
@@ -343,7 +343,10 @@ def plot(rows: Sequence[dict[str, Any]], out: Path) -> list[Path]:
         ax = fig.add_subplot(1, 3, j + 1)
         data = [[r[key] for r in rows if r["design"] == d and r["stable"]] or [np.nan]
                 for d in ds]
-        ax.boxplot(data, tick_labels=ds) if _mpl_new() else ax.boxplot(data, labels=ds)
+        if _mpl_new():
+            ax.boxplot(data, tick_labels=ds)
+        else:  # matplotlib < 3.9
+            ax.boxplot(data, labels=ds)  # type: ignore[call-arg]
         ax.set_title(label, fontsize=9)
     fig.tight_layout()
     p1 = out / "sweep_errors.png"

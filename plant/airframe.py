@@ -126,7 +126,7 @@ def resolve_airframe(name_or_path: str | Path) -> Path:
     path = Path(name_or_path)
     if path.suffix == ".toml" or path.exists():
         return path
-    shipped = resources.files("plant").joinpath("airframes", f"{name_or_path}.toml")
+    shipped = resources.files("plant") / "airframes" / f"{name_or_path}.toml"
     if shipped.is_file():
         return Path(str(shipped))
     raise AirframeError(

@@ -124,7 +124,7 @@ def _loops_from_pieces(spec: hinf.LoopSpec, k1: hinf.Block, k2: hinf.Block, w: n
 
     Pv = zoh([1.0], [tau, 1.0, 0.0])
     Pp = zoh([1.0], [tau, 1.0, 0.0, 0.0])
-    f = hinf._filter()
+    f = hinf.measurement_filter()
     hn, hd = signal.ss2tf(f.A, f.B, f.C, f.D)
     Hf = np.polyval(hn[0], z) / np.polyval(hd, z)
     Dl = z ** (-spec.delay)
@@ -286,7 +286,7 @@ def test_the_controller_fmu_runs_the_filter_and_sample_time_the_synthesis_design
         for k in range(steps):
             c.step(hinf.TS)
             got[k] = -c.read(acc_c)[0]
-    H = hinf._filter()
+    H = hinf.measurement_filter()
     x = np.zeros((H.A.shape[0], 1))
     want = np.empty(steps)
     for k in range(steps):  # y_k = C x_k + D u_k (the FMU's output after its update)

@@ -1,4 +1,4 @@
-"""The Python sources are ruff-clean (configuration in pyproject.toml)."""
+"""The Python sources are ruff-clean and type-check with mypy (configuration in pyproject.toml)."""
 
 import importlib.util
 import subprocess
@@ -15,6 +15,16 @@ def test_ruff_clean():
         pytest.fail("ruff is a test dependency: pip install '.[test]'")
     targets = ["plant", "controller", "orchestrator", "mavlink_bridge", "tests"]
     res = subprocess.run([sys.executable, "-m", "ruff", "check", *targets], cwd=ROOT,
+                         capture_output=True, text=True, check=False)
+    assert res.returncode == 0, res.stdout + res.stderr
+
+
+def test_mypy_clean():
+    """Types are checked, not only written: mypy over the four packages, for the oldest
+    Python the package supports ([tool.mypy] in pyproject.toml)."""
+    if importlib.util.find_spec("mypy") is None:
+        pytest.fail("mypy is a test dependency: pip install '.[test]'")
+    res = subprocess.run([sys.executable, "-m", "mypy", "--no-error-summary"], cwd=ROOT,
                          capture_output=True, text=True, check=False)
     assert res.returncode == 0, res.stdout + res.stderr
 

@@ -1,0 +1,77 @@
+"""``fullpose fly``: the bridge's command, joined to the ``fullpose`` CLI through the
+``fullpose.commands`` entry point (``orchestrator.cli`` loads it; neither imports the other's
+internals, and the orchestrator never imports the bridge)."""
+
+from __future__ import annotations
+
+import argparse
+import math
+import sys
+from typing import Any
+
+
+def register(sub: Any) -> None:
+    """Adds ``fly`` to the ``fullpose`` subparsers."""
+    fly = sub.add_parser("fly", help="fly the vehicle in real time from MAVLink ground tools")
+    fly.add_argument("scenario", nargs="?", default=None,
+                     help="start from this scenario's airframe, pose and parameters")
+    fly.add_argument("--airframe", default=None,
+                     help="shipped airframe name or TOML file (default: paper_hexacopter)")
+    fly.add_argument("--gcs", action="append", default=[], metavar="URL",
+                     help="MAVLink endpoint, udpout:HOST:PORT or udpin:HOST:PORT (repeatable; "
+                          "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540)")
+    fly.add_argument("--speed", default="1", metavar="X",
+                     help="simulated seconds per wall second, or 'max' (default: 1)")
+    fly.add_argument("--signing-key", default=None, metavar="FILE",
+                     help="MAVLink 2 signing key: 32 bytes, 64 hex digits or a passphrase")
+    fly.add_argument("--duration", type=float, default=None, metavar="S",
+                     help="stop after S simulated seconds (default: run until Ctrl-C)")
+    fly.set_defaults(func=_fly)
+
+
+def _fly(args: argparse.Namespace) -> int:
+    from mavlink_bridge.bridge import DEFAULT_URLS, Bridge, BridgeConfig  # pymavlink: lazily
+    from mavlink_bridge.links import load_key
+
+    if args.scenario is not None and args.airframe is not None:
+        raise ValueError("give a scenario or --airframe, not both")
+    speed = math.inf if args.speed.lower() == "max" else float(args.speed)
+    if not speed > 0:
+        raise ValueError("--speed must be positive or 'max'")
+    if args.duration is not None and not args.duration > 0:
+        raise ValueError("--duration must be positive")
+    config = BridgeConfig(urls=args.gcs or list(DEFAULT_URLS), speed=speed,
+                          duration=args.duration)
+    if args.scenario is not None:
+        from orchestrator.scenario import load_scenario
+
+        sc = load_scenario(args.scenario)
+        pos0, euler0 = sc.initial_pose()
+        config.airframe, config.pos0, config.euler0 = sc.airframe, tuple(pos0), tuple(euler0)
+        config.plant_parameters = sc.plant_parameters
+        config.controller_parameters = sc.controller_parameters
+        config.coupling = sc.coupling
+    elif args.airframe is not None:
+        config.airframe = args.airframe
+    if args.signing_key is not None:
+        try:
+            config.signing_key = load_key(args.signing_key)
+        except (OSError, UnicodeDecodeError) as e:
+            raise ValueError(f"signing key: {e}") from None
+    with Bridge(config) as bridge:
+        af = bridge.airframe
+        print(f"flying {af.name} from {tuple(float(x) for x in config.pos0)} "
+              f"(speed {args.speed}, signing {'on' if config.signing_key else 'off'})")
+        for ep in bridge.endpoints:
+            print(f"mavlink endpoint    {ep.url} (local {ep.sock.getsockname()[0]}:"
+                  f"{ep.sock.getsockname()[1]})")
+        sys.stdout.flush()
+        try:
+            stats = bridge.run()
+        except KeyboardInterrupt:
+            stats = bridge.stats
+        for line in stats.lines():
+            print(line)
+    return 0
+
+

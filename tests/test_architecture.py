@@ -1,0 +1,129 @@
+"""The walls of docs/architecture.md, enforced from the sources' own imports and includes.
+
+* plant/ imports only plant; controller/ only plant and controller; orchestrator/ never
+  mavlink_bridge/ (the ``fly`` command joins the CLI through an entry point);
+* no production module imports a private name (``_x``) of another module;
+* C model code never includes an FMI header (only the glue and the host kernel do); the plant
+  and controller models never include each other's headers.
+"""
+
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+PACKAGES = ("plant", "controller", "orchestrator", "mavlink_bridge")
+MAY_IMPORT = {
+    "plant": {"plant"},
+    "controller": {"plant", "controller"},
+    "orchestrator": {"plant", "controller", "orchestrator"},
+    "mavlink_bridge": {"plant", "controller", "orchestrator", "mavlink_bridge"},
+}
+
+
+def _modules(package: str) -> list[Path]:
+    return sorted(p for p in (ROOT / package).rglob("*.py") if "fmus" not in p.parts)
+
+
+def _module_name(path: Path) -> str:
+    parts = path.relative_to(ROOT).with_suffix("").parts
+    return ".".join(parts[:-1] if parts[-1] == "__init__" else parts)
+
+
+def _imports(path: Path) -> list[tuple[int, str, list[str]]]:
+    """(line, imported module, imported names) of every import, at any depth (lazy ones
+    inside functions count too)."""
+    out = []
+    for node in ast.walk(ast.parse(path.read_text(), str(path))):
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name, []) for a in node.names]
+        elif isinstance(node, ast.ImportFrom) and node.module and node.level == 0:
+            out.append((node.lineno, node.module, [a.name for a in node.names]))
+    return out
+
+
+def test_every_package_has_modules():
+    for package in PACKAGES:
+        assert _modules(package), package
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_packages_import_only_the_layers_below(package):
+    bad = []
+    for path in _modules(package):
+        for line, module, _ in _imports(path):
+            top = module.split(".")[0]
+            if top in PACKAGES and top not in MAY_IMPORT[package]:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {module}")
+    assert not bad, "\n".join(bad)
+
+
+@pytest.mark.parametrize("package", PACKAGES)
+def test_no_module_imports_another_modules_private_names(package):
+    bad = []
+    for path in _modules(package):
+        me = _module_name(path)
+        for line, module, names in _imports(path):
+            if module.split(".")[0] not in PACKAGES or module == me:
+                continue
+            private = [n for n in names if n.startswith("_") and not n.startswith("__")]
+            private += [p for p in module.split(".")[1:] if p.startswith("_")
+                        and not p.startswith("__")]
+            if private:
+                bad.append(f"{path.relative_to(ROOT)}:{line} imports {module}: {private}")
+    assert not bad, "\n".join(bad)
+
+
+_INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
+SRC = ROOT / "fmu_src"
+MODEL_DIRS = ("plant", "controller", "common")
+GLUE = {SRC / "common" / "fmi2_glue.c"}
+
+
+def _c_files(folder: str) -> list[Path]:
+    return sorted(p for p in (SRC / folder).glob("*") if p.suffix in (".c", ".h"))
+
+
+def _owner(header: str) -> str | None:
+    """The folder of fmu_src/ holding a header (None: not ours, e.g. the FMI headers)."""
+    for folder in (*MODEL_DIRS, "host", "tools"):
+        if (SRC / folder / header).is_file():
+            return folder
+    return None
+
+
+def test_model_code_never_includes_fmi_headers():
+    bad = [f"{p.relative_to(ROOT)} includes {h}" for d in MODEL_DIRS for p in _c_files(d)
+           if p not in GLUE for h in _INCLUDE.findall(p.read_text()) if h.startswith("fmi")]
+    assert not bad, "\n".join(bad)
+
+
+def test_plant_and_controller_models_never_include_each_other():
+    bad = []
+    for me, other in (("plant", "controller"), ("controller", "plant")):
+        for p in _c_files(me):
+            bad += [f"{p.relative_to(ROOT)} includes {h} ({other}/)"
+                    for h in _INCLUDE.findall(p.read_text()) if _owner(h) == other]
+    assert not bad, "\n".join(bad)
+
+
+def test_common_code_belongs_to_neither_model():
+    bad = [f"{p.relative_to(ROOT)} includes {h}" for p in _c_files("common")
+           for h in _INCLUDE.findall(p.read_text()) if _owner(h) in ("plant", "controller")]
+    assert not bad, "\n".join(bad)
+
+
+def test_the_walls_test_sees_a_breach(tmp_path):
+    """The checks above on a planted breach: they are not vacuous."""
+    breach = tmp_path / "x.py"
+    breach.write_text("def f():\n    from mavlink_bridge.bridge import Bridge\n"
+                      "from plant._native import core\n")
+    found = _imports(breach)
+    assert (2, "mavlink_bridge.bridge", ["Bridge"]) in found
+    assert (3, "plant._native", ["core"]) in found
+    assert _INCLUDE.findall('#include "fmi2Functions.h"\n  # include "wls.h"') == [
+        "fmi2Functions.h", "wls.h"]
