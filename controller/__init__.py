@@ -1,1 +1,4 @@
-"""Controller design: filters, gains, allocation weights, feasible-force polytope."""
+"""Controller design: force sets, robust gains, the allocation solver; the controller FMU."""
+
+CONTROLLER_FMU = "FullPoseController"
+"""Model name of the controller FMU (``controller/fmus/FullPoseController.fmu``)."""

@@ -23,6 +23,8 @@ POLY_FACETS = 64
 """Facet cap of S(0) (the FMU's ``poly_A`` has 64 rows)."""
 FAIL_FACETS = 32
 """Facet cap of each single-failure polytope (``fail_poly_A`` holds 8 x 32 rows)."""
+SAT_FLAG_SHIFT = {"motor": 0, "alpha": 8, "beta": 16}
+"""Bit of rotor 1 in the ``sat_flags`` output per actuator kind (rotor i: shift + i - 1)."""
 LOOPS = ("pos", "vel", "att", "rate")
 """The four blocks of the cascade, in the FMU's names ``K_<loop>_<A|B|C|D>[axis]``."""
 

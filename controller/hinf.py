@@ -82,11 +82,10 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import optimize, signal
 
+from controller import CONTROLLER_FMU
 from controller.lti import SS, Diagram, Margins, hinf_norm, loop_margins
 from plant import load_airframe
 from plant.model_description import start_value
-
-CONTROLLER_FMU = "FullPoseController"
 
 # The design constants, from the one place each is defined: the controller FMU's defaults
 # (sample time, measurement filter) and the shipped airframe (the actuator time constant), so

@@ -64,9 +64,10 @@ from typing import Any
 
 import numpy as np
 
+from controller.fmu_parameters import SAT_FLAG_SHIFT
+from controller.wls import STATUS_NAMES
 from orchestrator.results import RunResult
 
-STATUS_NAMES = ("optimal", "max_iter", "infeasible", "bad_input")
 """Names of the QP status codes 0..3 (controller outputs guid_status and alloc_status)."""
 
 POSITION_AXES = ("x", "y", "z")
@@ -84,10 +85,6 @@ def _num(x: float | np.floating | np.integer) -> float | None:
     """A plain float, or None when not finite (JSON has no NaN/inf)."""
     v = float(x)
     return v if math.isfinite(v) else None
-
-
-def _opt(result: RunResult, name: str) -> np.ndarray | None:
-    return result.get(name) if result.has(name) else None
 
 
 def wrap_deg(angle: np.ndarray) -> np.ndarray:
@@ -110,16 +107,6 @@ def _error_stats(err: np.ndarray, axes: tuple[str, ...]) -> dict[str, Any]:
     return out
 
 
-def _n_rotors(result: RunResult) -> int:
-    n = result.meta.get("n_rotors")
-    if n is not None:
-        return int(n)
-    for name in ("ctrl.omega_cmd", "plant.omega"):
-        if result.has(name):
-            return int(np.atleast_2d(result.get(name).T).shape[0])
-    return 8
-
-
 def saturation_fractions(flags: np.ndarray, n_rotors: int) -> dict[str, float | None]:
     """Saturation fractions of a sat_flags column (see the module docstring)."""
     f = np.asarray(flags, dtype=float)
@@ -130,7 +117,7 @@ def saturation_fractions(flags: np.ndarray, n_rotors: int) -> dict[str, float | 
     rotors = np.arange(n_rotors)
     out: dict[str, float | None] = {}
     sets = {}
-    for kind, shift in (("motor", 0), ("alpha", 8), ("beta", 16)):
+    for kind, shift in SAT_FLAG_SHIFT.items():
         on = (bits[:, None] >> (rotors + shift)[None, :]) & 1  # (n, n_rotors)
         sets[kind] = on
         out[f"any_{kind}"] = float(np.mean(np.any(on, axis=1)))
@@ -141,7 +128,7 @@ def saturation_fractions(flags: np.ndarray, n_rotors: int) -> dict[str, float | 
 
 
 def _qp_stats(result: RunResult, prefix: str) -> dict[str, Any] | None:
-    iters, status = _opt(result, f"ctrl.{prefix}_iter"), _opt(result, f"ctrl.{prefix}_status")
+    iters, status = result.optional(f"ctrl.{prefix}_iter"), result.optional(f"ctrl.{prefix}_status")
     if iters is None and status is None:
         return None
     out: dict[str, Any] = {"iter_mean": None, "iter_max": None, "status_counts": None}
@@ -161,7 +148,7 @@ def _qp_stats(result: RunResult, prefix: str) -> dict[str, Any] | None:
 def _timing(result: RunResult) -> dict[str, dict[str, float | None] | None]:
     out: dict[str, dict[str, float | None] | None] = {}
     for name in ("t_guid", "t_alloc", "t_step"):
-        t = _opt(result, f"ctrl.{name}")
+        t = result.optional(f"ctrl.{name}")
         if t is None or t.size == 0 or not np.any(t != 0.0):
             out[name] = None
             continue
@@ -201,8 +188,8 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
         m["lost"] = {"time": _num(outcome.get("time", math.nan)),
                      "reason": str(outcome.get("reason", ""))}
 
-    pos, pos_ref = _opt(result, "plant.pos"), _opt(result, "ref.pos_ref")
-    euler = _opt(result, "plant.euler")
+    pos, pos_ref = result.optional("plant.pos"), result.optional("ref.pos_ref")
+    euler = result.optional("plant.euler")
     bad = np.zeros(t.size, dtype=bool)
     for sig in (pos, euler):
         if sig is not None:
@@ -215,7 +202,7 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
 
     for key, ref_name in (("attitude_error_vs_mu_c", "ctrl.mu_c"),
                           ("attitude_error_vs_mu_ref", "ref.euler_ref")):
-        ref = _opt(result, ref_name)
+        ref = result.optional(ref_name)
         m[key] = None
         if euler is not None and ref is not None and t.size:
             err = wrap_deg(np.degrees(euler - ref))
@@ -224,12 +211,12 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
             stats["max_axis"] = None if None in per_axis else max(per_axis)
             m[key] = stats
 
-    feasible = _opt(result, "ctrl.feasible")
+    feasible = result.optional("ctrl.feasible")
     m["infeasible_fraction"] = (None if feasible is None or feasible.size == 0
                                 else _num(1.0 - np.mean(feasible)))
 
-    flags = _opt(result, "ctrl.sat_flags")
-    m["saturation"] = None if flags is None else saturation_fractions(flags, _n_rotors(result))
+    flags = result.optional("ctrl.sat_flags")
+    m["saturation"] = None if flags is None else saturation_fractions(flags, result.n_rotors)
 
     m["guidance_qp"] = _qp_stats(result, "guid")
     m["allocation_qp"] = _qp_stats(result, "alloc")

@@ -136,23 +136,9 @@ def _shade(ax: Axes, intervals: list[tuple[float, float]], label: str | None) ->
 # Helpers
 
 
-def _opt(result: RunResult, name: str) -> np.ndarray | None:
-    return result.get(name) if result.has(name) else None
-
-
 def _cols(a: np.ndarray) -> np.ndarray:
     """A signal as (n, k) (scalar signals become one column)."""
     return a.reshape(a.shape[0], -1)
-
-
-def _n_rotors(result: RunResult) -> int:
-    n = result.meta.get("n_rotors")
-    if n is not None:
-        return int(n)
-    for name in ("ctrl.omega_cmd", "plant.omega"):
-        if result.has(name):
-            return _cols(result.get(name)).shape[1]
-    return 0
 
 
 def _new_figure(width: float, height: float) -> Figure:
@@ -189,7 +175,7 @@ def plot_tracking(result: RunResult, path: Path) -> Path:
     t = result.time
     fig = _new_figure(13.0, 10.0)
     axs = fig.subplots(4, 2, sharex=True)
-    pos, pos_ref = _opt(result, "plant.pos"), _opt(result, "ref.pos_ref")
+    pos, pos_ref = result.optional("plant.pos"), result.optional("ref.pos_ref")
     for i, name in enumerate(("x", "y", "z")):
         ax = axs[i, 0]
         if pos_ref is not None:
@@ -201,11 +187,11 @@ def plot_tracking(result: RunResult, path: Path) -> Path:
     axs[0, 0].set_title("position (world NED)")
     axs[0, 0].legend(loc="upper right", fontsize=8)
 
-    feasible = _opt(result, "ctrl.feasible")
+    feasible = result.optional("ctrl.feasible")
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
     bands = [] if feasible is None else false_intervals(t, feasible, min_gap=span / 1000.0)
-    mu_ref, mu_c = _opt(result, "ref.euler_ref"), _opt(result, "ctrl.mu_c")
-    mu_m = _opt(result, "plant.euler")
+    mu_ref, mu_c = result.optional("ref.euler_ref"), result.optional("ctrl.mu_c")
+    mu_m = result.optional("plant.euler")
     for i, name in enumerate(("phi", "theta", "psi")):
         ax = axs[i, 1]
         _shade(ax, bands, "mu_ref infeasible" if i == 0 else None)
@@ -269,17 +255,17 @@ def _limits(result: RunResult, airframe: Airframe | None) -> dict[str, tuple[flo
 def plot_actuators(result: RunResult, path: Path, airframe: Airframe | None = None) -> Path:
     """Figs. 5/10: commanded servo angles and rotor speeds with their limits."""
     t = result.time
-    n = _n_rotors(result)
+    n = result.n_rotors
     lims = _limits(result, airframe)
     fig = _new_figure(13.0, 9.0)
     axs = fig.subplots(3, 1, sharex=True)
     groups = (("alpha", "alpha", np.degrees(1.0), "deg"), ("beta", "beta", np.degrees(1.0), "deg"),
               ("omega", "omega", RPM_PER_RAD_S, "rpm"))
     for ax, (key, sym, scale, unit) in zip(axs, groups, strict=True):
-        sig = _opt(result, f"ctrl.{key}_cmd")
+        sig = result.optional(f"ctrl.{key}_cmd")
         what = "commanded"
         if sig is None:
-            sig, what = _opt(result, f"plant.{key}"), "measured"
+            sig, what = result.optional(f"plant.{key}"), "measured"
         if sig is not None:
             sig = _cols(sig)
             for i in range(min(n, sig.shape[1])):
@@ -312,7 +298,7 @@ def plot_forces(result: RunResult, path: Path, afs: Polytope | None = None,
     """Fig. 6: f_b_ref vs f_b_c over time, in 3-D against the AFS and S(0), and in the
     lateral plane against the slices P_xy of S(0) at the run's f_bz range."""
     t = result.time
-    f_ref, f_c = _opt(result, "ctrl.f_b_ref"), _opt(result, "ctrl.f_b_c")
+    f_ref, f_c = result.optional("ctrl.f_b_ref"), result.optional("ctrl.f_b_c")
     fig = _new_figure(15.0, 10.0)
     grid = fig.add_gridspec(6, 2, width_ratios=[1.25, 1.0])
     axes_t = [fig.add_subplot(grid[2 * i:2 * i + 2, 0]) for i in range(3)]
@@ -422,10 +408,10 @@ def _nonzero(sig: np.ndarray | None, default: float = 0.0) -> bool:
 def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
     """Fig. 8: disturbances on top, QP computation times (or iterations) below."""
     t = result.time
-    n = _n_rotors(result)
-    a_d = _opt(result, "dist.a_d")
-    f_d, tau_d = _opt(result, "dist.f_d"), _opt(result, "dist.tau_d")
-    eff = _opt(result, "dist.efficiency")
+    n = result.n_rotors
+    a_d = result.optional("dist.a_d")
+    f_d, tau_d = result.optional("dist.f_d"), result.optional("dist.tau_d")
+    eff = result.optional("dist.efficiency")
     if eff is not None:
         eff = _cols(eff)[:, :n]
     panels: list[tuple[str, np.ndarray | None, str]] = [("a_d", a_d, "m/s^2")]
@@ -434,7 +420,7 @@ def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
     if _nonzero(tau_d):
         panels.append(("tau_d", tau_d, "N m"))
     show_eff = eff is not None and eff.size > 0 and _nonzero(eff, 1.0)
-    timing = {k: _opt(result, f"ctrl.{k}") for k in ("t_guid", "t_alloc")}
+    timing = {k: result.optional(f"ctrl.{k}") for k in ("t_guid", "t_alloc")}
     measured = any(_nonzero(v) for v in timing.values())
     rows = len(panels) + int(show_eff) + 1
     fig = _new_figure(12.0, 2.6 * rows + 0.6)
@@ -482,7 +468,7 @@ def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
     else:
         for name, color, label in (("guid_iter", CMD_COLOR, "guidance QP"),
                                    ("alloc_iter", MEAS_COLOR, "allocation QP")):
-            sig = _opt(result, f"ctrl.{name}")
+            sig = result.optional(f"ctrl.{name}")
             if sig is not None:
                 _line(ax, t, sig, color=color, lw=0.8, label=label)
         ax.set_ylabel("iterations [-]")

@@ -64,6 +64,22 @@ class RunResult:
 
     # -- files ---------------------------------------------------------------
 
+    def optional(self, name: str) -> np.ndarray | None:
+        """:meth:`get`, or None when the run did not record the signal."""
+        return self.get(name) if self.has(name) else None
+
+    @property
+    def n_rotors(self) -> int:
+        """The airframe's rotor count: from the metadata, else the recorded rotor vectors'
+        width, else the FMUs' 8 rotor slots."""
+        n = self.meta.get("n_rotors")
+        if n is not None:
+            return int(n)
+        for name in ("ctrl.omega_cmd", "plant.omega"):
+            if self.has(name):
+                return int(self.get(name).reshape(len(self.time), -1).shape[1])
+        return 8
+
     def write_csv(self, path: Path) -> None:
         header = ",".join(self.columns)
         np.savetxt(path, self.data, delimiter=",", header=header, comments="", fmt="%.17g")

@@ -82,6 +82,8 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from controller import CONTROLLER_FMU
+from orchestrator.engine import COUPLINGS
 from orchestrator.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
 from orchestrator.scenario_reader import FieldReader, ScenarioError
 from orchestrator.signals import (
@@ -98,7 +100,7 @@ from orchestrator.signals import (
     parse_signal,
     value_range,
 )
-from plant import Airframe, AirframeError, list_airframes, load_airframe
+from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
 from plant.model_description import model_variables, start_value
 
@@ -120,12 +122,9 @@ __all__ = [
     "scenario_names",
 ]
 
-STEP_QUANTUM = 0.002
-"""Communication steps are positive integer multiples of this (controller Ts), s."""
-DEFAULT_STEP = 0.002
-COUPLINGS = ("gauss-seidel", "jacobi")
-PLANT_FMU = "MultirotorPlant"
-CONTROLLER_FMU = "FullPoseController"
+STEP_QUANTUM = start_value(CONTROLLER_FMU, "Ts")
+"""Communication steps are positive integer multiples of this (the controller's Ts), s."""
+DEFAULT_STEP = STEP_QUANTUM
 POSITION_AXES = ("x", "y", "z")
 ATTITUDE_AXES = ("roll", "pitch", "yaw")
 DISTURBANCES = {"force": "f_d", "torque": "tau_d", "acceleration": "a_d"}
