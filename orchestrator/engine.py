@@ -180,21 +180,10 @@ class Recording:
     def time(self) -> np.ndarray:
         return self.data[:, 0]
 
-    @property
-    def ref(self) -> np.ndarray:
-        return self.block("ref")
-
-    @property
-    def plant(self) -> np.ndarray:
-        return self.block("plant")
-
-    @property
-    def dist(self) -> np.ndarray:
-        return self.block("dist")
-
-    @property
-    def ctrl(self) -> np.ndarray:
-        return self.block("ctrl")
+    ref = property(lambda self: self.block("ref"), doc="references r_k, controller inputs")
+    plant = property(lambda self: self.block("plant"), doc="plant outputs y_k, measured first")
+    dist = property(lambda self: self.block("dist"), doc="disturbances d_k, plant inputs")
+    ctrl = property(lambda self: self.block("ctrl"), doc="controller outputs u_k, commands first")
 
     @property
     def commands(self) -> np.ndarray:

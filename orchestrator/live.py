@@ -85,26 +85,11 @@ class LiveSession:
     def set_reference(self, **values: Sequence[float] | np.ndarray) -> None:
         """Any of ``pos_ref``, ``euler_ref``, ``vel_ref``, ``acc_ref``, ``euler_rate_ref``
         (3 values) and ``rotor_health`` (8 values, 0..1: what the controller knows)."""
-        for name, value in values.items():
-            if name not in self._ref_slices:
-                raise KeyError(f"unknown reference {name!r} (one of {', '.join(REF_INPUTS)})")
-            sl = self._ref_slices[name]
-            v = np.asarray(value, dtype=float)
-            if v.shape != (sl.stop - sl.start,) or not np.all(np.isfinite(v)):
-                raise ValueError(f"{name} must be {sl.stop - sl.start} finite numbers, "
-                                 f"got {value!r}")
-            self.reference[sl] = v
+        _assign(self.reference, self._ref_slices, "reference", values)
 
     def set_disturbance(self, **values: Sequence[float] | np.ndarray) -> None:
         """Any of ``f_d``, ``tau_d``, ``a_d`` (3 values) and ``efficiency`` (8)."""
-        for name, value in values.items():
-            if name not in self._dist_slices:
-                raise KeyError(f"unknown disturbance {name!r} (one of {', '.join(DIST_INPUTS)})")
-            sl = self._dist_slices[name]
-            v = np.asarray(value, dtype=float)
-            if v.shape != (sl.stop - sl.start,) or not np.all(np.isfinite(v)):
-                raise ValueError(f"{name} must be {sl.stop - sl.start} finite numbers")
-            self.disturbance[sl] = v
+        _assign(self.disturbance, self._dist_slices, "disturbance", values)
 
     def set_controller_parameter(self, name: str, value: float | int | bool) -> None:
         """A tunable controller parameter, applied from the next step on.
@@ -169,3 +154,20 @@ class LiveSession:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def _assign(target: np.ndarray, slices: Mapping[str, slice], kind: str,
+            values: Mapping[str, Sequence[float] | np.ndarray]) -> None:
+    """Writes each named input's values into its slice of ``target``, all checked first."""
+    checked = []
+    for name, value in values.items():
+        if name not in slices:
+            raise KeyError(f"unknown {kind} {name!r} (one of {', '.join(slices)})")
+        sl = slices[name]
+        v = np.asarray(value, dtype=float)
+        if v.shape != (sl.stop - sl.start,) or not np.all(np.isfinite(v)):
+            raise ValueError(f"{name} must be {sl.stop - sl.start} finite numbers, got {value!r}")
+        checked.append((sl, v))
+    for sl, v in checked:
+        target[sl] = v
+

@@ -75,7 +75,6 @@ import sys
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 from functools import cache
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
@@ -103,6 +102,7 @@ from orchestrator.signals import (
 from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
 from plant.model_description import model_variables, start_value
+from plant.toml_reader import resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -637,8 +637,7 @@ def _position_warnings(sc: Scenario) -> tuple[str, ...]:
 
 def scenario_names() -> list[str]:
     """Names of the scenario files shipped with the package."""
-    root = resources.files("orchestrator").joinpath("scenarios")
-    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+    return shipped_names("orchestrator", "scenarios")
 
 
 def list_scenarios() -> list[Scenario]:
@@ -647,14 +646,7 @@ def list_scenarios() -> list[Scenario]:
 
 
 def resolve_scenario(name_or_path: str | Path) -> Path:
-    path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
-        return path
-    shipped = resources.files("orchestrator") / "scenarios" / f"{name_or_path}.toml"
-    if shipped.is_file():
-        return Path(str(shipped))
-    raise ScenarioError(str(name_or_path), "", "no such file or shipped scenario (shipped: "
-                        f"{', '.join(scenario_names())})")
+    return resolve_file(name_or_path, "orchestrator", "scenarios", "scenario", ScenarioError)
 
 
 def load_scenario(name_or_path: str | Path) -> Scenario:

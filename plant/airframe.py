@@ -10,14 +10,13 @@ from __future__ import annotations
 import math
 import sys
 from dataclasses import dataclass
-from importlib import resources
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from plant.effectiveness import RotorSet
-from plant.toml_reader import FieldError, TomlTable
+from plant.toml_reader import FieldError, TomlTable, resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -118,20 +117,11 @@ class Airframe:
 
 def list_airframes() -> list[str]:
     """Names of the airframe files shipped with the package."""
-    root = resources.files("plant").joinpath("airframes")
-    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+    return shipped_names("plant", "airframes")
 
 
 def resolve_airframe(name_or_path: str | Path) -> Path:
-    path = Path(name_or_path)
-    if path.suffix == ".toml" or path.exists():
-        return path
-    shipped = resources.files("plant") / "airframes" / f"{name_or_path}.toml"
-    if shipped.is_file():
-        return Path(str(shipped))
-    raise AirframeError(
-        str(name_or_path), "", f"no such file or shipped airframe (shipped: "
-        f"{', '.join(list_airframes())})")
+    return resolve_file(name_or_path, "plant", "airframes", "airframe", AirframeError)
 
 
 def load_airframe(name_or_path: str | Path) -> Airframe:

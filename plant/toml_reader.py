@@ -10,6 +10,8 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from importlib import resources
+from pathlib import Path
 from typing import Any, ClassVar
 
 
@@ -81,3 +83,22 @@ class TomlTable:
             raise self.fail(key, f"expected one of {', '.join(repr(c) for c in choices)}, "
                             f"got {value!r}")
         return value
+
+
+def shipped_names(package: str, folder: str) -> list[str]:
+    """Names (without ``.toml``) of the files shipped in a package's data folder."""
+    root = resources.files(package) / folder
+    return sorted(p.name[:-5] for p in root.iterdir() if p.name.endswith(".toml"))
+
+
+def resolve_file(name_or_path: str | Path, package: str, folder: str, what: str,
+                 error: type[FieldError] = FieldError) -> Path:
+    """A TOML file given as a path, or by the name of a shipped one; ``error`` when neither."""
+    path = Path(name_or_path)
+    if path.suffix == ".toml" or path.exists():
+        return path
+    shipped = resources.files(package) / folder / f"{name_or_path}.toml"
+    if shipped.is_file():
+        return Path(str(shipped))
+    raise error(str(name_or_path), "", f"no such file or shipped {what} (shipped: "
+                f"{', '.join(shipped_names(package, folder))})")
