@@ -310,34 +310,47 @@ class PythonEngine(Engine):
     """The per-step call sequence from Python: the oracle of :class:`NativeEngine`."""
 
     def steps(self, first: int, last: int, t0: float) -> None:
-        rec, v, h = self.rec, self.vrs, self.h
-        p, c = self._p, self._c
+        rec, v, h, jacobi = self.rec, self.vrs, self.h, self.jacobi
         pc = self.plant.slave.component
-        cc = self.ctrl.slave.component if self.ctrl is not None else None
-        ref, plant, dist, ctrl = rec.ref, rec.plant, rec.dist, rec.ctrl
-        c_int, c_bool, p_int = rec.int_block("ctrl"), rec.int_block("ctrl_bool"), \
-            rec.int_block("plant")
+        p_set, p_step, p_get, p_geti = (self._p[n] for n in _PLANT_FNS)
+        # each block's row 0 address and row stride: element [k, 0] is at base + k * stride
+        stride = rec.data.strides[0]
+        ref, ctrl, dist, plant = (int(rec.block(b).ctypes.data)
+                                  for b in ("ref", "ctrl", "dist", "plant"))
+        istride = rec.ints.strides[0]
+        c_int, c_bool, p_int = (int(rec.int_block(b).ctypes.data)
+                                for b in ("ctrl", "ctrl_bool", "plant"))
+        spare = ctrl + rec.spare * stride
+        c_in, c_out, c_ints, c_bools = v["c_in"], v["c_out"], v["c_int"], v["c_bool"]
+        p_in, p_cmd, p_dist, p_out, p_ints = (v["p_in"], v["p_cmd"], v["p_dist"], v["p_out"],
+                                              v["p_int"])
+        n_cin, n_cout, n_cint, n_cbool = len(c_in), len(c_out), len(c_ints), len(c_bools)
+        n_pin, n_cmd, n_dist, n_pout, n_pint = (len(p_in), len(p_cmd), len(p_dist), len(p_out),
+                                                len(p_ints))
+        closed = self._c is not None and self.ctrl is not None
+        if closed:
+            assert self._c is not None and self.ctrl is not None
+            cc = self.ctrl.slave.component
+            c_set, c_step, c_get, c_geti, c_getb = (self._c[n] for n in _CTRL_FNS)
         for k in range(first, last):
             t = t0 + k * h
             a = 0
-            if c is not None:  # the controller samples [r_k, y_k]
-                a |= c["fmi2SetReal"](cc, v["c_in"], len(v["c_in"]), _address(ref, k))
-                a |= c["fmi2DoStep"](cc, t, h, 1)
-                a |= c["fmi2GetReal"](cc, v["c_out"], len(v["c_out"]), _address(ctrl, k))
-                a |= c["fmi2GetInteger"](cc, v["c_int"], len(v["c_int"]), _address(c_int, k))
-                a |= c["fmi2GetBoolean"](cc, v["c_bool"], len(v["c_bool"]),
-                                         _address(c_bool, k))
+            if closed:  # the controller samples [r_k, y_k]
+                a |= c_set(cc, c_in, n_cin, ref + k * stride)
+                a |= c_step(cc, t, h, 1)
+                a |= c_get(cc, c_out, n_cout, ctrl + k * stride)
+                a |= c_geti(cc, c_ints, n_cint, c_int + k * istride)
+                a |= c_getb(cc, c_bools, n_cbool, c_bool + k * istride)
                 if a > _OK_STATUS:
                     self.fail(t, k)
-            if self.jacobi:  # the plant integrates with u_{k-1}
-                a |= p["fmi2SetReal"](pc, v["p_cmd"], len(v["p_cmd"]),
-                                      _address(ctrl, k - 1 if k else rec.spare))
-                a |= p["fmi2SetReal"](pc, v["p_dist"], len(v["p_dist"]), _address(dist, k))
+            if jacobi:  # the plant integrates with u_{k-1}
+                a |= p_set(pc, p_cmd, n_cmd, ctrl + (k - 1) * stride if k else spare)
+                a |= p_set(pc, p_dist, n_dist, dist + k * stride)
             else:  # with u_k: [dist_k, u_k] are contiguous, one call
-                a |= p["fmi2SetReal"](pc, v["p_in"], len(v["p_in"]), _address(dist, k))
-            a |= p["fmi2DoStep"](pc, t, h, 1)
-            a |= p["fmi2GetReal"](pc, v["p_out"], len(v["p_out"]), _address(plant, k + 1))
-            a |= p["fmi2GetInteger"](pc, v["p_int"], len(v["p_int"]), _address(p_int, k + 1))
+                a |= p_set(pc, p_in, n_pin, dist + k * stride)
+            a |= p_step(pc, t, h, 1)
+            a |= p_get(pc, p_out, n_pout, plant + (k + 1) * stride)
+            a |= p_geti(pc, p_ints, n_pint, p_int + (k + 1) * istride)
             if a > _OK_STATUS:
                 self.fail(t, k)
 
