@@ -316,21 +316,6 @@ def _pack(k1: Block, k2: Block, no_lag: bool = False) -> np.ndarray:
     return np.array([lp(k1.a), k1.g, k1.d, lp(k2.a), g2, k2.d])
 
 
-def grid_gains(spec: LoopSpec, k1: Block, k2: Block, w: np.ndarray) -> np.ndarray | None:
-    """|weighted channels| on a grid for every model: (n_models, len(w), 6), or None when a
-    model's closed loop is unstable."""
-    out = []
-    for kk, tau in models(spec):
-        cl = interconnection(spec, k1, k2, kk, tau)
-        ci = inner_loop(spec, k2, kk, tau)
-        if max(cl.spectral_radius(), ci.spectral_radius()) >= 1.0 - 1e-9:
-            return None
-        g = np.abs(cl.freqresp(w)[:, np.arange(len(CHANNELS)), list(CHANNEL_INPUT)])
-        g[:, 1] = np.abs(ci.freqresp(w)[:, 0, 0])
-        out.append(g)
-    return np.array(out)
-
-
 def _tf(sys: SS, out: int, inp: int) -> tuple[np.ndarray, np.ndarray]:
     num, den = signal.ss2tf(sys.A, sys.B, sys.C, sys.D, input=inp)
     return np.trim_zeros(num[out], "f") if np.any(num[out]) else np.zeros(1), den

@@ -7,8 +7,8 @@
   Boyd-Balakrishnan / Bruinsma-Steinbuch bisection on the Hamiltonian of the bilinear-
   transformed system (the bilinear map z = (alpha + s) / (alpha - s) maps the unit circle onto
   the imaginary axis one-to-one, so the peak gain is unchanged) - quadratically convergent.
-* :func:`hinf_norm_grid` - an independent check: a dense log-frequency grid of |G(e^{jwTs})|
-  refined near the peak with scipy.optimize.minimize_scalar.
+  (tests/test_hinf.py checks it against a dense log-frequency grid of |G(e^{jwTs})| refined
+  near the peak with scipy.optimize.minimize_scalar).
 * :func:`loop_margins` - gain, phase and (symmetric) disk margins of a SISO loop.
 """
 
@@ -236,29 +236,6 @@ def hinf_norm(sys: SS, rtol: float = 1e-9, max_iter: int = 60) -> tuple[float, f
             break
     w_d = 2.0 / sys.Ts * np.arctan(wpk / alpha) if np.isfinite(wpk) else np.pi / sys.Ts
     return gl, float(w_d)
-
-
-def hinf_norm_grid(sys: SS, n_grid: int = 4000, w_min: float = 1e-3) -> tuple[float, float]:
-    """Independent check of :func:`hinf_norm`: a dense log grid of the largest singular value
-    of G(e^{j w Ts}) up to Nyquist, refined around the best few points by bounded scalar
-    minimization (scipy.optimize.minimize_scalar)."""
-    wn = np.pi / sys.Ts
-    w = np.concatenate([[0.0], np.logspace(np.log10(w_min), np.log10(wn), n_grid)])
-
-    def smax(x: float) -> float:
-        return float(np.linalg.norm(sys.freqresp(np.array([x]))[0], 2))
-
-    g = np.linalg.norm(sys.freqresp(w), ord=2, axis=(1, 2))
-    best, wbest = float(g.max()), float(w[int(g.argmax())])
-    for i in np.argsort(g)[-5:]:
-        lo, hi = w[max(i - 1, 0)], w[min(i + 1, len(w) - 1)]
-        if hi <= lo:
-            continue
-        r = optimize.minimize_scalar(lambda x: -smax(x), bounds=(lo, hi), method="bounded",
-                                     options={"xatol": 1e-10 * max(hi, 1.0)})
-        if -r.fun > best:
-            best, wbest = float(-r.fun), float(r.x)
-    return best, wbest
 
 
 # ---------------------------------------------------------------------------------------
