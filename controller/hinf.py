@@ -82,7 +82,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import optimize, signal
 
-from controller import CONTROLLER_FMU
+from controller import controller_fmu
 from controller.lti import SS, Diagram, Margins, hinf_norm, loop_margins
 from plant import load_airframe
 from plant.model_description import start_value
@@ -91,10 +91,10 @@ from plant.model_description import start_value
 # (sample time, measurement filter) and the shipped airframe (the actuator time constant), so
 # the synthesis can never design for another loop than the one the FMU runs.
 DESIGN_AIRFRAME = "paper_hexacopter"
-TS = start_value(CONTROLLER_FMU, "Ts")
+TS = start_value(controller_fmu(), "Ts")
 TAU_ACT = load_airframe(DESIGN_AIRFRAME).tau_motor
-FILT_WN = start_value(CONTROLLER_FMU, "filt_wn")
-FILT_ZETA = start_value(CONTROLLER_FMU, "filt_zeta")
+FILT_WN = start_value(controller_fmu(), "filt_wn")
+FILT_ZETA = start_value(controller_fmu(), "filt_zeta")
 
 CHANNELS = ("S_outer", "S_inner", "T_input", "KS_noise", "disturbance", "KS_outer")
 # the closed-loop input of each channel in :func:`interconnection` ([do1, do2, di, n2, d])

@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from plant import AirframeError, NativeBuildMissing, fmu_path, list_airframes, load_airframe
+from plant import AirframeError, NativeBuildMissing, list_airframes, load_airframe
 
 COMMANDS_GROUP = "fullpose.commands"
 
@@ -151,8 +151,11 @@ def _cmd_force_set(args: argparse.Namespace) -> int:
 
 
 def _cmd_fmus(args: argparse.Namespace) -> int:
-    for name in ("MultirotorPlant", "FullPoseController"):
-        print(f"{name:20s} {fmu_path(name)}")
+    from controller import CONTROLLER_FMU, controller_fmu
+    from plant import PLANT_FMU, plant_fmu
+
+    for name, path in ((PLANT_FMU, plant_fmu), (CONTROLLER_FMU, controller_fmu)):
+        print(f"{name:20s} {path()}")
     return 0
 
 

@@ -33,6 +33,18 @@ _STATUS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
 _FAILED = ("DISCARD", "ERROR", "FATAL")
 
 
+def installed_fmu(model: str) -> Path:
+    """Path of an installed FMU by model name (``MultirotorPlant`` or
+    ``FullPoseController``)."""
+    from controller import CONTROLLER_FMU, controller_fmu
+    from plant import PLANT_FMU, plant_fmu
+
+    where = {PLANT_FMU: plant_fmu, CONTROLLER_FMU: controller_fmu}.get(model)
+    if where is None:
+        raise ValueError(f"unknown FMU {model!r} (known: {PLANT_FMU}, {CONTROLLER_FMU})")
+    return where()
+
+
 def status_name(status: int) -> str:
     return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
 

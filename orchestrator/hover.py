@@ -19,7 +19,7 @@ import numpy as np
 from orchestrator.engine import Connections, Recording, make_engine
 from orchestrator.fmu import FmuInstance
 from orchestrator.start_values import Pose, plant_start_values
-from plant import fmu_path, load_airframe
+from plant import load_airframe, plant_fmu
 
 STEP = 0.002  # s, the co-simulation rate of 500 Hz
 COMMANDS = ("omega_cmd", "alpha_cmd", "beta_cmd")
@@ -49,7 +49,7 @@ def run_hover(airframe: str = "paper_hexacopter", duration: float = 10.0,
     params = plant_start_values(af, Pose.of(pos0), overrides={"init_trim": True})
     n = af.n_rotors
     steps = round(duration / STEP)
-    with FmuInstance(fmu_path("MultirotorPlant"), "plant") as fmu:
+    with FmuInstance(plant_fmu(), "plant") as fmu:
         conn = Connections.open_loop(fmu, COMMANDS)
         rec = Recording(conn, steps + 1)
         engine = make_engine("native", fmu, None, conn, rec, STEP)

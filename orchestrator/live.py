@@ -12,6 +12,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
+from controller import controller_fmu
 from orchestrator.engine import (
     COUPLINGS,
     DIST_INPUTS,
@@ -23,7 +24,7 @@ from orchestrator.engine import (
 )
 from orchestrator.fmu import FmuInstance
 from orchestrator.start_values import Pose, start_values
-from plant import Airframe, fmu_path, load_airframe
+from plant import Airframe, load_airframe, plant_fmu
 
 
 class LiveSession:
@@ -49,8 +50,8 @@ class LiveSession:
         self.step_size = step
         self.chunk = chunk
         self.steps_done = 0
-        self.plant_inst = FmuInstance(fmu_path("MultirotorPlant"), "plant")
-        self.ctrl_inst = FmuInstance(fmu_path("FullPoseController"), "controller")
+        self.plant_inst = FmuInstance(plant_fmu(), "plant")
+        self.ctrl_inst = FmuInstance(controller_fmu(), "controller")
         try:
             start = start_values(self.airframe, Pose.of(pos0, euler0), timing=timing,
                                  plant_overrides=plant_parameters,

@@ -23,6 +23,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from controller import controller_fmu
 from orchestrator.engine import (
     COUPLINGS,
     DIST_INPUTS,
@@ -38,7 +39,7 @@ from orchestrator.fmu import FmuInstance
 from orchestrator.outcome import Lost, LostCriteria, first_lost
 from orchestrator.results import RunResult
 from orchestrator.start_values import Pose, StartValues, start_values
-from plant import fmu_path
+from plant import plant_fmu
 
 if TYPE_CHECKING:
     from orchestrator.scenario import Scenario
@@ -137,9 +138,9 @@ class CoSimulation:
     def run(self, on_chunk: Callable[[int, int], None] | None = None) -> RunResult:
         """The whole run; stops early, with ``meta["outcome"]`` saying so, when the vehicle
         is lost (``orchestrator.outcome``)."""
-        plant_inst = FmuInstance(fmu_path("MultirotorPlant"), "plant")
+        plant_inst = FmuInstance(plant_fmu(), "plant")
         try:
-            ctrl_inst = FmuInstance(fmu_path("FullPoseController"), "controller")
+            ctrl_inst = FmuInstance(controller_fmu(), "controller")
         except BaseException:
             plant_inst.close()
             raise
@@ -154,8 +155,8 @@ class CoSimulation:
         the FMUs refuse (a parameter out of range, an infeasible hover, unstable gains) is
         an :class:`~orchestrator.fmu.FmuError`; a recording too large for memory a
         :class:`RecordingTooLarge`."""
-        with FmuInstance(fmu_path("MultirotorPlant"), "plant") as plant_inst, \
-                FmuInstance(fmu_path("FullPoseController"), "controller") as ctrl_inst:
+        with FmuInstance(plant_fmu(), "plant") as plant_inst, \
+                FmuInstance(controller_fmu(), "controller") as ctrl_inst:
             self._setup(plant_inst, ctrl_inst, 1, self.scenario.n_steps + 1)
 
     # -- setup ---------------------------------------------------------------

@@ -81,8 +81,9 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
-from controller import CONTROLLER_FMU
+from controller import CONTROLLER_FMU, controller_fmu
 from orchestrator.engine import COUPLINGS
+from orchestrator.fmu import installed_fmu
 from orchestrator.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
 from orchestrator.scenario_reader import FieldReader, ScenarioError
 from orchestrator.signals import (
@@ -101,7 +102,7 @@ from orchestrator.signals import (
 )
 from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
-from plant.model_description import model_variables, start_value
+from plant.model_description import fmu_variables, start_value
 from plant.toml_reader import resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
@@ -122,7 +123,7 @@ __all__ = [
     "scenario_names",
 ]
 
-STEP_QUANTUM = start_value(CONTROLLER_FMU, "Ts")
+STEP_QUANTUM = start_value(controller_fmu(), "Ts")
 """Communication steps are positive integer multiples of this (the controller's Ts), s."""
 DEFAULT_STEP = STEP_QUANTUM
 POSITION_AXES = ("x", "y", "z")
@@ -304,7 +305,7 @@ def _stack(axes: Vec3, t: np.ndarray, order: int) -> np.ndarray:
 @cache
 def _fmu_variables(model: str) -> dict[str, tuple[str, str]]:
     """name -> (causality, type) of an installed FMU's model variables."""
-    return {name: (v.causality, v.type) for name, v in model_variables(model).items()}
+    return {name: (v.causality, v.type) for name, v in fmu_variables(installed_fmu(model)).items()}
 
 
 _INDEX = re.compile(r"\[(\d+)(?:,(\d+))?\]$")
@@ -468,7 +469,7 @@ def _euler_bounds(sc: Scenario, index: int) -> tuple[float, float, bool]:
     bounds, the FMU's defaults unless the scenario overrides them."""
     names = (f"euler_min[{index}]", f"euler_max[{index}]")
     p = sc.controller_parameters
-    lo, hi = (float(p.get(n, start_value(CONTROLLER_FMU, n))) for n in names)
+    lo, hi = (float(p.get(n, start_value(controller_fmu(), n))) for n in names)
     for name, value in zip(names, (lo, hi), strict=True):
         if name in p and not abs(value) < math.pi / 2:
             raise ScenarioError(sc.source, f"controller.{name}", "expected a bound inside "

@@ -84,14 +84,15 @@ from fmpy.model_description import ModelDescription
 from fmpy.ssp.ssd import Parameter, ParameterSet, System, read_ssd
 from lxml import etree
 
+from controller import CONTROLLER_FMU, controller_fmu
 from orchestrator.fmu import FmuInstance
 from orchestrator.start_values import Pose, controller_start_values, plant_start_values
-from plant import fmu_path, load_airframe
+from plant import PLANT_FMU, load_airframe, plant_fmu
 
 log = logging.getLogger(__name__)
 
-PLANT = "MultirotorPlant"
-CONTROLLER = "FullPoseController"
+PLANT = PLANT_FMU
+CONTROLLER = CONTROLLER_FMU
 SYSTEM = "ClosedLoop"
 SSD_NAME = "SystemStructure.ssd"
 
@@ -184,7 +185,7 @@ def _typed(md: ModelDescription, values: Mapping[str, Value]) -> list[tuple[str,
 
 def _initial_outputs(params: Mapping[str, Value], names: Iterable[str]) -> dict[str, float]:
     """The plant's outputs after initialization with ``params`` (its trim at pos0)."""
-    with FmuInstance(fmu_path(PLANT), PLANT) as fmu:
+    with FmuInstance(plant_fmu(), PLANT) as fmu:
         fmu.initialize(parameters=params)
         return {n: float(fmu.get(n)) for n in names}
 
@@ -320,7 +321,7 @@ def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
     path = Path(path)
     if path.suffix != ".ssp":
         path = path.with_suffix(".ssp")
-    fmus = {PLANT: Path(fmu_path(PLANT)), CONTROLLER: Path(fmu_path(CONTROLLER))}
+    fmus = {PLANT: Path(plant_fmu()), CONTROLLER: Path(controller_fmu())}
     mds = {comp: read_model_description(str(p)) for comp, p in fmus.items()}
     connections = connection_table(mds[PLANT], mds[CONTROLLER])
     values = component_parameters(airframe, pos0, connections)

@@ -17,9 +17,10 @@ from __future__ import annotations
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
+from controller import controller_fmu
 from controller.polytope_cache import failure_set_parameters, polytope_parameters
 from plant import Airframe
-from plant.model_description import model_variables
+from plant.model_description import fmu_variables
 
 Value = float | int | bool
 Vec3 = tuple[float, float, float]
@@ -70,7 +71,7 @@ def controller_start_values(airframe: Airframe, *, failures: bool = False,
                             overrides: Mapping[str, Value] | None = None) -> dict[str, Value]:
     """The controller's: shared airframe numbers, S(0) (and the single-failure sets), the
     design's gains, then ``overrides``."""
-    variables = model_variables("FullPoseController")
+    variables = fmu_variables(controller_fmu())
     params: dict[str, Value] = {k: v for k, v in airframe.fmu_parameters().items()
                                 if k in variables and variables[k].causality == "parameter"}
     params.update(polytope_parameters(airframe))

@@ -1,15 +1,18 @@
-"""Multirotor plant: airframes, effectiveness matrices (C core), FMU location."""
+"""Multirotor plant: airframes, rotor kinematics and effectiveness (C core), the plant FMU."""
 
-from plant._native import NativeBuildMissing, fmu_path
+from pathlib import Path
+
+from plant._native import NativeBuildMissing, find_artifact
 from plant.airframe import Airframe, AirframeError, list_airframes, load_airframe
 from plant.effectiveness import RotorSet, rotor_rotation, thrust_direction
 
 PLANT_FMU = "MultirotorPlant"
+"""Model name of the plant FMU (``plant/fmus/MultirotorPlant.fmu``)."""
 
 
-def plant_fmu_path() -> str:
-    """Filesystem path of the installed MultirotorPlant FMU."""
-    return str(fmu_path(PLANT_FMU))
+def plant_fmu() -> Path:
+    """Path of the installed (or ``FULLPOSE_BUILD_DIR``-built) MultirotorPlant FMU."""
+    return find_artifact("plant", "fmus", f"{PLANT_FMU}.fmu")
 
 
 __all__ = [
@@ -18,10 +21,10 @@ __all__ = [
     "AirframeError",
     "NativeBuildMissing",
     "RotorSet",
-    "fmu_path",
+    "find_artifact",
     "list_airframes",
     "load_airframe",
-    "plant_fmu_path",
+    "plant_fmu",
     "rotor_rotation",
     "thrust_direction",
 ]

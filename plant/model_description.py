@@ -1,4 +1,4 @@
-"""What the installed FMUs declare: their variables and start values, read once.
+"""What an installed FMU declares: its variables and start values, read once per file.
 
 The FMUs' ``modelDescription.xml`` is generated from the C variable tables with the C defaults
 as start values, so it is the one source of the design constants Python also needs (the
@@ -11,22 +11,15 @@ from functools import cache
 from pathlib import Path
 from typing import Any
 
-from plant import fmu_path
-
 
 @cache
-def _variables(path: Path) -> dict[str, Any]:
+def fmu_variables(fmu: Path) -> dict[str, Any]:
+    """name -> fmpy ScalarVariable of the FMU at ``fmu``."""
     from fmpy import read_model_description
 
-    return {v.name: v for v in read_model_description(str(path)).modelVariables}
+    return {v.name: v for v in read_model_description(str(fmu)).modelVariables}
 
 
-def model_variables(model: str) -> dict[str, Any]:
-    """name -> fmpy ScalarVariable of an installed FMU (``MultirotorPlant``,
-    ``FullPoseController``)."""
-    return _variables(fmu_path(model))
-
-
-def start_value(model: str, name: str) -> float:
-    """The start (default) value of a Real variable of an installed FMU."""
-    return float(model_variables(model)[name].start)
+def start_value(fmu: Path, name: str) -> float:
+    """The start (default) value of a Real variable of the FMU at ``fmu``."""
+    return float(fmu_variables(fmu)[name].start)

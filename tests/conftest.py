@@ -22,7 +22,7 @@ H = 0.002
 def plant_fmu() -> Path:
     """Path of the built MultirotorPlant FMU (plant._native also finds the installed one
     when the source tree is imported first, as with `python -m pytest`)."""
-    return Path(plant.fmu_path(plant.PLANT_FMU))
+    return plant.plant_fmu()
 
 
 @pytest.fixture(scope="session")

@@ -12,9 +12,10 @@ import math
 import numpy as np
 import pytest
 
+from controller import controller_fmu
 from controller.force_sets import feasible_force_set
 from orchestrator.fmu import FmuInstance
-from plant import fmu_path, load_airframe
+from plant import load_airframe, plant_fmu
 
 H = 0.002
 D2R = math.pi / 180
@@ -23,8 +24,8 @@ HOVER = np.array([0.0, 0.0, -3.0])
 
 class Loop:
     def __init__(self, plant_params=None, ctrl_params=None, pos0=HOVER):
-        self.plant = FmuInstance(fmu_path("MultirotorPlant"), "plant")
-        self.ctrl = FmuInstance(fmu_path("FullPoseController"), "controller")
+        self.plant = FmuInstance(plant_fmu(), "plant")
+        self.ctrl = FmuInstance(controller_fmu(), "controller")
         params = {f"pos0[{i + 1}]": float(v) for i, v in enumerate(pos0)}
         params.update(plant_params or {})
         self.plant.initialize(parameters=params)

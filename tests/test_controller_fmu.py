@@ -12,6 +12,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
 import plant
+from controller import controller_fmu
 from controller.qp_record import ALLOCATION, GUIDANCE, qp_from_state
 from orchestrator.fmu import FmuInstance
 
@@ -24,7 +25,7 @@ def make_ctrl():
     made = []
 
     def make(params=None, initialize=True, pos_ref=(0.0, 0.0, 0.0)):
-        c = FmuInstance(plant.fmu_path("FullPoseController"), f"ctrl{len(made)}")
+        c = FmuInstance(controller_fmu(), f"ctrl{len(made)}")
         made.append(c)
         if initialize:
             c.slave.setupExperiment(startTime=0.0)
@@ -44,7 +45,7 @@ def errors(inst):
 
 
 def test_controller_fmu_validates():
-    assert validate_fmu(str(plant.fmu_path("FullPoseController"))) == []
+    assert validate_fmu(str(controller_fmu())) == []
 
 
 @pytest.mark.parametrize("name", ["paper_hexacopter", "fixed_tilt_hexarotor", "quadrotor"])
@@ -159,6 +160,41 @@ def test_bad_parameters_are_refused(make_ctrl, params, name):
         c.slave.exitInitializationMode()
     assert err.value.status == 3
     assert f"parameter {name}" in errors(c) or f"parameters {name}" in errors(c)
+
+
+# The airframe parameters both FMUs carry are checked by one set of rules
+# (fmu_src/common/fp_params.c): both refuse the same value with the same message.
+SHARED_AIRFRAME_RULES = [
+    ({"alpha_max[1]": 2.0}, "parameter alpha_max[1] = 2: must be within [-pi/2, pi/2]"),
+    ({"beta_min[3]": -1.6}, "parameter beta_min[3] = -1.6: must be within [-pi/2, pi/2]"),
+    ({"k_d": -1e-6}, "parameter k_d = -1e-06: must not be negative"),
+    ({"inertia[2,3]": 0.001},
+     "parameter inertia[2,3] = 0.001: the inertia matrix must be symmetric"),
+    ({"inertia[1,1]": -0.004}, "parameter inertia is not positive definite"),
+    ({"rotor_pos[2,1]": math.nan}, "parameter rotor_pos[2,1] = nan: must be finite"),
+    ({"rotor_dir[4]": 0}, "parameter rotor_dir[4] = 0: must be +1 or -1"),
+    ({"omega_min": -1.0}, "parameter omega_min = -1: must not be negative"),
+    ({"beta_min[2]": 0.5, "beta_max[2]": 0.2},
+     "parameter beta_min[2] = 0.5: exceeds beta_max (inverted limits)"),
+    ({"n_rotors": 9}, "parameter n_rotors = 9: must be in 1..8"),
+]
+
+
+@pytest.mark.parametrize(("params", "message"), SHARED_AIRFRAME_RULES,
+                         ids=[m.split(":")[0] for _, m in SHARED_AIRFRAME_RULES])
+def test_both_fmus_apply_the_same_airframe_rules(make_ctrl, make_plant, params, message):
+    c = make_ctrl(initialize=False)
+    c.slave.setupExperiment(startTime=0.0)
+    c.set_many(params)
+    c.slave.enterInitializationMode()
+    with pytest.raises(FMICallException):
+        c.slave.exitInitializationMode()
+    p = make_plant(initialize=False)
+    with pytest.raises(FMICallException):
+        p.initialize(parameters=params)
+    for inst in (c, p):
+        found = [m for s, _, m in inst.messages if s == "ERROR" and m.startswith(message)]
+        assert found, (inst.md.modelName, inst.messages)
 
 
 def polytope_params(A, b):

@@ -289,9 +289,9 @@ def test_controller_fmu_ships_the_synthesized_gains():
     synthesis result, read back through fmpy as any importer would."""
     from fmpy import read_model_description
 
-    from plant._native import fmu_path
+    from controller import controller_fmu
 
-    md = read_model_description(str(fmu_path("FullPoseController")))
+    md = read_model_description(str(controller_fmu()))
     start = {v.name: v.start for v in md.modelVariables}
     for name, value in gains_defaults.controller_parameters().items():
         assert float(start[name]) == value, name
@@ -312,13 +312,13 @@ def test_the_controller_fmu_runs_the_filter_and_sample_time_the_synthesis_design
     """The synthesis' H(z) (``hinf._filter``, scipy's ZOH at ``hinf.TS``) against the FMU's
     own: with K_pos = 0 and K_vel = 1 the commanded acceleration is -H[vel], so a unit step
     on the measured velocity returns the FMU's filter step response in ``acc_c``."""
+    from controller import controller_fmu
     from orchestrator.fmu import FmuInstance
-    from plant import fmu_path
 
     zero = {f"K_{loop}_{n}[{i}]": 0.0 for loop in ("pos", "vel") for n in "ABCD"
             for i in (1, 2, 3)}
     zero.update({f"K_vel_D[{i}]": 1.0 for i in (1, 2, 3)})
-    with FmuInstance(fmu_path("FullPoseController"), "ctrl") as c:
+    with FmuInstance(controller_fmu(), "ctrl") as c:
         c.initialize(parameters=zero)
         assert c.get("Ts") == hinf.TS
         vel, acc_c = c.signal("vel"), c.signal("acc_c")

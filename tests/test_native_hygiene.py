@@ -38,7 +38,7 @@ def tool(name):
 @pytest.fixture(scope="module")
 def plant_binary(tmp_path_factory):
     out = tmp_path_factory.mktemp("plantbin")
-    with zipfile.ZipFile(plant.fmu_path("MultirotorPlant")) as z:
+    with zipfile.ZipFile(plant.plant_fmu()) as z:
         name = next(n for n in z.namelist() if n.startswith("binaries/") and n.endswith(".so"))
         return z.extract(name, out)
 

@@ -604,9 +604,9 @@ DEG = math.pi / 180.0
 def _controller_start(name: str) -> float:
     from fmpy import read_model_description
 
-    from plant import fmu_path
+    from controller import controller_fmu
 
-    md = read_model_description(str(fmu_path("FullPoseController")))
+    md = read_model_description(str(controller_fmu()))
     return float(next(v.start for v in md.modelVariables if v.name == name))
 
 

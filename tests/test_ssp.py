@@ -21,6 +21,7 @@ from fmpy.ssp.ssd import read_ssd
 from lxml import etree
 
 from controller.force_sets import feasible_force_set, same_polytope
+from orchestrator.fmu import installed_fmu
 from orchestrator.ssp import (
     CONTROLLER,
     PLANT,
@@ -29,7 +30,7 @@ from orchestrator.ssp import (
     parameter_set,
     unconnected_inputs,
 )
-from plant import AirframeError, fmu_path
+from plant import AirframeError
 
 SCHEMAS = Path(fmpy.ssp.__file__).parent / "schema"
 NS = {
@@ -55,7 +56,7 @@ def hover_ssp(tmp_path_factory):
 
 @pytest.fixture(scope="module")
 def mds():
-    return {c: read_model_description(str(fmu_path(c))) for c in (PLANT, CONTROLLER)}
+    return {c: read_model_description(str(installed_fmu(c))) for c in (PLANT, CONTROLLER)}
 
 
 def members(path):
@@ -89,7 +90,7 @@ def test_archive_layout_and_fmus_verbatim(hover_ssp):
     assert {i.date_time for i in infos} == {(1980, 1, 1, 0, 0, 0)}
     got = members(hover_ssp)
     for comp in (PLANT, CONTROLLER):
-        assert got[f"resources/{comp}.fmu"] == Path(fmu_path(comp)).read_bytes()
+        assert got[f"resources/{comp}.fmu"] == installed_fmu(comp).read_bytes()
 
 
 def test_ssd_and_ssv_validate_against_fmpy_schemas(hover_ssp, mds):

@@ -21,10 +21,11 @@ import time
 import numpy as np
 import piqp
 
+from controller import controller_fmu
 from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, qp_from_state
 from controller.wls import WlsSolver
 from orchestrator.fmu import FmuInstance
-from plant import fmu_path
+from plant import plant_fmu
 
 H = 0.002
 MEAS = ["pos", "vel", "acc", "euler", "rate", "omega", "alpha", "beta"]
@@ -46,8 +47,8 @@ def stats(label: str, us: np.ndarray) -> dict[str, float]:
 
 def fly(seconds: float, every: int) -> tuple[dict[str, np.ndarray], list[RecordedQP],
                                               list[RecordedQP]]:
-    plant = FmuInstance(fmu_path("MultirotorPlant"), "plant")
-    ctrl = FmuInstance(fmu_path("FullPoseController"), "controller")
+    plant = FmuInstance(plant_fmu(), "plant")
+    ctrl = FmuInstance(controller_fmu(), "controller")
     plant.initialize(parameters={"pos0[3]": -3.0})
     y_p, y_c = plant.signal(MEAS), ctrl.signal(MEAS)
     u_c, u_p = ctrl.signal(CMDS), plant.signal(CMDS)

@@ -21,7 +21,7 @@ import numpy as np
 from fmpy import simulate_fmu
 
 from orchestrator.fmu import FmuInstance
-from plant import fmu_path
+from plant import plant_fmu
 
 H = 0.002
 
@@ -35,7 +35,7 @@ def stats(name: str, ns: np.ndarray) -> dict[str, float]:
 
 
 def bench_raw(steps: int) -> np.ndarray:
-    with FmuInstance(fmu_path("MultirotorPlant"), "raw") as fmu:
+    with FmuInstance(plant_fmu(), "raw") as fmu:
         fmu.initialize()
         do_step = fmu.slave.dll.fmi2DoStep
         do_step.argtypes = [ctypes.c_void_p, ctypes.c_double, ctypes.c_double, ctypes.c_int]
@@ -54,7 +54,7 @@ def bench_raw(steps: int) -> np.ndarray:
 
 
 def bench_low_level(steps: int) -> np.ndarray:
-    with FmuInstance(fmu_path("MultirotorPlant"), "low") as fmu:
+    with FmuInstance(plant_fmu(), "low") as fmu:
         fmu.initialize()
         meas = fmu.signal(["omega", "alpha", "beta"])
         cmd = fmu.signal(["omega_cmd", "alpha_cmd", "beta_cmd"])
@@ -74,7 +74,7 @@ def bench_low_level(steps: int) -> np.ndarray:
 
 
 def bench_buffered(steps: int) -> np.ndarray:
-    with FmuInstance(fmu_path("MultirotorPlant"), "buffered") as fmu:
+    with FmuInstance(plant_fmu(), "buffered") as fmu:
         fmu.initialize()
         meas = fmu.signal(["omega", "alpha", "beta"])
         cmd = fmu.signal(["omega_cmd", "alpha_cmd", "beta_cmd"])
@@ -106,7 +106,7 @@ def bench_high_level(steps: int) -> np.ndarray:
         stamps.append(clock())
         return True
 
-    simulate_fmu(str(fmu_path("MultirotorPlant")), stop_time=steps * H, step_size=H,
+    simulate_fmu(str(plant_fmu()), stop_time=steps * H, step_size=H,
                  output_interval=H, fmi_type="CoSimulation", step_finished=step_finished)
     return np.diff(np.asarray(stamps, dtype=np.int64))
 
