@@ -2,8 +2,9 @@
 
 The controller keeps its last guidance and inner-allocation problems in its
 state; this reads them from the serialized FMU state (fmi2SerializeFMUstate)
-through the core library, so tests and benchmarks hand the very same problems
-to other solvers (piqp) without a second copy of the control law.
+through the controller's host library (``libfp_controller``), so tests and benchmarks
+hand the very same problems to other solvers (piqp) without a second copy of the
+control law.
 """
 
 from __future__ import annotations
@@ -13,7 +14,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from plant._native import core
+from controller.native import solver
 
 GUIDANCE = 0
 ALLOCATION = 1
@@ -38,7 +39,7 @@ def qp_from_state(state: bytes, which: int) -> RecordedQP:
     dims = np.zeros(3, dtype=np.int32)
     bufs = [np.zeros(_CAP) for _ in range(7)]
     dp = ctypes.POINTER(ctypes.c_double)
-    rc = core().fp_controller_state_qp(
+    rc = solver().fp_controller_state_qp(
         state, len(state), which, dims.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)),
         *(b.ctypes.data_as(dp) for b in bufs))
     if rc != 0:

@@ -22,7 +22,7 @@ from functools import cache
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
-from plant import _native
+from controller.native import solver
 
 STATUS_NAMES: tuple[str, ...] = ("optimal", "max_iter", "infeasible", "bad_input")
 
@@ -46,31 +46,10 @@ class WlsResult:
 
 
 @cache
-def _lib() -> ctypes.CDLL:
-    lib = _native.core()
-    vp, i = ctypes.c_void_p, ctypes.c_int
-    signatures: dict[str, list[object]] = {
-        "fp_wls_size": [],
-        "fp_wls_caps": [_I32P],
-        "fp_wls_setup_api": [vp, i, i, i],
-        "fp_wls_set_data_api": [vp, _DP, _DP, _DP, _DP, _DP, _DP],
-        "fp_wls_set_start_api": [vp, _DP, _I8P],
-        "fp_wls_get_working_set_api": [vp, _I8P],
-        "fp_wls_solve_api": [vp, i, _DP, _I32P, _DP],
-        "fp_wls_bench_api": [vp, i, i, _DP, _DP, _I32P, _DP],
-    }
-    for name, argtypes in signatures.items():
-        fn = getattr(lib, name)
-        fn.argtypes = argtypes
-        fn.restype = ctypes.c_int
-    return lib
-
-
-@cache
 def caps() -> tuple[int, int, int]:
     """Size caps compiled into the solver: (max variables, max rows of A, max rows of C)."""
     out = np.zeros(3, dtype=np.int32)
-    _lib().fp_wls_caps(out.ctypes.data_as(_I32P))
+    solver().fp_wls_caps(out.ctypes.data_as(_I32P))
     return int(out[0]), int(out[1]), int(out[2])
 
 
@@ -97,7 +76,7 @@ class WlsSolver:
                 f"sizes (vars={n_vars}, rows={n_rows}, cons={n_cons}) exceed the caps "
                 f"({max_vars}, {max_rows}, {max_cons})"
             )
-        lib = _lib()
+        lib = solver()
         words = (lib.fp_wls_size() + 7) // 8
         self._buf = (ctypes.c_double * words)()
         if lib.fp_wls_setup_api(self._buf, n_vars, n_rows, n_cons) != 0:
@@ -107,7 +86,7 @@ class WlsSolver:
     @property
     def working_set(self) -> NDArray[np.int8]:
         ws = np.zeros(self.n_vars + self.n_cons, dtype=np.int8)
-        _lib().fp_wls_get_working_set_api(self._buf, ws.ctypes.data_as(_I8P))
+        solver().fp_wls_get_working_set_api(self._buf, ws.ctypes.data_as(_I8P))
         return ws
 
     @working_set.setter
@@ -115,12 +94,12 @@ class WlsSolver:
         arr = np.ascontiguousarray(np.asarray(ws, dtype=np.int8).reshape(-1))
         if arr.shape != (self.n_vars + self.n_cons,):
             raise ValueError(f"working set must have {self.n_vars + self.n_cons} entries")
-        _lib().fp_wls_set_start_api(self._buf, None, arr.ctypes.data_as(_I8P))
+        solver().fp_wls_set_start_api(self._buf, None, arr.ctypes.data_as(_I8P))
 
     def set_x(self, x0: ArrayLike) -> None:
         """Start point of the next solve (used for a cold start and for a rank-deficient A)."""
         arr = _vector(x0, self.n_vars, 0.0, "x0")
-        _lib().fp_wls_set_start_api(self._buf, _dptr(arr), None)
+        solver().fp_wls_set_start_api(self._buf, _dptr(arr), None)
 
     def reset(self) -> None:
         """Forget the working set: the next solve starts cold."""
@@ -153,7 +132,7 @@ class WlsSolver:
             dd = _vector(d, p, 0.0, "d")
         else:
             cc = dd = None  # no equality rows: NULL pointers
-        rc = _lib().fp_wls_set_data_api(
+        rc = solver().fp_wls_set_data_api(
             self._buf, _dptr(a), _dptr(bb), _dptr(lo), _dptr(hi), _dptr(cc), _dptr(dd)
         )
         if rc != 0:
@@ -177,7 +156,7 @@ class WlsSolver:
         x = np.zeros(self.n_vars)
         info = np.zeros(4, dtype=np.int32)
         fout = np.zeros(2)
-        _lib().fp_wls_solve_api(
+        solver().fp_wls_solve_api(
             self._buf, int(max_iter), _dptr(x), info.ctypes.data_as(_I32P), _dptr(fout)
         )
         return self._result(x, info, fout)
@@ -206,7 +185,7 @@ class WlsSolver:
         x = np.zeros(self.n_vars)
         info = np.zeros(4, dtype=np.int32)
         fout = np.zeros(2)
-        _lib().fp_wls_bench_api(
+        solver().fp_wls_bench_api(
             self._buf,
             int(max_iter),
             int(repeats),

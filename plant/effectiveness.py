@@ -1,6 +1,6 @@
 """Effectiveness matrices and rotor kinematics, computed by the C core.
 
-Thin numpy wrappers over ``libfullpose_core`` (the same code the FMUs run):
+Thin numpy wrappers over ``libfp_multirotor`` (the same code the FMUs run):
 nothing here re-implements the model.  Conventions are those of
 ``fmu_src/common/multirotor.h``: R_Mi^B = Rz(gamma) Rx(alpha) Ry(beta), thrust
 along the rotor's -z axis, reaction torque c_i k_d omega^2 along the thrust.
@@ -14,7 +14,7 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from plant._native import core
+from plant.native import multirotor
 
 Array = NDArray[np.float64]
 
@@ -48,7 +48,7 @@ class RotorSet:
         return int(self.positions.shape[0])
 
     def _buffer(self) -> ctypes.Array[ctypes.c_char]:
-        lib = core()
+        lib = multirotor()
         buf = ctypes.create_string_buffer(lib.fp_rotor_set_size())
         pos = np.ascontiguousarray(self.positions, dtype=np.float64)
         spins = np.ascontiguousarray(self.spins, dtype=np.int32)
@@ -67,7 +67,7 @@ class RotorSet:
     def B(self) -> Array:
         """Paper eq. (3): 6 x 3n map from per-rotor body forces to [f_b; tau_b]."""
         out = np.zeros((6, 3 * self.n))
-        if core().fp_effectiveness_b_api(self._buffer(), _dp(out)) != 0:
+        if multirotor().fp_effectiveness_b_api(self._buffer(), _dp(out)) != 0:
             raise ValueError("effectiveness B failed")
         return out
 
@@ -82,7 +82,7 @@ class RotorSet:
         a = _vec(alpha, self.n, "alpha")
         b = _vec(beta, self.n, "beta")
         out = np.zeros((6, 3 * self.n))
-        if core().fp_effectiveness_bprime_api(self._buffer(), _dp(a), _dp(b), _dp(out)) != 0:
+        if multirotor().fp_effectiveness_bprime_api(self._buffer(), _dp(a), _dp(b), _dp(out)) != 0:
             raise ValueError("effectiveness B' failed")
         return out
 
@@ -94,7 +94,7 @@ class RotorSet:
         a, b, w = (_vec(x, self.n, nm) for x, nm in ((alpha, "alpha"), (beta, "beta"),
                                                      (omega, "omega")))
         out = np.zeros((6, 3 * self.n))
-        if core().fp_effectiveness_b2prime_api(self._buffer(), _dp(a), _dp(b), _dp(w),
+        if multirotor().fp_effectiveness_b2prime_api(self._buffer(), _dp(a), _dp(b), _dp(w),
                                                _dp(out)) != 0:
             raise ValueError("effectiveness B'' failed")
         return out
@@ -108,7 +108,7 @@ class RotorSet:
         eff = None if efficiency is None else _vec(efficiency, self.n, "efficiency")
         f = np.zeros(3)
         t = np.zeros(3)
-        core().fp_rotor_wrench_api(self._buffer(), _dp(a), _dp(b), _dp(w),
+        multirotor().fp_rotor_wrench_api(self._buffer(), _dp(a), _dp(b), _dp(w),
                                    None if eff is None else _dp(eff), _dp(f), _dp(t))
         return f, t
 
@@ -120,8 +120,8 @@ class RotorSet:
         w = _vec(wrench, 6, "wrench")
         a, b, o = np.zeros(self.n), np.zeros(self.n), np.zeros(self.n)
         why = ctypes.create_string_buffer(256)
-        status = core().fp_preferred_config_api(self._buffer(), _dp(w), _dp(a), _dp(b), _dp(o),
-                                                why, len(why))
+        status = multirotor().fp_preferred_config_api(self._buffer(), _dp(w), _dp(a), _dp(b),
+                                                      _dp(o), why, len(why))
         if status != 0:
             raise ValueError(why.value.decode())
         return a, b, o
@@ -130,12 +130,12 @@ class RotorSet:
 def rotor_rotation(alpha: float, beta: float, gamma: float) -> Array:
     """R_Mi^B(alpha, beta, gamma) = Rz(gamma) Rx(alpha) Ry(beta)."""
     out = np.zeros(9)
-    core().fp_rotor_rotation_api(alpha, beta, gamma, _dp(out))
+    multirotor().fp_rotor_rotation_api(alpha, beta, gamma, _dp(out))
     return out.reshape(3, 3)
 
 
 def thrust_direction(alpha: float, beta: float, gamma: float) -> Array:
     """Unit thrust direction of a rotor in the body frame (-R_Mi^B e_z)."""
     out = np.zeros(3)
-    core().fp_thrust_direction_api(alpha, beta, gamma, _dp(out))
+    multirotor().fp_thrust_direction_api(alpha, beta, gamma, _dp(out))
     return out

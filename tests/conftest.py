@@ -20,7 +20,7 @@ H = 0.002
 
 @pytest.fixture(scope="session")
 def plant_fmu() -> Path:
-    """Path of the built MultirotorPlant FMU (plant._native also finds the installed one
+    """Path of the built MultirotorPlant FMU (plant.artifacts also finds the installed one
     when the source tree is imported first, as with `python -m pytest`)."""
     return plant.plant_fmu()
 

@@ -2,11 +2,11 @@
 
 #include <math.h>
 #include <stddef.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "fp_clock.h"
 #include "fp_math.h"
+#include "fp_params.h"
 #include "plant_vars.h"
 
 #define PI 3.14159265358979323846
@@ -220,60 +220,7 @@ static void compute_outputs(PlantModel *m, const Commands *u) {
 }
 
 /* ------------------------------------------------------------------------ */
-/* Parameter validation                                                     */
-
-typedef struct {
-    const FpLogger *logger;
-    int errors;
-} Check;
-
-static void bad(Check *c, const char *fmt, const char *name, double value, const char *why) {
-    char label[64];
-    char text[FP_REAL_TEXT];
-    snprintf(label, sizeof label, fmt, name);
-    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %s: %s", label,
-           fp_real_text(text, value), why);
-    c->errors++;
-}
-
-static void require_finite(Check *c, const char *name, const double *v, int n, int width) {
-    int i;
-    char label[64];
-    for (i = 0; i < n; i++) {
-        if (isfinite(v[i])) continue;
-        if (n == 1) snprintf(label, sizeof label, "%s", name);
-        else if (width == 1) snprintf(label, sizeof label, "%s[%d]", name, i + 1);
-        else snprintf(label, sizeof label, "%s[%d,%d]", name, i / width + 1, i % width + 1);
-        bad(c, "%s", label, v[i], "must be finite");
-    }
-}
-
-static void require_positive(Check *c, const char *name, double v) {
-    if (isfinite(v) && !(v > 0.0)) bad(c, "%s", name, v, "must be positive");
-}
-
-/* Eigenvalues of a symmetric 3x3 matrix (trigonometric closed form). */
-static void sym3_eigenvalues(double a[3][3], double e[3]) {
-    double p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
-    double q = (a[0][0] + a[1][1] + a[2][2]) / 3.0, p2, p, b[3][3], r, phi;
-    int i, j;
-    if (p1 == 0.0) {
-        for (i = 0; i < 3; i++) e[i] = a[i][i];
-        return;
-    }
-    p2 = (a[0][0] - q) * (a[0][0] - q) + (a[1][1] - q) * (a[1][1] - q) +
-         (a[2][2] - q) * (a[2][2] - q) + 2.0 * p1;
-    p = sqrt(p2 / 6.0);
-    for (i = 0; i < 3; i++)
-        for (j = 0; j < 3; j++) b[i][j] = (a[i][j] - (i == j ? q : 0.0)) / p;
-    r = 0.5 * (b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1]) -
-               b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0]) +
-               b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]));
-    phi = r <= -1.0 ? PI / 3.0 : (r >= 1.0 ? 0.0 : acos(r) / 3.0);
-    e[0] = q + 2.0 * p * cos(phi);
-    e[2] = q + 2.0 * p * cos(phi + 2.0 * PI / 3.0);
-    e[1] = 3.0 * q - e[0] - e[2];
-}
+/* Parameter validation (the airframe rules are shared with the controller) */
 
 static int invert3(double a[3][3], double inv[3][3]) {
     double det = a[0][0] * (a[1][1] * a[2][2] - a[1][2] * a[2][1]) -
@@ -289,150 +236,47 @@ static int invert3(double a[3][3], double inv[3][3]) {
     return 0;
 }
 
-static void check_inertia(Check *c, PlantModel *m) {
-    double e[3], scale = 0.0, m1, m2;
-    int i, j;
-    for (i = 0; i < 9; i++)
-        if (!isfinite(m->inertia[i / 3][i % 3])) return; /* reported as non-finite */
-    for (i = 0; i < 3; i++)
-        for (j = 0; j < 3; j++) scale = fmax(scale, fabs(m->inertia[i][j]));
-    for (i = 0; i < 3; i++)
-        for (j = i + 1; j < 3; j++)
-            if (fabs(m->inertia[i][j] - m->inertia[j][i]) > 1e-12 * scale) {
-                char label[32];
-                snprintf(label, sizeof label, "inertia[%d,%d]", i + 1, j + 1);
-                bad(c, "%s", label, m->inertia[i][j], "the inertia matrix must be symmetric");
-            }
-    /* Sylvester: leading principal minors positive <=> positive definite. */
-    m1 = m->inertia[0][0];
-    m2 = m->inertia[0][0] * m->inertia[1][1] - m->inertia[0][1] * m->inertia[1][0];
-    sym3_eigenvalues(m->inertia, e);
-    if (!(m1 > 0.0) || !(m2 > 0.0) || !(e[0] > 0.0 && e[1] > 0.0 && e[2] > 0.0)) {
-        fp_log(c->logger, FP_ERROR, FP_LOG_ERROR,
-               "parameter inertia is not positive definite (eigenvalues %.6g, %.6g, %.6g kg.m2)",
-               e[0], e[1], e[2]);
-        c->errors++;
-        return;
-    }
-    for (i = 0; i < 3; i++)
-        if (e[i] > e[(i + 1) % 3] + e[(i + 2) % 3] * (1.0 + 1e-12)) {
-            fp_log(c->logger, FP_WARNING, FP_LOG_WARNING,
-                   "parameter inertia: principal moment %.6g kg.m2 exceeds the sum of the other "
-                   "two (%.6g + %.6g), which no rigid body has; simulating it as given",
-                   e[i], e[(i + 1) % 3], e[(i + 2) % 3]);
-            break;
-        }
-}
-
-static void check_range(Check *c, const char *name, const double *v, int n, double lo, double hi,
-                        const char *why) {
-    int i;
-    char label[64];
-    for (i = 0; i < n; i++)
-        if (isfinite(v[i]) && (v[i] < lo || v[i] > hi)) {
-            snprintf(label, sizeof label, "%s[%d]", name, i + 1);
-            bad(c, "%s", label, v[i], why);
-        }
-}
-
-static int validate(PlantModel *m, const FpLogger *logger) {
-    Check c;
+static int validate(const PlantModel *m, const FpLogger *logger) {
+    FpCheck c;
+    FpRotorSet rs;
     int i, n = m->n_rotors;
-    char label[64];
-    c.logger = logger;
-    c.errors = 0;
-    if (n < 1 || n > FP_MAX_ROTORS) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "parameter n_rotors = %d: must be in 1..%d",
-               (int)n, FP_MAX_ROTORS);
-        return 1; /* per-rotor checks need a valid n */
-    }
-    require_finite(&c, "mass", &m->mass, 1, 1);
-    require_positive(&c, "mass", m->mass);
-    require_finite(&c, "inertia", &m->inertia[0][0], 9, 3);
-    check_inertia(&c, m);
-    require_finite(&c, "g", &m->g, 1, 1);
-    require_finite(&c, "k_t", &m->k_t, 1, 1);
-    require_positive(&c, "k_t", m->k_t);
-    require_finite(&c, "k_d", &m->k_d, 1, 1);
-    if (isfinite(m->k_d) && m->k_d < 0.0) bad(&c, "%s", "k_d", m->k_d, "must not be negative");
-    require_finite(&c, "rotor_pos", &m->rotor_pos[0][0], 3 * n, 3);
-    require_finite(&c, "rotor_gamma", m->rotor_gamma, n, 1);
-    for (i = 0; i < n; i++)
-        if (m->rotor_dir[i] != 1 && m->rotor_dir[i] != -1) {
-            snprintf(label, sizeof label, "rotor_dir[%d]", i + 1);
-            bad(&c, "%s", label, m->rotor_dir[i], "must be +1 or -1");
-        }
-    require_finite(&c, "alpha_min", m->alpha_min, n, 1);
-    require_finite(&c, "alpha_max", m->alpha_max, n, 1);
-    require_finite(&c, "beta_min", m->beta_min, n, 1);
-    require_finite(&c, "beta_max", m->beta_max, n, 1);
-    check_range(&c, "alpha_min", m->alpha_min, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
-    check_range(&c, "alpha_max", m->alpha_max, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
-    check_range(&c, "beta_min", m->beta_min, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
-    check_range(&c, "beta_max", m->beta_max, n, -PI / 2, PI / 2, "must be within [-pi/2, pi/2]");
-    for (i = 0; i < n; i++) {
-        if (m->alpha_min[i] > m->alpha_max[i]) {
-            snprintf(label, sizeof label, "alpha_min[%d]", i + 1);
-            bad(&c, "%s", label, m->alpha_min[i], "exceeds alpha_max (inverted limits)");
-        }
-        if (m->beta_min[i] > m->beta_max[i]) {
-            snprintf(label, sizeof label, "beta_min[%d]", i + 1);
-            bad(&c, "%s", label, m->beta_min[i], "exceeds beta_max (inverted limits)");
-        }
-    }
-    require_finite(&c, "omega_min", &m->omega_min, 1, 1);
-    require_finite(&c, "omega_max", &m->omega_max, 1, 1);
-    if (m->omega_min < 0.0) bad(&c, "%s", "omega_min", m->omega_min, "must not be negative");
-    require_positive(&c, "omega_max", m->omega_max);
-    if (m->omega_min > m->omega_max)
-        bad(&c, "%s", "omega_min", m->omega_min, "exceeds omega_max (inverted limits)");
-    require_finite(&c, "tau_motor", &m->tau_motor, 1, 1);
-    require_positive(&c, "tau_motor", m->tau_motor);
-    require_finite(&c, "tau_servo", &m->tau_servo, 1, 1);
-    require_positive(&c, "tau_servo", m->tau_servo);
-    require_finite(&c, "h_internal", &m->h_internal, 1, 1);
-    require_positive(&c, "h_internal", m->h_internal);
-    require_finite(&c, "pos0", m->pos0, 3, 1);
-    require_finite(&c, "vel0", m->vel0, 3, 1);
-    require_finite(&c, "euler0", m->euler0, 3, 1);
-    require_finite(&c, "rate0", m->rate0, 3, 1);
+    fp_check_init(&c, logger);
+    FP_MODEL_TO_ROTOR_SET(m, &rs);
+    if (fp_check_airframe(&c, m->mass, &m->inertia[0][0], m->g, &rs) != FP_OK) return c.errors;
+    fp_need_positive(&c, "tau_motor", &m->tau_motor, 1, 0);
+    fp_need_positive(&c, "tau_servo", &m->tau_servo, 1, 0);
+    fp_need_positive(&c, "h_internal", &m->h_internal, 1, 0);
+    fp_need_finite(&c, "pos0", m->pos0, 3, 1);
+    fp_need_finite(&c, "vel0", m->vel0, 3, 1);
+    fp_need_finite(&c, "euler0", m->euler0, 3, 1);
+    fp_need_finite(&c, "rate0", m->rate0, 3, 1);
     if (!m->init_trim) {
-        require_finite(&c, "omega0", m->omega0, n, 1);
-        require_finite(&c, "alpha0", m->alpha0, n, 1);
-        require_finite(&c, "beta0", m->beta0, n, 1);
+        fp_need_finite(&c, "omega0", m->omega0, n, 1);
+        fp_need_finite(&c, "alpha0", m->alpha0, n, 1);
+        fp_need_finite(&c, "beta0", m->beta0, n, 1);
         for (i = 0; i < n; i++) {
-            if (m->omega0[i] < m->omega_min || m->omega0[i] > m->omega_max) {
-                snprintf(label, sizeof label, "omega0[%d]", i + 1);
-                bad(&c, "%s", label, m->omega0[i], "outside [omega_min, omega_max]");
-            }
-            if (m->alpha0[i] < m->alpha_min[i] || m->alpha0[i] > m->alpha_max[i]) {
-                snprintf(label, sizeof label, "alpha0[%d]", i + 1);
-                bad(&c, "%s", label, m->alpha0[i], "outside [alpha_min, alpha_max]");
-            }
-            if (m->beta0[i] < m->beta_min[i] || m->beta0[i] > m->beta_max[i]) {
-                snprintf(label, sizeof label, "beta0[%d]", i + 1);
-                bad(&c, "%s", label, m->beta0[i], "outside [beta_min, beta_max]");
-            }
+            if (m->omega0[i] < m->omega_min || m->omega0[i] > m->omega_max)
+                fp_check_bad(&c, "omega0", i + 1, 0, m->omega0[i],
+                             "outside [omega_min, omega_max]");
+            if (m->alpha0[i] < m->alpha_min[i] || m->alpha0[i] > m->alpha_max[i])
+                fp_check_bad(&c, "alpha0", i + 1, 0, m->alpha0[i],
+                             "outside [alpha_min, alpha_max]");
+            if (m->beta0[i] < m->beta_min[i] || m->beta0[i] > m->beta_max[i])
+                fp_check_bad(&c, "beta0", i + 1, 0, m->beta0[i],
+                             "outside [beta_min, beta_max]");
         }
     }
-    require_finite(&c, "noise_pos", &m->noise_pos, 1, 1);
-    require_finite(&c, "noise_vel", &m->noise_vel, 1, 1);
-    require_finite(&c, "noise_acc", &m->noise_acc, 1, 1);
-    require_finite(&c, "noise_att", &m->noise_att, 1, 1);
-    require_finite(&c, "noise_rate", &m->noise_rate, 1, 1);
-    require_finite(&c, "noise_ang_acc", &m->noise_ang_acc, 1, 1);
-    if (m->noise_pos < 0.0) bad(&c, "%s", "noise_pos", m->noise_pos, "must not be negative");
-    if (m->noise_vel < 0.0) bad(&c, "%s", "noise_vel", m->noise_vel, "must not be negative");
-    if (m->noise_acc < 0.0) bad(&c, "%s", "noise_acc", m->noise_acc, "must not be negative");
-    if (m->noise_att < 0.0) bad(&c, "%s", "noise_att", m->noise_att, "must not be negative");
-    if (m->noise_rate < 0.0) bad(&c, "%s", "noise_rate", m->noise_rate, "must not be negative");
-    if (m->noise_ang_acc < 0.0)
-        bad(&c, "%s", "noise_ang_acc", m->noise_ang_acc, "must not be negative");
+    fp_need_nonnegative(&c, "noise_pos", &m->noise_pos, 1, 0);
+    fp_need_nonnegative(&c, "noise_vel", &m->noise_vel, 1, 0);
+    fp_need_nonnegative(&c, "noise_acc", &m->noise_acc, 1, 0);
+    fp_need_nonnegative(&c, "noise_att", &m->noise_att, 1, 0);
+    fp_need_nonnegative(&c, "noise_rate", &m->noise_rate, 1, 0);
+    fp_need_nonnegative(&c, "noise_ang_acc", &m->noise_ang_acc, 1, 0);
     if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->tau_motor, m->tau_servo))
-        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
-               "parameter h_internal = %g s is coarse against the actuator time constants "
-               "(%g s, %g s); RK4 will be inaccurate",
-               m->h_internal, m->tau_motor, m->tau_servo);
+        fp_check_warning(&c,
+                         "parameter h_internal = %g s is coarse against the actuator time "
+                         "constants (%g s, %g s); RK4 will be inaccurate",
+                         m->h_internal, m->tau_motor, m->tau_servo);
     return c.errors;
 }
 

@@ -1,99 +1,17 @@
 /*
- * The C API of libfullpose_core, called from Python through ctypes.  It wraps
- * the very functions the FMUs run, so Python analysis and tests use the one
- * implementation of the model (no numpy copy).  Every function returns 0 on
- * success and a non-zero FpStatus otherwise.
+ * libfp_controller: the C API of the allocation solver and of the controller's QP replay
+ * (fp_controller_api.h), wrapping the very code the controller FMU runs.
  */
 #if !defined(_WIN32) && !defined(_POSIX_C_SOURCE)
 #define _POSIX_C_SOURCE 199309L /* clock_gettime for fp_wls_bench_api */
 #endif
+#include "fp_controller_api.h"
+
 #include <string.h>
 #include <time.h>
 
 #include "controller.h"
-#include "multirotor.h"
-#include "plant.h"
 #include "wls.h"
-
-#if defined(_WIN32)
-#define FP_API __declspec(dllexport)
-#else
-#define FP_API __attribute__((visibility("default")))
-#endif
-
-FP_API int fp_api_version(void) { return 1; }
-
-FP_API int fp_max_rotors(void) { return FP_MAX_ROTORS; }
-
-/* Size in bytes of the opaque rotor-set buffer the functions below take. */
-FP_API int fp_rotor_set_size(void) { return (int)sizeof(FpRotorSet); }
-
-FP_API int fp_rotor_set_init(void *buffer, int n, double k_t, double k_d, const double *pos,
-                             const int32_t *dir, const double *gamma, const double *alpha_min,
-                             const double *alpha_max, const double *beta_min,
-                             const double *beta_max, double omega_min, double omega_max) {
-    FpRotorSet *rs = (FpRotorSet *)buffer;
-    int i;
-    if (rs == NULL || n < 1 || n > FP_MAX_ROTORS || !(k_t > 0.0)) return FP_ERROR;
-    memset(rs, 0, sizeof *rs);
-    rs->n = n;
-    rs->k_t = k_t;
-    rs->k_d = k_d;
-    for (i = 0; i < n; i++) {
-        memcpy(rs->pos[i], pos + 3 * i, 3 * sizeof(double));
-        rs->dir[i] = dir[i];
-        rs->gamma[i] = gamma[i];
-        rs->alpha_min[i] = alpha_min[i];
-        rs->alpha_max[i] = alpha_max[i];
-        rs->beta_min[i] = beta_min[i];
-        rs->beta_max[i] = beta_max[i];
-    }
-    rs->omega_min = omega_min;
-    rs->omega_max = omega_max;
-    return FP_OK;
-}
-
-FP_API int fp_rotor_rotation_api(double alpha, double beta, double gamma, double *r9) {
-    fp_rotor_rotation(alpha, beta, gamma, (double(*)[3])r9);
-    return FP_OK;
-}
-
-FP_API int fp_thrust_direction_api(double alpha, double beta, double gamma, double *t3) {
-    fp_thrust_direction(alpha, beta, gamma, t3);
-    return FP_OK;
-}
-
-FP_API int fp_tilt_from_direction_api(const double *f3, double gamma, double *alpha, double *beta) {
-    fp_tilt_from_direction(f3, gamma, alpha, beta);
-    return FP_OK;
-}
-
-FP_API int fp_effectiveness_b_api(const void *rotor_set, double *b) {
-    return fp_effectiveness_b((const FpRotorSet *)rotor_set, b);
-}
-
-FP_API int fp_effectiveness_bprime_api(const void *rotor_set, const double *alpha,
-                                       const double *beta, double *bp) {
-    return fp_effectiveness_bprime((const FpRotorSet *)rotor_set, alpha, beta, bp);
-}
-
-FP_API int fp_rotor_wrench_api(const void *rotor_set, const double *alpha, const double *beta,
-                               const double *omega, const double *efficiency, double *f_b,
-                               double *tau_b) {
-    fp_rotor_wrench((const FpRotorSet *)rotor_set, alpha, beta, omega, efficiency, f_b, tau_b);
-    return FP_OK;
-}
-
-FP_API int fp_preferred_config_api(const void *rotor_set, const double *wrench, double *alpha,
-                                   double *beta, double *omega, char *why, int why_size) {
-    return fp_preferred_config((const FpRotorSet *)rotor_set, wrench, alpha, beta, omega, why,
-                               why_size);
-}
-
-/* ---- Constrained least-squares allocation solver (wls.h) ----------------
- * The FpWls struct is opaque to Python: allocate fp_wls_size() bytes.  The
- * working set crosses the API as int8[n_vars + n_cons]: first the bounds
- * (-1 at lb, +1 at ub, 0 free), then the rows of C (1 active, 0 not). */
 
 FP_API int fp_wls_size(void) { return (int)sizeof(FpWls); }
 
@@ -114,7 +32,7 @@ FP_API int fp_wls_set_data_api(void *buffer, const double *A, const double *b, c
     return fp_wls_set_data((FpWls *)buffer, A, b, lb, ub, C, d);
 }
 
-/* Start of the next solve: x0 (NULL keeps the stored x) and working set (NULL keeps it). */
+/* The buffer holds a set-up solver (sizes within the caps). */
 static int wls_sizes_ok(const FpWls *w) {
     return w != NULL && w->n_vars >= 1 && w->n_vars <= FP_WLS_MAX_VARS && w->n_rows >= 0 &&
            w->n_rows <= FP_WLS_MAX_ROWS && w->n_cons >= 0 && w->n_cons <= FP_WLS_MAX_CONS;
@@ -202,14 +120,6 @@ FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_
     fout[0] = res.objective;
     fout[1] = res.max_violation;
     return st;
-}
-
-/* ------------------------------------------------------------------------ */
-/* Controller introspection                                                 */
-
-FP_API int fp_effectiveness_b2prime_api(const void *rotor_set, const double *alpha,
-                                        const double *beta, const double *omega, double *b2p) {
-    return fp_effectiveness_b2prime((const FpRotorSet *)rotor_set, alpha, beta, omega, b2p);
 }
 
 /*

@@ -1,5 +1,5 @@
 /*
- * Step kernel of the Python co-simulation master (orchestrator/master.py).
+ * Step kernel of the Python co-simulation master (orchestrator/engine.py), libfp_cosim.
  *
  * The master builds the whole plan in Python on fmpy-loaded FMUs: connection
  * table, value references, the recording matrix and its layout, the coupling.
@@ -8,37 +8,29 @@
  * issues the same calls, in the same order, on the same buffers, from C.  The
  * pure-Python loop stays as the reference (tests: bit-identical results).
  */
+#include "fp_cosim.h"
+
 #include <stddef.h>
 #include <stdint.h>
 
 #include "fmi2FunctionTypes.h"
 
-#if defined(_WIN32)
-#define FP_API __declspec(dllexport)
-#else
-#define FP_API __attribute__((visibility("default")))
-#endif
-
-/* Any function pointer; cast to the FMI type before calling (C allows that). */
-typedef void (*FpFn)(void);
-
-enum { F_C_SET, F_C_STEP, F_C_GET, F_C_GETI, F_C_GETB, F_P_SET, F_P_STEP, F_P_GET, F_P_GETI };
+/* The orders of fns, vrs/counts and offsets (fp_cosim.h). */
+enum { F_C_SET, F_C_STEP, F_C_GET, F_C_GETI, F_C_GETB, F_P_SET, F_P_STEP, F_P_GET, F_P_GETI,
+       F_COUNT };
 enum { V_C_IN, V_C_OUT, V_C_INT, V_C_BOOL, V_P_IN, V_P_CMD, V_P_DIST, V_P_OUT, V_P_INT, V_COUNT };
 enum { O_REF, O_PLANT, O_DIST, O_CTRL, O_CINT, O_CBOOL, O_PINT, O_COUNT };
+typedef char fp_cosim_layout_matches_header[(F_COUNT == FP_COSIM_N_FNS &&
+                                             V_COUNT == FP_COSIM_N_VRS &&
+                                             O_COUNT == FP_COSIM_N_OFFSETS) ? 1 : -1];
 
-/*
- * Steps k = first .. last-1 of a run (time t0 + k h): the controller samples [r_k, y_k] (row k),
- * its outputs go to row k; the plant integrates with [dist_k, u_k] (Gauss-Seidel)
- * or u_{k-1} (Jacobi; row -1 is the spare row `spare`), its outputs go to row
- * k+1.  Offsets are in elements of their matrix.  With comps[0] == NULL (the plant alone)
- * the controller is not called and the plant's commands are read from the rows as written.
- * Returns 0, or the first FMI status above fmi2Warning with *failed_step set to its step.
- */
-FP_API int fp_cosim_steps(const FpFn fns[9], void *const comps[2],
-                          const unsigned int *const vrs[V_COUNT], const size_t counts[V_COUNT],
-                          double *data, long stride, int32_t *ints, long istride, double *spare,
-                          const long offsets[O_COUNT], double t0, double h, int jacobi,
-                          long first, long last, long *failed_step) {
+/* See fp_cosim.h.  Offsets are in elements of their matrix. */
+FP_API int fp_cosim_steps(const FpFn fns[FP_COSIM_N_FNS], void *const comps[2],
+                          const unsigned int *const vrs[FP_COSIM_N_VRS],
+                          const size_t counts[FP_COSIM_N_VRS], double *data, long stride,
+                          int32_t *ints, long istride, double *spare,
+                          const long offsets[FP_COSIM_N_OFFSETS], double t0, double h,
+                          int jacobi, long first, long last, long *failed_step) {
     fmi2SetRealTYPE *c_set, *p_set;
     fmi2DoStepTYPE *c_step, *p_step;
     fmi2GetRealTYPE *c_get, *p_get;

@@ -1,0 +1,205 @@
+#include "fp_params.h"
+
+#include <math.h>
+#include <stdarg.h>
+#include <stdio.h>
+
+#define PI 3.14159265358979323846
+
+void fp_check_init(FpCheck *c, const FpLogger *logger) {
+    c->logger = logger;
+    c->errors = 0;
+}
+
+static void label_of(char *buf, size_t size, const char *name, int i, int j) {
+    if (i <= 0) snprintf(buf, size, "%s", name);
+    else if (j <= 0) snprintf(buf, size, "%s[%d]", name, i);
+    else snprintf(buf, size, "%s[%d,%d]", name, i, j);
+}
+
+void fp_check_bad(FpCheck *c, const char *name, int i, int j, double value, const char *why) {
+    char label[64], text[FP_REAL_TEXT];
+    label_of(label, sizeof label, name, i, j);
+    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %s: %s", label,
+           fp_real_text(text, value), why);
+    c->errors++;
+}
+
+void fp_check_bad_int(FpCheck *c, const char *name, int i, long value, const char *why) {
+    char label[64];
+    label_of(label, sizeof label, name, i, 0);
+    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "parameter %s = %ld: %s", label, value, why);
+    c->errors++;
+}
+
+void fp_check_error(FpCheck *c, const char *fmt, ...) {
+    char message[512];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(message, sizeof message, fmt, args);
+    va_end(args);
+    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "%s", message);
+    c->errors++;
+}
+
+void fp_check_warning(FpCheck *c, const char *fmt, ...) {
+    char message[512];
+    va_list args;
+    va_start(args, fmt);
+    vsnprintf(message, sizeof message, fmt, args);
+    va_end(args);
+    fp_log(c->logger, FP_WARNING, FP_LOG_WARNING, "%s", message);
+}
+
+/* Element k of a parameter shaped by cols, reported as name / name[i] / name[i,j]. */
+static void bad_element(FpCheck *c, const char *name, int k, int cols, double value,
+                        const char *why) {
+    if (cols <= 0) fp_check_bad(c, name, 0, 0, value, why);
+    else if (cols == 1) fp_check_bad(c, name, k + 1, 0, value, why);
+    else fp_check_bad(c, name, k / cols + 1, k % cols + 1, value, why);
+}
+
+void fp_need_finite(FpCheck *c, const char *name, const double *v, int n, int cols) {
+    int k;
+    for (k = 0; k < n; k++)
+        if (!isfinite(v[k])) bad_element(c, name, k, cols, v[k], "must be finite");
+}
+
+void fp_need_positive(FpCheck *c, const char *name, const double *v, int n, int cols) {
+    int k;
+    for (k = 0; k < n; k++) {
+        if (!isfinite(v[k])) bad_element(c, name, k, cols, v[k], "must be finite");
+        else if (!(v[k] > 0.0)) bad_element(c, name, k, cols, v[k], "must be positive");
+    }
+}
+
+void fp_need_nonnegative(FpCheck *c, const char *name, const double *v, int n, int cols) {
+    int k;
+    for (k = 0; k < n; k++) {
+        if (!isfinite(v[k])) bad_element(c, name, k, cols, v[k], "must be finite");
+        else if (v[k] < 0.0) bad_element(c, name, k, cols, v[k], "must not be negative");
+    }
+}
+
+void fp_need_range(FpCheck *c, const char *name, const double *v, int n, int cols, double lo,
+                   double hi, const char *why) {
+    int k;
+    for (k = 0; k < n; k++)
+        if (isfinite(v[k]) && (v[k] < lo || v[k] > hi)) bad_element(c, name, k, cols, v[k], why);
+}
+
+void fp_need_ordered(FpCheck *c, const char *name, const double *lo, const double *hi, int n,
+                     int cols, const char *why) {
+    int k;
+    for (k = 0; k < n; k++)
+        if (lo[k] > hi[k]) bad_element(c, name, k, cols, lo[k], why);
+}
+
+/* ------------------------------------------------------------------------ */
+/* Inertia                                                                  */
+
+/* Eigenvalues of a symmetric 3x3 matrix (trigonometric closed form), e[0] >= e[1] >= e[2]. */
+static void sym3_eigenvalues(double a[3][3], double e[3]) {
+    double p1 = a[0][1] * a[0][1] + a[0][2] * a[0][2] + a[1][2] * a[1][2];
+    double q = (a[0][0] + a[1][1] + a[2][2]) / 3.0, p2, p, b[3][3], r, phi;
+    int i, j;
+    if (p1 == 0.0) {
+        for (i = 0; i < 3; i++) e[i] = a[i][i];
+        return;
+    }
+    p2 = (a[0][0] - q) * (a[0][0] - q) + (a[1][1] - q) * (a[1][1] - q) +
+         (a[2][2] - q) * (a[2][2] - q) + 2.0 * p1;
+    p = sqrt(p2 / 6.0);
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) b[i][j] = (a[i][j] - (i == j ? q : 0.0)) / p;
+    r = 0.5 * (b[0][0] * (b[1][1] * b[2][2] - b[1][2] * b[2][1]) -
+               b[0][1] * (b[1][0] * b[2][2] - b[1][2] * b[2][0]) +
+               b[0][2] * (b[1][0] * b[2][1] - b[1][1] * b[2][0]));
+    phi = r <= -1.0 ? PI / 3.0 : (r >= 1.0 ? 0.0 : acos(r) / 3.0);
+    e[0] = q + 2.0 * p * cos(phi);
+    e[2] = q + 2.0 * p * cos(phi + 2.0 * PI / 3.0);
+    e[1] = 3.0 * q - e[0] - e[2];
+}
+
+/* Finite, symmetric, positive definite (leading minors, eigenvalues and a Cholesky factor
+ * all agree), and a warning for moments no rigid body has. */
+static void check_inertia(FpCheck *c, const double *inertia) {
+    double a[3][3], e[3], l[9], scale = 0.0, m1, m2;
+    int i, j;
+    fp_need_finite(c, "inertia", inertia, 9, 3);
+    for (i = 0; i < 9; i++)
+        if (!isfinite(inertia[i])) return; /* reported as non-finite */
+    for (i = 0; i < 9; i++) {
+        a[i / 3][i % 3] = inertia[i];
+        l[i] = inertia[i];
+        scale = fmax(scale, fabs(inertia[i]));
+    }
+    for (i = 0; i < 3; i++)
+        for (j = i + 1; j < 3; j++)
+            if (fabs(a[i][j] - a[j][i]) > 1e-12 * scale)
+                fp_check_bad(c, "inertia", i + 1, j + 1, a[i][j],
+                             "the inertia matrix must be symmetric");
+    /* Sylvester: leading principal minors positive <=> positive definite. */
+    m1 = a[0][0];
+    m2 = a[0][0] * a[1][1] - a[0][1] * a[1][0];
+    sym3_eigenvalues(a, e);
+    if (!(m1 > 0.0) || !(m2 > 0.0) || !(e[0] > 0.0 && e[1] > 0.0 && e[2] > 0.0) ||
+        fp_cholesky_factor(l, 3) != FP_OK) {
+        fp_check_error(c,
+                       "parameter inertia is not positive definite (eigenvalues %.6g, %.6g, "
+                       "%.6g kg.m2)",
+                       e[0], e[1], e[2]);
+        return;
+    }
+    for (i = 0; i < 3; i++)
+        if (e[i] > e[(i + 1) % 3] + e[(i + 2) % 3] * (1.0 + 1e-12)) {
+            fp_check_warning(c,
+                             "parameter inertia: principal moment %.6g kg.m2 exceeds the sum of "
+                             "the other two (%.6g + %.6g), which no rigid body has; using it as "
+                             "given",
+                             e[i], e[(i + 1) % 3], e[(i + 2) % 3]);
+            break;
+        }
+}
+
+/* ------------------------------------------------------------------------ */
+/* Airframe                                                                 */
+
+FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, double g,
+                           const FpRotorSet *rs) {
+    static const char *const within = "must be within [-pi/2, pi/2]";
+    int i, n = rs->n;
+    char why[32];
+    if (n < 1 || n > FP_MAX_ROTORS) {
+        snprintf(why, sizeof why, "must be in 1..%d", FP_MAX_ROTORS);
+        fp_check_bad_int(c, "n_rotors", 0, (long)n, why);
+        return FP_ERROR; /* the per-rotor checks need a valid n */
+    }
+    fp_need_positive(c, "mass", &mass, 1, 0);
+    check_inertia(c, inertia);
+    fp_need_finite(c, "g", &g, 1, 0);
+    fp_need_positive(c, "k_t", &rs->k_t, 1, 0);
+    fp_need_nonnegative(c, "k_d", &rs->k_d, 1, 0);
+    fp_need_finite(c, "rotor_pos", &rs->pos[0][0], 3 * n, 3);
+    for (i = 0; i < n; i++)
+        if (rs->dir[i] != 1 && rs->dir[i] != -1)
+            fp_check_bad(c, "rotor_dir", i + 1, 0, (double)rs->dir[i], "must be +1 or -1");
+    fp_need_finite(c, "rotor_gamma", rs->gamma, n, 1);
+    fp_need_finite(c, "alpha_min", rs->alpha_min, n, 1);
+    fp_need_finite(c, "alpha_max", rs->alpha_max, n, 1);
+    fp_need_finite(c, "beta_min", rs->beta_min, n, 1);
+    fp_need_finite(c, "beta_max", rs->beta_max, n, 1);
+    fp_need_range(c, "alpha_min", rs->alpha_min, n, 1, -PI / 2, PI / 2, within);
+    fp_need_range(c, "alpha_max", rs->alpha_max, n, 1, -PI / 2, PI / 2, within);
+    fp_need_range(c, "beta_min", rs->beta_min, n, 1, -PI / 2, PI / 2, within);
+    fp_need_range(c, "beta_max", rs->beta_max, n, 1, -PI / 2, PI / 2, within);
+    fp_need_ordered(c, "alpha_min", rs->alpha_min, rs->alpha_max, n, 1,
+                    "exceeds alpha_max (inverted limits)");
+    fp_need_ordered(c, "beta_min", rs->beta_min, rs->beta_max, n, 1,
+                    "exceeds beta_max (inverted limits)");
+    fp_need_nonnegative(c, "omega_min", &rs->omega_min, 1, 0);
+    fp_need_positive(c, "omega_max", &rs->omega_max, 1, 0);
+    fp_need_ordered(c, "omega_min", &rs->omega_min, &rs->omega_max, 1, 0,
+                    "exceeds omega_max (inverted limits)");
+    return FP_OK;
+}

@@ -1,0 +1,143 @@
+/*
+ * Internal to the solver (wls.c, wls_qr.c, wls_phase1.c): the iteration context, the
+ * working-set states, the tolerances and the accessors shared by the three files.  Not part
+ * of the API (wls.h).
+ */
+#ifndef FP_WLS_INTERNAL_H
+#define FP_WLS_INTERNAL_H
+
+#include <float.h>
+#include <math.h>
+
+#include "wls.h"
+
+#define NV1 FP_WLS_NV1
+
+/* Variable states in the working set. */
+#define ST_FREE 0
+#define ST_LB (-1)
+#define ST_UB 1
+#define ST_EQ 2 /* lb == ub: fixed for good */
+
+/* Tolerances (relative; see where they are used). */
+#define TOL_DEP 1e-12      /* a row this close to the span of the others is dependent */
+#define TOL_BLOCK 1e-11    /* a row blocks only if c'p > TOL_BLOCK ||p|| (c unit norm) */
+#define TOL_BLOCK_B 1e-14  /* a bound blocks only if |p_j| > TOL_BLOCK_B ||p|| */
+#define TOL_RANK 1e-12     /* rank cut-off of the pivoted QR of A_F Z */
+#define TOL_TIE 1e-12      /* step lengths this close are ties */
+#define TOL_STEP 1e-14     /* ||p|| below this (relative to ||x||) is no step */
+#define TOL_MULT 1e-13     /* multipliers above -TOL_MULT * (gradient scale) are >= 0 */
+#define TOL_FEAS 1e-11     /* feasibility, relative to max(1, |d|, |x|) */
+#define TOL_GI 1e-10       /* projection phase: a normal this close to the span is dependent */
+
+/* Magnitudes above this are bad input (their squares would overflow). */
+#define BIG 1e150
+
+/* Outcomes of the iteration loop. */
+enum { RUN_OPTIMAL, RUN_CAP, RUN_FEASIBLE, RUN_INFEASIBLE, RUN_NUMERIC };
+
+typedef struct {
+    FpWls *w;
+    FpWlsWork *k;
+    int n;        /* variables of the problem */
+    int nv;       /* variables iterated: n, or n + 1 in phase 1 (t last) */
+    int ph1;      /* phase 1: objective t^2, rows of C get a -t term */
+    int nf, nw;   /* free variables, accepted active rows */
+    int stall;    /* consecutive iterations that did not move x */
+    int bland;    /* stalled long enough: use smallest-index choices */
+    double anorm; /* largest column norm of A (rank cut-off scale) */
+    double tol_feas;
+} Ctx;
+
+/* ------------------------------------------------------------------------ */
+/* Problem accessors (phase 1 and phase 2 share the loop).                  */
+
+static inline double lbv(const Ctx *c, int j) { return j < c->n ? c->w->lb[j] : 0.0; }
+
+static inline double ubv(const Ctx *c, int j) { return j < c->n ? c->w->ub[j] : INFINITY; }
+
+/* Row i of the scaled C (with the -t column in phase 1). */
+static inline double cval(const Ctx *c, int i, int j) {
+    return j < c->n ? c->w->C[i * c->n + j] * c->k->cinv[i] : -1.0;
+}
+
+static inline double dval(const Ctx *c, int i) { return c->w->d[i] * c->k->cinv[i]; }
+
+static inline double crow_dot(const Ctx *c, int i, const double *x) {
+    double s = 0.0;
+    int j;
+    for (j = 0; j < c->nv; j++) s += cval(c, i, j) * x[j];
+    return s;
+}
+
+static inline int nrows(const Ctx *c) { return c->ph1 ? 1 : c->w->n_rows; }
+
+/* r = b - A x over the rows of the current objective. */
+static inline void residual(Ctx *c) {
+    FpWlsWork *k = c->k;
+    int i, j, n = c->n;
+    if (c->ph1) {
+        k->r[0] = -k->x[n];
+        return;
+    }
+    for (i = 0; i < c->w->n_rows; i++) {
+        const double *a = c->w->A + i * n;
+        double s = c->w->b[i];
+        for (j = 0; j < n; j++) s -= a[j] * k->x[j];
+        k->r[i] = s;
+    }
+}
+
+static inline double vnorm(const double *x, int len) {
+    double s = 0.0;
+    int i;
+    for (i = 0; i < len; i++) s += x[i] * x[i];
+    return sqrt(s);
+}
+
+static inline double inf_norm(const double *x, int len) {
+    double m = 0.0;
+    int i;
+    for (i = 0; i < len; i++)
+        if (fabs(x[i]) > m) m = fabs(x[i]);
+    return m;
+}
+
+/* ------------------------------------------------------------------------ */
+/* wls_qr.c: factorisations of the working set and the steps they give.    */
+
+/* Householder QR of C_WF^T (active rows on the free variables); dependent rows leave the
+ * working set.  Sets c->nf, c->nw and the free and active index lists. */
+void wls_factor_ws(Ctx *c);
+
+/* Step p (full length nv, zero on fixed variables) to the face minimiser.
+ * Needs wls_factor_ws (and uses the current x).  Returns 0 if not finite. */
+int wls_compute_step(Ctx *c);
+
+/* Decompose v (length nv) on the working set (needs wls_factor_ws):
+ *     v = sum_q rr[q] c_{act_idx[q]} + sum_{j fixed} rb[j] n_j + z,
+ * n_j = +e_j at an upper bound, -e_j at a lower one, z in the null space of
+ * the working set (zero on fixed variables). */
+void wls_decompose(Ctx *c, const double *v, double *z, double *rr, double *rb);
+
+/* Move x (phase 2, warm start) onto the face of the working set: minimum-norm
+ * correction so the active rows hold at equality.  Needs wls_factor_ws. */
+void wls_project_to_face(Ctx *c);
+
+/* ------------------------------------------------------------------------ */
+/* wls.c: the active-set loop.                                              */
+
+/* The active-set loop from a feasible point with a consistent working set: RUN_OPTIMAL,
+ * RUN_CAP, RUN_NUMERIC, or in phase 1 RUN_FEASIBLE. */
+int wls_run(Ctx *c, int max_iter, int *iter);
+
+/* ------------------------------------------------------------------------ */
+/* wls_phase1.c: a feasible start.                                          */
+
+/* From any k->x: a feasible point with a consistent working set
+ * (RUN_FEASIBLE), RUN_INFEASIBLE (x: minimax point, or the best found within
+ * the cap), RUN_CAP (x: phase-1 iterate clamped into the bounds) or
+ * RUN_NUMERIC. */
+int wls_find_feasible(Ctx *c, int max_iter, int *iter);
+
+#endif

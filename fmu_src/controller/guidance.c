@@ -1,0 +1,188 @@
+/*
+ * Guidance (paper eq. 14-23).  The blocks K_xi and K_xidot with velocity and acceleration
+ * feed-forward give the commanded acceleration; outer INDI turns it into the force the
+ * reference needs; the WLS guidance QP over du = [df_b (3), dphi, dtheta] finds the pose
+ * nearest the reference whose force lies in the feasible-force set: the commanded attitude
+ * mu_c (psi_c = psi_ref, outside the QP: docs/architecture.md, "Design decisions") and the
+ * body-force increment df_b_c.
+ */
+#include <string.h>
+
+#include "fp_clock.h"
+#include "fp_math.h"
+#include "stages.h"
+
+enum { NV = 5 }; /* QP variables [dfx, dfy, dfz, dphi, dtheta] */
+
+/* Outer INDI at the filtered measurement. */
+typedef struct {
+    double r[9], dr_dphi[9], dr_dtheta[9]; /* R(mu_m) and its partial derivatives */
+    double dacc[3];                        /* acc_c - acc_m */
+    double f_w_ref[3];                     /* world force the reference needs, eq. (20) */
+    double f_p[3];                         /* R(mu_ref)^T f_w_ref: body force at mu_ref */
+} OuterIndi;
+
+/* R = Rz(psi) Ry(theta) Rx(phi) and its partial derivatives in phi and theta. */
+static void attitude_jacobian(const double e[3], double r[9], double dr_dphi[9],
+                              double dr_dtheta[9]) {
+    double rx[3][3], ry[3][3], rz[3][3], drx[3][3], dry[3][3], t[9];
+    double cp = cos(e[0]), sp = sin(e[0]), ct = cos(e[1]), st = sin(e[1]);
+    rot_x(e[0], rx);
+    rot_y(e[1], ry);
+    rot_z(e[2], rz);
+    memset(drx, 0, sizeof drx);
+    memset(dry, 0, sizeof dry);
+    drx[1][1] = -sp, drx[1][2] = -cp, drx[2][1] = cp, drx[2][2] = -sp;
+    dry[0][0] = -st, dry[0][2] = ct, dry[2][0] = -ct, dry[2][2] = -st;
+    m3_mul(&rz[0][0], &ry[0][0], t);
+    m3_mul(t, &rx[0][0], r);
+    m3_mul(t, &drx[0][0], dr_dphi);
+    m3_mul(&rz[0][0], &dry[0][0], t);
+    m3_mul(t, &rx[0][0], dr_dtheta);
+}
+
+/* K_xi and K_xidot with feed-forward: acc_c, and dacc = acc_c - acc_m.
+ * Position and velocity references pass through the measurement filter H(s) before they
+ * meet the filtered measurements: with the same delay on both sides the feedback terms
+ * vanish when the vehicle tracks exactly, instead of pushing on the filter's lag
+ * (~2 zeta / wn = 22 ms: 4 cm at 1.5 m/s).  acc_ref is the unfiltered feed-forward: INDI
+ * compares it with the filtered acceleration, whose lag the equally filtered actuator
+ * feedback cancels. */
+static void outer_loop(const CtrlGuidanceParams *p, const CtrlGuidanceInputs *in,
+                       const CtrlFiltered *s, CtrlGuidanceState *st, double acc_c[3],
+                       double dacc[3]) {
+    int i;
+    for (i = 0; i < 3; i++) {
+        double e_pos = s->pos_ref_f[i] - s->pos_m[i];
+        double v_c = ctrl_block(&p->K_pos, i, &st->x_pos[i], e_pos) + s->vel_ref_f[i];
+        acc_c[i] = ctrl_block(&p->K_vel, i, &st->x_vel[i], v_c - s->vel_m[i]) + in->acc_ref[i];
+        dacc[i] = acc_c[i] - s->acc_m[i];
+    }
+}
+
+/* The QP of eq. (17)-(23) into w: objective rows, bounds and the force-set rows. */
+static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
+                     const double mu_ref[3], const CtrlFiltered *s, const OuterIndi *o,
+                     double f_bz_ref, FpWls *w) {
+    double g_mat[3][NV], sg = sqrt(p->gamma_opt);
+    int i, j, k, n_cons = 0;
+    /* G = d(R f_b)/d[f_b, phi, theta] at the filtered measurement (eq. 14) */
+    {
+        double gp[3], gt[3];
+        m3_mul_v(o->dr_dphi, s->f_b_m, gp);
+        m3_mul_v(o->dr_dtheta, s->f_b_m, gt);
+        for (i = 0; i < 3; i++) {
+            for (j = 0; j < 3; j++) g_mat[i][j] = o->r[3 * i + j];
+            g_mat[i][3] = gp[i];
+            g_mat[i][4] = gt[i];
+        }
+    }
+    /* eq. (19): A = [sqrt(gamma) W_v G; W_u], b = [sqrt(gamma) W_v m dacc; W_u du_p] */
+    w->n_rows = 8;
+    for (i = 0; i < 3; i++) {
+        for (j = 0; j < NV; j++) w->A[i * NV + j] = sg * p->W_v[i] * g_mat[i][j];
+        w->b[i] = sg * p->W_v[i] * p->mass * o->dacc[i];
+    }
+    /* du_p: the increment to the reference pose, i.e. to mu_ref and to the body force
+     * f_p = R_ref^T f_w_ref that mu_ref needs.  With du_p's force part at zero ("no force
+     * increment") the force and attitude terms trade off and mu_c lags mu_ref by a
+     * fraction of the tracking error even when mu_ref is feasible; with f_p both terms
+     * vanish together, so mu_c = mu_ref up to second-order linearization error. */
+    for (i = 0; i < 3; i++) w->b[3 + i] = p->W_u[i] * (o->f_p[i] - s->f_b_m[i]);
+    for (i = 0; i < NV; i++)
+        for (j = 0; j < NV; j++) w->A[(3 + i) * NV + j] = (i == j) ? p->W_u[i] : 0.0;
+    w->b[6] = p->W_u[3] * ctrl_wrap_pi(mu_ref[0] - s->mu_m[0]);
+    w->b[7] = p->W_u[4] * (mu_ref[1] - s->mu_m[1]);
+    for (i = 0; i < 3; i++) {
+        w->lb[i] = -INFINITY;
+        w->ub[i] = INFINITY;
+    }
+    for (i = 0; i < 2; i++) {
+        w->lb[3 + i] = p->euler_min[i] - s->mu_m[i];
+        w->ub[3 + i] = p->euler_max[i] - s->mu_m[i];
+    }
+    if (p->force_constraint == 0) {
+        /* joint: A_poly (f_b_m + df) <= b_poly */
+        for (k = 0; k < fs->n; k++, n_cons++) {
+            for (j = 0; j < NV; j++) w->C[n_cons * NV + j] = j < 3 ? fs->A[k][j] : 0.0;
+            w->d[n_cons] = fs->d[k] - v3_dot(fs->A[k], s->f_b_m);
+        }
+    } else {
+        /* paper eq. (22)-(23): slice at f_bz_ref (clamped into the polytope's z range) */
+        double fz = fmin(fmax(f_bz_ref, fs->fz[0]), fs->fz[1]);
+        for (k = 0; k < fs->n; k++) {
+            double ax = fs->A[k][0], ay = fs->A[k][1];
+            if (ax * ax + ay * ay < 1e-18) continue;
+            for (j = 0; j < NV; j++) w->C[n_cons * NV + j] = 0.0;
+            w->C[n_cons * NV] = ax;
+            w->C[n_cons * NV + 1] = ay;
+            w->d[n_cons] = fs->d[k] - fs->A[k][2] * fz - ax * s->f_b_m[0] - ay * s->f_b_m[1];
+            n_cons++;
+        }
+        w->lb[2] = fs->fz[0] - s->f_b_m[2];
+        w->ub[2] = fs->fz[1] - s->f_b_m[2];
+    }
+    w->n_cons = n_cons;
+}
+
+/* The constraints active at the QP's solution (guid_flags). */
+static int32_t active_constraints(const FpWls *w) {
+    const double *x = w->x;
+    int32_t flags = 0;
+    int j, k;
+    for (k = 0; k < w->n_cons; k++) {
+        double v = -w->d[k];
+        for (j = 0; j < NV; j++) v += w->C[k * NV + j] * x[j];
+        if (v > -1e-9 * (1.0 + fabs(w->d[k]))) flags |= 1;
+    }
+    if (x[3] <= w->lb[3] + 1e-12 || x[3] >= w->ub[3] - 1e-12) flags |= 2;
+    if (x[4] <= w->lb[4] + 1e-12 || x[4] >= w->ub[4] - 1e-12) flags |= 4;
+    return flags;
+}
+
+/* eq. (7): is the reference pose feasible?  f_p = R_ref^T f_w_ref in the force set. */
+static int32_t reference_feasible(const CtrlForceSet *fs, const double f_p[3]) {
+    int k;
+    for (k = 0; k < fs->n; k++) /* 1 uN of slack: flat sets (quadrotor) have b = 0 facets */
+        if (v3_dot(fs->A[k], f_p) > fs->d[k] + 1e-6 * (1.0 + fabs(fs->d[k]))) return 0;
+    return 1;
+}
+
+void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
+                   const CtrlGuidanceInputs *in, const CtrlFiltered *s, CtrlGuidanceState *st,
+                   CtrlGuidanceOut *out) {
+    FpWls *w = st->qp;
+    FpWlsResult res;
+    OuterIndi o;
+    double rf[3], t0;
+    int i;
+    outer_loop(p, in, s, st, out->acc_c, o.dacc);
+    attitude_jacobian(s->mu_m, o.r, o.dr_dphi, o.dr_dtheta);
+    /* eq. (20)-(21) */
+    m3_mul_v(o.r, s->f_b_m, rf);
+    for (i = 0; i < 3; i++) o.f_w_ref[i] = p->mass * o.dacc[i] + rf[i];
+    for (i = 0; i < 3; i++)
+        out->f_b_ref[i] = o.r[i] * o.f_w_ref[0] + o.r[3 + i] * o.f_w_ref[1] +
+                          o.r[6 + i] * o.f_w_ref[2];
+    {
+        double q[4], r_ref[3][3];
+        quat_from_euler(in->mu_ref, q);
+        rot_from_quat(q, r_ref);
+        for (i = 0; i < 3; i++)
+            o.f_p[i] = r_ref[0][i] * o.f_w_ref[0] + r_ref[1][i] * o.f_w_ref[1] +
+                       r_ref[2][i] * o.f_w_ref[2];
+    }
+    build_qp(p, fs, in->mu_ref, s, &o, out->f_b_ref[2], w);
+    t0 = p->timing ? fp_clock_seconds() : 0.0;
+    fp_wls_solve(w, p->max_iter, &res);
+    if (p->timing) out->t_solve = fp_clock_seconds() - t0;
+    out->status = res.status;
+    out->iterations = res.iterations;
+    for (i = 0; i < 3; i++) out->df_c[i] = w->x[i];
+    out->mu_c[0] = s->mu_m[0] + w->x[3];
+    out->mu_c[1] = s->mu_m[1] + w->x[4];
+    out->mu_c[2] = in->mu_ref[2];
+    out->flags = active_constraints(w);
+    out->feasible = reference_feasible(fs, o.f_p);
+    for (i = 0; i < 3; i++) out->f_b_c[i] = s->f_b_m[i] + out->df_c[i];
+}

@@ -1,0 +1,235 @@
+/*
+ * The stages of one FullPoseController sample, as controller.c sequences them:
+ *
+ *   filters.c        H(s) on every measurement, reference and actuator feedback
+ *   guidance.c       K_xi, K_xidot, outer INDI and the WLS guidance QP: mu_c, df_b_c
+ *   stabilization.c  attitude and rate blocks, inner INDI: rate_c, dtau_c
+ *   allocation.c     the WLS inner allocation on B''(u_a,m): actuator commands
+ *   force_sets.c     the feasible-force sets S(0): prepared at initialization, the one in
+ *                    use picked after rotor losses
+ *   validate.c       parameter validation (the airframe rules are common/fp_params.c)
+ *
+ * Each stage is a function of explicit inputs, parameters and state: parameters and inputs
+ * come in through const pointers (views of the ControllerModel members, built by
+ * controller.c), what a stage carries from sample to sample through a small state struct
+ * of pointers, and it writes its results only to its output struct or arrays.  Symbols are
+ * the paper's: mu (Euler attitude), nu = [f_b; tau_b] (virtual control), B2 = B''(u_a).
+ */
+#ifndef CTRL_STAGES_H
+#define CTRL_STAGES_H
+
+#include <math.h>
+#include <stdint.h>
+
+#include "controller.h"
+#include "fp_params.h"
+#include "multirotor.h"
+#include "wls.h"
+
+#define CTRL_PI 3.14159265358979323846
+
+/* Slots of ControllerModel.filt, the filter states [value, derivative] per signal. */
+enum { F_POS = 0, F_VEL = 3, F_ACC = 6, F_EULER = 9, F_RATE = 12, F_POS_REF = 15, F_VEL_REF = 18,
+       F_EULER_REF = 21, F_OMEGA = 24 };
+#define F_ALPHA (F_OMEGA + FP_MAX_ROTORS)
+#define F_BETA (F_ALPHA + FP_MAX_ROTORS)
+
+/* Rows of ControllerModel.blk, the states of the first-order blocks. */
+enum { BLK_POS = 0, BLK_VEL = 1, BLK_ATT = 2, BLK_RATE = 3 };
+
+static inline double ctrl_wrap_pi(double a) {
+    a = fmod(a + CTRL_PI, 2.0 * CTRL_PI);
+    if (a < 0.0) a += 2.0 * CTRL_PI;
+    return a - CTRL_PI;
+}
+
+/* The first-order blocks x+ = A x + B e, y = C x + D e (discrete) of one cascade level:
+ * A, B, C, D hold one value per axis. */
+typedef struct {
+    const double *A, *B, *C, *D;
+} CtrlBlock;
+
+/* One axis of a block: returns y and advances its state x. */
+static inline double ctrl_block(const CtrlBlock *k, int axis, double *x, double e) {
+    double y = k->C[axis] * (*x) + k->D[axis] * e;
+    *x = k->A[axis] * (*x) + k->B[axis] * e;
+    return y;
+}
+
+/* ------------------------------------------------------------------------ */
+/* filters.c                                                                */
+
+/* H(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) discretized exactly (zero-order hold) at Ts:
+ * x+ = Phi x + Gamma u with x = [y, y']. */
+void ctrl_filter_discretize(double wn, double zeta, double Ts, double phi[2][2],
+                            double gamma[2]);
+
+/* The heading psi made continuous before filtering: the angle nearest *unwrapped that
+ * differs from angle by a multiple of 2 pi.  Updates both states and returns it. */
+double ctrl_unwrap(double angle, double *raw, double *unwrapped);
+
+/* What the filters take in one sample. */
+typedef struct {
+    const double *pos, *vel, *acc, *euler, *rate; /* measurements, 3 each */
+    const double *pos_ref, *vel_ref, *mu_ref;     /* references xi_ref, xi_ref', mu_ref */
+    double psi, psi_ref;                          /* unwrapped euler[2], mu_ref[2] */
+    const double *omega, *alpha, *beta;           /* measured actuators, n_rotors each */
+    int n_rotors;
+} CtrlFilterInputs;
+
+/* One sample of every filter; x is ControllerModel.filt. */
+void ctrl_filters_update(const double phi[2][2], const double gamma[2],
+                         const CtrlFilterInputs *in, double x[CTRL_N_FILTERS][2]);
+
+/* Every filter in steady state at its input (the raw headings: at the start the unwrapped
+ * heading is the raw one). */
+void ctrl_filters_start(const CtrlFilterInputs *in, double x[CTRL_N_FILTERS][2]);
+
+/* One sample's signals after H(s) (subscript m: measured). */
+typedef struct {
+    double pos_m[3], vel_m[3], acc_m[3];     /* world NED */
+    double mu_m[3], rate_m[3], ang_acc_m[3]; /* ang_acc_m: the rate filter's derivative */
+    double a_m[FP_MAX_ROTORS], b_m[FP_MAX_ROTORS], w_m[FP_MAX_ROTORS]; /* alpha, beta, omega */
+    double eff[FP_MAX_ROTORS];               /* known rotor efficiency, 0 for lost rotors */
+    double f_b_m[3], tau_b_m[3];             /* nu_m: the rotor wrench at a_m, b_m, w_m */
+    /* the references delayed by H(s) like the measurements */
+    double pos_ref_f[3], vel_ref_f[3], mu_ref_f[3];
+} CtrlFiltered;
+
+void ctrl_read_filters(const double x[CTRL_N_FILTERS][2], const FpRotorSet *rotors,
+                       const double rotor_health[], int32_t lost_mask, CtrlFiltered *s);
+
+/* ------------------------------------------------------------------------ */
+/* force_sets.c                                                             */
+
+/* A feasible-force set {f_b : A f_b <= d} (unit normals, d scaled about the hover force). */
+typedef struct {
+    const double (*A)[3];
+    const double *d;
+    int n;        /* facets */
+    double fz[2]; /* its f_bz range [min, max] */
+} CtrlForceSet;
+
+/*
+ * Validate the polytope {A f_b <= b} of n facets (finite, non-zero normals, non-empty,
+ * bounded; errors name it as `name`) and derive what the guidance uses: the offsets d of
+ * the set scaled by margin about the hover force [0, 0, hover_fz], its f_bz range fz (scaled
+ * the same way), and *hover_ok, whether the hover force lies inside (if not: d = b, fz
+ * unscaled).  scratch is a solver the support functions borrow.  FP_ERROR when invalid.
+ */
+FpStatus ctrl_force_set_prepare(FpCheck *c, const char *name, const double (*A)[3],
+                                const double *b, int n, double hover_fz, double margin,
+                                FpWls *scratch, double d[], double *fz_min, double *fz_max,
+                                int32_t *hover_ok);
+
+/* Which rotors are lost (efficiency below one half) and which force set goes with it. */
+typedef struct {
+    int32_t lost_mask;       /* bit i-1: rotor i */
+    int32_t rotors_lost;     /* how many */
+    int32_t active_polytope; /* 0 nominal, i: after losing rotor i, -1: several (nominal) */
+    int32_t hover_possible;  /* the hover force lies in that set */
+} CtrlLosses;
+
+/* hover_ok[0]: nominal set, [i]: set after losing rotor i (ControllerModel.hover_ok). */
+void ctrl_rotor_losses(int n_rotors, const double rotor_health[], const int32_t fail_poly_n[],
+                       const int32_t hover_ok[], CtrlLosses *out);
+
+/* Say which force set a change of losses leaves the guidance with. */
+void ctrl_log_losses(const CtrlLosses *l, const FpLogger *logger);
+
+/* ------------------------------------------------------------------------ */
+/* guidance.c                                                               */
+
+typedef struct {
+    double mass;
+    CtrlBlock K_pos, K_vel;              /* K_xi, K_xidot */
+    double gamma_opt;                    /* weight of the acceleration-tracking term */
+    const double *W_u, *W_v;             /* 5 and 3 diagonal weights */
+    const double *euler_min, *euler_max; /* bounds of [phi_c, theta_c] */
+    int force_constraint;                /* 0: joint S(0), 1: slice P_xy at f_bz_ref */
+    int max_iter, timing;
+} CtrlGuidanceParams;
+
+typedef struct {
+    const double *acc_ref; /* acceleration feed-forward (unfiltered) */
+    const double *mu_ref;  /* reference attitude */
+} CtrlGuidanceInputs;
+
+typedef struct {
+    double *x_pos, *x_vel; /* states of the K_xi and K_xidot blocks, 3 each */
+    FpWls *qp;             /* the guidance QP; its working set warm-starts the next sample */
+} CtrlGuidanceState;
+
+typedef struct {
+    double acc_c[3];   /* commanded acceleration (blocks plus feed-forward) */
+    double f_b_ref[3]; /* body force that follows xi_ref at the measured attitude, eq. (21) */
+    double df_c[3];    /* commanded body-force increment df_b_c */
+    double mu_c[3];    /* commanded attitude (not wrapped) */
+    double f_b_c[3];   /* f_b_m + df_b_c */
+    FpWlsStatus status;
+    int iterations;
+    int32_t flags;    /* active constraints: bit 0 force set, bit 1 phi, bit 2 theta bound */
+    int32_t feasible; /* eq. (7): R(mu_ref)^T f_w_ref lies in the force set */
+    double t_solve;   /* s, only written with timing */
+} CtrlGuidanceOut;
+
+void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
+                   const CtrlGuidanceInputs *in, const CtrlFiltered *s, CtrlGuidanceState *st,
+                   CtrlGuidanceOut *out);
+
+/* ------------------------------------------------------------------------ */
+/* stabilization.c                                                          */
+
+typedef struct {
+    CtrlBlock K_att, K_rate;
+    double yaw_rate_max;
+    const double (*inertia)[3]; /* nominal I */
+} CtrlStabilizationParams;
+
+typedef struct {
+    double *x_att, *x_rate; /* states of the attitude and rate blocks, 3 each */
+} CtrlStabilizationState;
+
+/* From mu_c (guidance), mu_ref and its rate feed-forward mu_dot_ref: the commanded body
+ * rates rate_c and the torque increment dtau_c = I (dOmega_c - dOmega_m). */
+void ctrl_stabilization(const CtrlStabilizationParams *p, const CtrlFiltered *s,
+                        const double mu_c[3], const double mu_ref[3],
+                        const double mu_dot_ref[3], CtrlStabilizationState *st,
+                        double rate_c[3], double dtau_c[3]);
+
+/* ------------------------------------------------------------------------ */
+/* allocation.c                                                             */
+
+typedef struct {
+    const FpRotorSet *rotors; /* geometry and actuator limits */
+    const double *W_nu;       /* 6 row weights of dnu */
+    double w_pref;            /* weight of the preferred configuration */
+    double pref_omega_scale;  /* scale of rotor speeds in that term */
+    int max_iter, timing;
+} CtrlAllocationParams;
+
+typedef struct {
+    double alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS], omega_cmd[FP_MAX_ROTORS];
+    double residual[6]; /* B2 du - dnu_c */
+    int32_t sat_flags;  /* bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i */
+    FpWlsStatus status;
+    int iterations;
+    double t_solve; /* s, only written with timing */
+} CtrlAllocationOut;
+
+/* The actuator commands that realise dnu_c = [df_b_c; dtau_c] at the filtered actuator
+ * state; rotors in lost_mask stay where they are, their motors stopped. */
+void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const double dnu_c[6],
+                     int32_t lost_mask, FpWls *qp, CtrlAllocationOut *out);
+
+/* ------------------------------------------------------------------------ */
+/* validate.c                                                               */
+
+/* Every parameter but the polytopes' facets (ctrl_force_set_prepare checks those); the
+ * number of errors, each logged. */
+int ctrl_check_parameters(const ControllerModel *m, const FpLogger *logger);
+
+/* The tunable parameters only (after a change while stepping). */
+int ctrl_check_tunables(const ControllerModel *m, const FpLogger *logger);
+
+#endif
