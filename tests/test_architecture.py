@@ -127,3 +127,21 @@ def test_the_walls_test_sees_a_breach(tmp_path):
     assert (3, "plant._native", ["core"]) in found
     assert _INCLUDE.findall('#include "fmi2Functions.h"\n  # include "wls.h"') == [
         "fmi2Functions.h", "wls.h"]
+
+
+def test_constants_shared_by_c_and_python_agree():
+    """Layouts written in both languages: the rotor slots and the sat_flags bits
+    (common/multirotor.h) against controller.fmu_parameters, and the polytope caps the
+    generated headers declare."""
+    from controller import fmu_parameters as fp
+
+    rotor_h = (SRC / "common" / "multirotor.h").read_text()
+    assert int(re.search(r"#define FP_MAX_ROTORS (\d+)", rotor_h).group(1)) == fp.MAX_ROTORS
+    bits = dict(re.findall(r"FP_SAT_(\w+) = (\d+)", rotor_h))
+    assert {k.lower(): int(v) for k, v in bits.items()} == fp.SAT_FLAG_SHIFT
+    caps = {"default_polytope.h": ("FP_POLYTOPE_MAX_FACETS", fp.POLY_FACETS),
+            "default_fail_polytopes.h": ("FP_FAIL_POLYTOPE_FACETS", fp.FAIL_FACETS)}
+    for header, (macro, value) in caps.items():
+        text = (SRC / "controller" / header).read_text()
+        assert int(re.search(rf"#define {macro} (\d+)", text).group(1)) == value
+

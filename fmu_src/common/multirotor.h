@@ -25,6 +25,10 @@
 
 #define FP_MAX_ROTORS 8
 
+/* Bit of rotor i (0-based) in both FMUs' sat_flags output: FP_SAT_<kind> + i.
+ * (Python: controller.fmu_parameters.SAT_FLAG_SHIFT; a test compares them.) */
+enum { FP_SAT_MOTOR = 0, FP_SAT_ALPHA = 8, FP_SAT_BETA = 16 };
+
 /* Geometry and actuator limits of a rotor set (SI units, radians). */
 typedef struct {
     int32_t n;

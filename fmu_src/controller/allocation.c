@@ -110,12 +110,12 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
         if ((lost_mask >> i) & 1) continue; /* a stopped dead rotor is not saturated */
         if (rs->alpha_max[i] > rs->alpha_min[i] &&
             (a_cmd[i] <= rs->alpha_min[i] + 1e-9 || a_cmd[i] >= rs->alpha_max[i] - 1e-9))
-            flags |= (int32_t)1 << (8 + i);
+            flags |= (int32_t)1 << (FP_SAT_ALPHA + i);
         if (rs->beta_max[i] > rs->beta_min[i] &&
             (b_cmd[i] <= rs->beta_min[i] + 1e-9 || b_cmd[i] >= rs->beta_max[i] - 1e-9))
-            flags |= (int32_t)1 << (16 + i);
+            flags |= (int32_t)1 << (FP_SAT_BETA + i);
         if (w_cmd[i] <= rs->omega_min + 1e-9 || w_cmd[i] >= rs->omega_max - 1e-9)
-            flags |= (int32_t)1 << i;
+            flags |= (int32_t)1 << (FP_SAT_MOTOR + i);
     }
     out->sat_flags = flags;
 }

@@ -183,9 +183,12 @@ static void saturate(const PlantModel *m, Commands *u, int32_t *flags) {
     *flags = 0;
     memset(u, 0, sizeof *u);
     for (i = 0; i < m->n_rotors; i++) {
-        u->omega[i] = clamp(m->omega_cmd[i], m->omega_min, m->omega_max, flags, i);
-        u->alpha[i] = clamp(m->alpha_cmd[i], m->alpha_min[i], m->alpha_max[i], flags, 8 + i);
-        u->beta[i] = clamp(m->beta_cmd[i], m->beta_min[i], m->beta_max[i], flags, 16 + i);
+        u->omega[i] = clamp(m->omega_cmd[i], m->omega_min, m->omega_max, flags,
+                            FP_SAT_MOTOR + i);
+        u->alpha[i] = clamp(m->alpha_cmd[i], m->alpha_min[i], m->alpha_max[i], flags,
+                            FP_SAT_ALPHA + i);
+        u->beta[i] = clamp(m->beta_cmd[i], m->beta_min[i], m->beta_max[i], flags,
+                           FP_SAT_BETA + i);
     }
 }
 
