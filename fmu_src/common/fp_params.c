@@ -32,23 +32,26 @@ void fp_check_bad_int(FpCheck *c, const char *name, int i, long value, const cha
     c->errors++;
 }
 
-void fp_check_error(FpCheck *c, const char *fmt, ...) {
+static void check_vlog(FpCheck *c, FpStatus status, FpLogCategory category, const char *fmt,
+                       va_list args) {
     char message[512];
+    vsnprintf(message, sizeof message, fmt, args);
+    fp_log(c->logger, status, category, "%s", message);
+}
+
+void fp_check_error(FpCheck *c, const char *fmt, ...) {
     va_list args;
     va_start(args, fmt);
-    vsnprintf(message, sizeof message, fmt, args);
+    check_vlog(c, FP_ERROR, FP_LOG_ERROR, fmt, args);
     va_end(args);
-    fp_log(c->logger, FP_ERROR, FP_LOG_ERROR, "%s", message);
     c->errors++;
 }
 
 void fp_check_warning(FpCheck *c, const char *fmt, ...) {
-    char message[512];
     va_list args;
     va_start(args, fmt);
-    vsnprintf(message, sizeof message, fmt, args);
+    check_vlog(c, FP_WARNING, FP_LOG_WARNING, fmt, args);
     va_end(args);
-    fp_log(c->logger, FP_WARNING, FP_LOG_WARNING, "%s", message);
 }
 
 /* Element k of a parameter shaped by cols, reported as name / name[i] / name[i,j]. */

@@ -57,6 +57,18 @@ FP_API int fp_wls_get_working_set_api(const void *buffer, int8_t *ws) {
     return FP_OK;
 }
 
+/* A solve's result into the caller's arrays (see fp_wls_solve_api). */
+static void report(const FpWls *w, const FpWlsResult *res, double *x, int32_t *info,
+                   double *fout) {
+    if (x != NULL) memcpy(x, w->x, (size_t)w->n_vars * sizeof(double));
+    info[0] = (int32_t)res->status;
+    info[1] = res->iterations;
+    info[2] = res->phase1_iterations;
+    info[3] = res->warm_start;
+    fout[0] = res->objective;
+    fout[1] = res->max_violation;
+}
+
 /* Solve; x[n_vars] gets the solution, info[4] = status, iterations,
  * phase-1 iterations, warm start flag; fout[2] = objective, max violation. */
 FP_API int fp_wls_solve_api(void *buffer, int max_iter, double *x, int32_t *info, double *fout) {
@@ -65,13 +77,7 @@ FP_API int fp_wls_solve_api(void *buffer, int max_iter, double *x, int32_t *info
     FpStatus st;
     if (!wls_sizes_ok(w) || info == NULL || fout == NULL) return FP_ERROR;
     st = fp_wls_solve(w, max_iter, &res);
-    if (x != NULL) memcpy(x, w->x, (size_t)w->n_vars * sizeof(double));
-    info[0] = (int32_t)res.status;
-    info[1] = res.iterations;
-    info[2] = res.phase1_iterations;
-    info[3] = res.warm_start;
-    fout[0] = res.objective;
-    fout[1] = res.max_violation;
+    report(w, &res, x, info, fout);
     return st;
 }
 
@@ -112,13 +118,7 @@ FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_
         t1 = fp_now_ns();
         ns_out[r] = t1 - t0;
     }
-    if (x != NULL) memcpy(x, w->x, (size_t)w->n_vars * sizeof(double));
-    info[0] = (int32_t)res.status;
-    info[1] = res.iterations;
-    info[2] = res.phase1_iterations;
-    info[3] = res.warm_start;
-    fout[0] = res.objective;
-    fout[1] = res.max_violation;
+    report(w, &res, x, info, fout);
     return st;
 }
 
