@@ -50,6 +50,21 @@ def _faces(poly: Polytope) -> list[np.ndarray]:
     return faces
 
 
+def force_axes(ax: Axes, points: np.ndarray | None) -> None:
+    """A 3-D axes of body forces (FRD, thrust drawn upwards) framing ``points`` (N) in a
+    cube (None: matplotlib's limits)."""
+    ax3 = cast(Axes3D, ax)
+    if points is not None:
+        span = float(np.max(np.ptp(points, axis=0))) or 1.0
+        mid = (points.max(axis=0) + points.min(axis=0)) / 2
+        for setter, m in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), mid, strict=True):
+            setter(m - span / 2, m + span / 2)
+    ax3.invert_zaxis()  # FRD: thrust (negative f_bz) drawn upwards
+    ax3.set_xlabel("f_bx [N]")
+    ax3.set_ylabel("f_by [N]")
+    ax3.set_zlabel("f_bz [N]")
+
+
 def draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bool,
                    label: str) -> None:
     if poly.dimension < 3:
@@ -108,15 +123,7 @@ def plot_force_sets(
     ax.plot(ring[:, 0], ring[:, 1], np.full(len(ring), z), color=RED, lw=1.5,
             label=f"P_xy at f_bz = {z:.2f} N")
     ax.scatter(*hover, color="k", s=12, label="hover force")
-    lim = np.vstack([afs.vertices, s0.vertices])
-    span = float(np.max(np.ptp(lim, axis=0)))
-    mid = (lim.max(axis=0) + lim.min(axis=0)) / 2
-    for setter, m in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid, strict=True):
-        setter(m - span / 2, m + span / 2)
-    ax.invert_zaxis()  # FRD: thrust (negative f_bz) drawn upwards
-    ax.set_xlabel("f_bx [N]")
-    ax.set_ylabel("f_by [N]")
-    ax.set_zlabel("f_bz [N]")
+    force_axes(ax, np.vstack([afs.vertices, s0.vertices]))
     ax.set_title(f"{af.name}: attainable force set vs S(tau = 0)")
     ax.legend(loc="upper left", bbox_to_anchor=(-0.1, 1.0), fontsize=8)
     ax.view_init(elev=18, azim=-60)

@@ -332,10 +332,10 @@ def plot_forces(result: RunResult, path: Path, afs: Polytope | None = None,
 
 def _forces_3d(ax3: Any, trajectories: list[tuple[np.ndarray, str, str]],
                afs: Polytope | None, s0: Polytope | None) -> None:
+    from controller.plots_force_sets import BLUE, GREEN, draw_polytope, force_axes
+
     bounds = []
     if afs is not None or s0 is not None:
-        from controller.plots_force_sets import BLUE, GREEN, draw_polytope
-
         if afs is not None:
             draw_polytope(ax3, afs, GREEN, 0.12, False, "attainable force set")
             bounds.append(afs.vertices)
@@ -347,16 +347,7 @@ def _forces_3d(ax3: Any, trajectories: list[tuple[np.ndarray, str, str]],
         ax3.scatter(pts[:, 0], pts[:, 1], pts[:, 2], color=color, s=2, label=label,
                     depthshade=False)
         bounds.append(pts)
-    if bounds:
-        lim = np.vstack(bounds)
-        span = float(np.max(np.ptp(lim, axis=0))) or 1.0
-        mid = (lim.max(axis=0) + lim.min(axis=0)) / 2
-        for setter, m in zip((ax3.set_xlim, ax3.set_ylim, ax3.set_zlim), mid, strict=True):
-            setter(m - span / 2, m + span / 2)
-    ax3.invert_zaxis()  # FRD: thrust (negative f_bz) drawn upwards
-    ax3.set_xlabel("f_bx [N]")
-    ax3.set_ylabel("f_by [N]")
-    ax3.set_zlabel("f_bz [N]")
+    force_axes(ax3, np.vstack(bounds) if bounds else None)
     ax3.view_init(elev=18, azim=-60)
     ax3.set_box_aspect((1.0, 1.0, 1.0), zoom=0.85)  # room for the axis labels
     ax3.legend(loc="upper left", fontsize=8)
