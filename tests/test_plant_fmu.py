@@ -656,7 +656,7 @@ def test_restoring_a_structurally_corrupt_state_is_refused(make_plant):
     state = inst.slave.deSerializeFMUstate(bytes(bad))
     with pytest.raises(FMICallException):
         inst.slave.setFMUstate(state)
-    assert any("state is corrupt" in m for m in errors(inst))
+    assert any("rotor count 40" in m for m in errors(inst)), inst.messages
     inst.slave.setFMUstate(inst.slave.deSerializeFMUstate(bytes(good)))  # still usable
     trim_feedback(inst)
     inst.step(H)

@@ -101,9 +101,14 @@ typedef struct {
     FpStatus (*step)(void *model, double t, double h, const FpLogger *logger);
     /* Re-validate tunable parameters changed while stepping (may be NULL). */
     FpStatus (*tunables_changed)(void *model, const FpLogger *logger);
-    /* 1 if a model struct restored from an FMU state is structurally sound (sizes and
-     * indices within their caps), so stepping it cannot overrun an array (may be NULL). */
-    int (*state_valid)(const void *model);
+    /*
+     * A model struct from an FMU state, checked before it replaces the live one (the glue
+     * passes an aligned copy): structurally sound (sizes and indices within their caps, so
+     * stepping it cannot overrun an array) and, when it was saved after initialization
+     * (`initialized`), parameters valid by the same rules as initialization and the state
+     * finite.  FP_ERROR, with the reason logged, refuses the state.
+     */
+    FpStatus (*check_restored)(const void *model, int initialized, const FpLogger *logger);
 } FpModelInfo;
 
 /* Each FMU links exactly one model that provides this. */

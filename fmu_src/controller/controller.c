@@ -457,8 +457,7 @@ static int wls_valid(const FpWls *w) {
            w->n_rows <= FP_WLS_MAX_ROWS && w->n_cons >= 0 && w->n_cons <= FP_WLS_MAX_CONS;
 }
 
-static int controller_state_valid(const void *model) {
-    const ControllerModel *m = (const ControllerModel *)model;
+static int structure_valid(const ControllerModel *m) {
     int i;
     if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
         m->rotors.n > FP_MAX_ROTORS || m->poly_n < 0 || m->poly_n > FP_POLYTOPE_MAX_FACETS ||
@@ -468,6 +467,37 @@ static int controller_state_valid(const void *model) {
     for (i = 0; i < FP_MAX_ROTORS; i++)
         if (m->fail_poly_n[i] < 0 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS) return 0;
     return 1;
+}
+
+static int finite_array(const double *v, size_t n) {
+    size_t i;
+    for (i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static FpStatus controller_check_restored(const void *model, int initialized,
+                                          const FpLogger *logger) {
+    const ControllerModel *m = (const ControllerModel *)model;
+    if (!structure_valid(m)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: a size or index is beyond its cap (rotors %ld, facets %ld)",
+               (long)m->n_rotors, (long)m->poly_n);
+        return FP_ERROR;
+    }
+    if (!initialized) return FP_OK; /* parameters are checked when initialization ends */
+    if (ctrl_check_parameters(m, logger) != 0) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
+        return FP_ERROR;
+    }
+    if (!finite_array(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
+        !finite_array(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
+        !finite_array(&m->filt_phi[0][0], 4) || !finite_array(m->filt_gamma, 2)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: the filter or block states are not finite");
+        return FP_ERROR;
+    }
+    return FP_OK;
 }
 
 static const FpModelInfo controller_info = {
@@ -484,7 +514,7 @@ static const FpModelInfo controller_info = {
     controller_initialize,
     controller_step,
     controller_tunables_changed,
-    controller_state_valid,
+    controller_check_restored,
 };
 
 const FpModelInfo *controller_model_info(void) { return &controller_info; }

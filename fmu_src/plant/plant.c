@@ -402,10 +402,35 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
     return FP_OK;
 }
 
-static int plant_state_valid(const void *model) {
+static int all_finite(const double *v, size_t n) {
+    size_t i;
+    for (i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
+
+static FpStatus plant_check_restored(const void *model, int initialized,
+                                     const FpLogger *logger) {
     const PlantModel *m = (const PlantModel *)model;
-    return m->n_rotors >= 1 && m->n_rotors <= FP_MAX_ROTORS && m->rotors.n >= 0 &&
-           m->rotors.n <= FP_MAX_ROTORS;
+    if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
+        m->rotors.n > FP_MAX_ROTORS || (initialized && m->rotors.n != m->n_rotors)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: rotor count %ld (rotor set %ld) outside 1..%d",
+               (long)m->n_rotors, (long)m->rotors.n, FP_MAX_ROTORS);
+        return FP_ERROR;
+    }
+    if (!initialized) return FP_OK; /* parameters are checked when initialization ends */
+    if (validate(m, logger) != 0) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
+        return FP_ERROR;
+    }
+    if (!all_finite(m->x, PLANT_NX) || !all_finite(&m->inertia_inv[0][0], 9) ||
+        !all_finite(m->pos, 3) || !all_finite(m->vel, 3) || !all_finite(m->euler, 3) ||
+        !all_finite(m->rate, 3)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: the vehicle state is not finite");
+        return FP_ERROR;
+    }
+    return FP_OK;
 }
 
 static const FpModelInfo plant_info = {
@@ -421,7 +446,7 @@ static const FpModelInfo plant_info = {
     plant_initialize,
     plant_step,
     NULL,
-    plant_state_valid,
+    plant_check_restored,
 };
 
 const FpModelInfo *plant_model_info(void) { return &plant_info; }
