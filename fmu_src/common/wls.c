@@ -392,6 +392,21 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
         if (fabs(w->d[i]) / cn > fscale) fscale = fabs(w->d[i]) / cn;
     }
 
+    /* A start point far outside the problem's own scale (the constraint offsets and finite
+     * bounds) is a stale or corrupt warm start; it would also set the feasibility
+     * tolerance, so the solve starts cold instead. */
+    {
+        double scale = fscale;
+        for (j = 0; j < n; j++) {
+            if (isfinite(w->lb[j]) && fabs(w->lb[j]) > scale) scale = fabs(w->lb[j]);
+            if (isfinite(w->ub[j]) && fabs(w->ub[j]) > scale) scale = fabs(w->ub[j]);
+        }
+        if (inf_norm(w->x, n) > START_RANGE * scale) {
+            for (j = 0; j < n; j++) w->x[j] = 0.0;
+            fp_wls_reset(w);
+        }
+    }
+
     /* Working set from the caller (sanitised) and start point. */
     for (j = 0; j < n; j++) {
         int8_t s = ST_FREE;

@@ -28,6 +28,7 @@
 #define TOL_STEP 1e-14     /* ||p|| below this (relative to ||x||) is no step */
 #define TOL_MULT 1e-13     /* multipliers above -TOL_MULT * (gradient scale) are >= 0 */
 #define TOL_FEAS 1e-11     /* feasibility, relative to max(1, |d|, |x|) */
+#define START_RANGE 1e6    /* a start point beyond START_RANGE x the data's scale is dropped */
 #define TOL_GI 1e-10       /* projection phase: a normal this close to the span is dependent */
 
 /* Magnitudes above this are bad input (their squares would overflow). */
@@ -88,11 +89,20 @@ static inline void residual(Ctx *c) {
     }
 }
 
+static inline double inf_norm(const double *x, int len);
+
 static inline double vnorm(const double *x, int len) {
-    double s = 0.0;
+    double s = 0.0, m;
     int i;
     for (i = 0; i < len; i++) s += x[i] * x[i];
-    return sqrt(s);
+    if (s >= DBL_MIN && s < HUGE_VAL) return sqrt(s);
+    /* the squares underflowed (entries below ~1e-154) or overflowed: the norm of x scaled
+     * by its largest entry, scaled back, so a tiny but nonzero row is not a zero row */
+    m = inf_norm(x, len);
+    if (!(m > 0.0) || !(m < HUGE_VAL)) return sqrt(s);
+    s = 0.0;
+    for (i = 0; i < len; i++) s += (x[i] / m) * (x[i] / m);
+    return m * sqrt(s);
 }
 
 static inline double inf_norm(const double *x, int len) {

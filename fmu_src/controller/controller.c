@@ -246,12 +246,24 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
 }
 
 /* Every input finite and the rotor health within [0, 1]; else a warning naming it. */
-static int inputs_valid(const ControllerModel *m, const FpLogger *logger) {
+/* The plausible range of each measurement: beyond it a value is finite but absurd (a sensor
+ * glitch, a unit error) and would poison the filters for seconds.  The vehicle's own range
+ * matches the plant's (docs/robustness.md); the actuators' comes from the airframe. */
+#define CTRL_MAX_DISTANCE 1e7 /* m */
+#define CTRL_MAX_SPEED 1e3    /* m/s */
+#define CTRL_MAX_ACC 1e4      /* m/s^2 */
+#define CTRL_MAX_ANGLE 1e3    /* rad (Euler angles, also unwrapped) */
+#define CTRL_MAX_RATE 1e3     /* rad/s */
+#define CTRL_SERVO_MARGIN (CTRL_PI / 4.0) /* rad beyond the servo limits */
+
+/* 1 if every input is usable; else the first unusable one is described in why. */
+static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
     static const char *const names[] = {"pos_ref", "euler_ref", "vel_ref", "acc_ref",
                                         "euler_rate_ref", "pos", "vel", "acc", "euler", "rate",
                                         "omega", "alpha", "beta", "rotor_health"};
     const double *inputs[14];
     int counts[14] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0};
+    double lo[14], hi[14];
     int i, k, n = m->n_rotors;
     inputs[0] = m->pos_ref, inputs[1] = m->euler_ref, inputs[2] = m->vel_ref;
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
@@ -259,22 +271,51 @@ static int inputs_valid(const ControllerModel *m, const FpLogger *logger) {
     inputs[10] = m->omega, inputs[11] = m->alpha, inputs[12] = m->beta;
     inputs[13] = m->rotor_health;
     counts[10] = counts[11] = counts[12] = counts[13] = n;
+    /* the references and the measurements of the same quantities share one range */
+    hi[0] = hi[5] = CTRL_MAX_DISTANCE; /* pos_ref, pos */
+    hi[1] = hi[8] = CTRL_MAX_ANGLE;    /* euler_ref, euler */
+    hi[2] = hi[6] = CTRL_MAX_SPEED;    /* vel_ref, vel */
+    hi[3] = hi[7] = CTRL_MAX_ACC;      /* acc_ref, acc */
+    hi[4] = hi[9] = CTRL_MAX_RATE;     /* euler_rate_ref, rate */
+    for (k = 0; k < 10; k++) lo[k] = -hi[k];
+    lo[10] = -m->omega_max, hi[10] = 2.0 * m->omega_max;
+    lo[13] = 0.0, hi[13] = 1.0;
     for (k = 0; k < 14; k++)
-        for (i = 0; i < counts[k]; i++)
-            if (!isfinite(inputs[k][i])) {
-                fp_log(logger, FP_WARNING, FP_LOG_WARNING,
-                       "input %s[%d] = %g is not finite: holding the last valid command",
-                       names[k], i + 1, inputs[k][i]);
+        for (i = 0; i < counts[k]; i++) {
+            double v = inputs[k][i], a = lo[k], b = hi[k];
+            if (k == 11 || k == 12) { /* servo angles: the airframe's limits plus a margin */
+                a = (k == 11 ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
+                b = (k == 11 ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
+            }
+            if (!isfinite(v)) {
+                snprintf(why, size, "input %s[%d] = %g is not finite", names[k], i + 1, v);
                 return 0;
             }
-    for (i = 0; i < n; i++)
-        if (m->rotor_health[i] < 0.0 || m->rotor_health[i] > 1.0) {
-            fp_log(logger, FP_WARNING, FP_LOG_WARNING,
-                   "input rotor_health[%d] = %g is outside [0, 1]: holding the last valid command",
-                   i + 1, m->rotor_health[i]);
-            return 0;
+            if (v < a || v > b) {
+                snprintf(why, size, "input %s[%d] = %g is outside its plausible range [%g, %g]",
+                         names[k], i + 1, v, a, b);
+                return 0;
+            }
         }
     return 1;
+}
+
+/* Unusable inputs: hold the last command (the sample is skipped, filters and blocks keep
+ * their state), say so once per episode, and recover at the first usable sample. */
+static int inputs_valid(ControllerModel *m, const FpLogger *logger) {
+    char why[160];
+    if (inputs_usable(m, why, sizeof why)) {
+        if (m->holding > 0)
+            fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+                   "inputs usable again after %ld held sample(s): control resumed",
+                   (long)m->holding);
+        m->holding = 0;
+        return 1;
+    }
+    if (m->holding == 0)
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING, "%s: holding the last valid command", why);
+    if (m->holding < INT32_MAX) m->holding++;
+    return 0;
 }
 
 static int all_finite(const double *v, int n) {
@@ -284,9 +325,6 @@ static int all_finite(const double *v, int n) {
     return 1;
 }
 
-/* One sample of the controller.  FP_WARNING: an input was not finite and the last valid
- * command is held (nothing else changes), or the command computed was not finite and is
- * not applied (the diagnostics of the sample are). */
 static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlFilterInputs fin;
     CtrlFiltered s;
@@ -299,10 +337,16 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlStabilizationState sst;
     CtrlAllocationParams ap;
     CtrlAllocationOut a;
-    double dtau_c[3], t_start = m->timing ? fp_clock_seconds() : 0.0;
+    double dtau_c[3], rate_c[3], dnu_c[6], t_start = m->timing ? fp_clock_seconds() : 0.0;
+    /* what a sample changes besides its outputs: restored when the sample is discarded */
+    double filt_before[CTRL_N_FILTERS][2], blk_before[4][3], psi_before[4];
     int i, n = m->n_rotors;
     if (!inputs_valid(m, logger)) return FP_WARNING;
     update_rotor_losses(m, logger);
+    memcpy(filt_before, m->filt, sizeof filt_before);
+    memcpy(blk_before, m->blk, sizeof blk_before);
+    psi_before[0] = m->psi_raw, psi_before[1] = m->psi_unwrapped;
+    psi_before[2] = m->psi_ref_raw, psi_before[3] = m->psi_ref_unwrapped;
     /* 1. filters (headings unwrapped first so that +-pi crossings filter smoothly) */
     fin = filter_inputs(m);
     fin.psi = ctrl_unwrap(m->euler[2], &m->psi_raw, &m->psi_unwrapped);
@@ -319,6 +363,35 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     gst.x_vel = m->blk[BLK_VEL];
     gst.qp = &m->guid;
     ctrl_guidance(&gp, &fs, &gin, &s, &gst, &g);
+    /* 3. stabilization */
+    sp = stabilization_params(m);
+    sst.x_att = m->blk[BLK_ATT];
+    sst.x_rate = m->blk[BLK_RATE];
+    ctrl_stabilization(&sp, &s, g.mu_c, m->euler_ref, m->euler_rate_ref, &sst, rate_c, dtau_c);
+    /* 4. inner allocation of dnu_c = [df_b_c; dtau_c] */
+    for (i = 0; i < 3; i++) {
+        dnu_c[i] = g.df_c[i];
+        dnu_c[3 + i] = dtau_c[i];
+    }
+    ap = allocation_params(m);
+    ctrl_allocation(&ap, &s, dnu_c, m->lost_mask, &m->alloc, &a);
+    /* never a non-finite output: a sample that computed one is discarded whole (states
+     * restored, the QPs' warm starts dropped) and the last valid outputs held */
+    if (!all_finite(a.alpha_cmd, n) || !all_finite(a.beta_cmd, n) || !all_finite(a.omega_cmd, n) ||
+        !all_finite(g.mu_c, 3) || !all_finite(g.acc_c, 3) || !all_finite(g.f_b_ref, 3) ||
+        !all_finite(g.f_b_c, 3) || !all_finite(rate_c, 3) || !all_finite(dnu_c, 6) ||
+        !all_finite(a.residual, 6)) {
+        memcpy(m->filt, filt_before, sizeof filt_before);
+        memcpy(m->blk, blk_before, sizeof blk_before);
+        m->psi_raw = psi_before[0], m->psi_unwrapped = psi_before[1];
+        m->psi_ref_raw = psi_before[2], m->psi_ref_unwrapped = psi_before[3];
+        fp_wls_reset(&m->guid);
+        fp_wls_reset(&m->alloc);
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+               "non-finite value computed from the inputs: sample discarded, holding the last "
+               "valid command");
+        return FP_WARNING;
+    }
     memcpy(m->acc_c, g.acc_c, sizeof m->acc_c);
     memcpy(m->f_b_ref, g.f_b_ref, sizeof m->f_b_ref);
     memcpy(m->f_b_c, g.f_b_c, sizeof m->f_b_c);
@@ -327,29 +400,13 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     m->guid_flags = g.flags;
     m->feasible = g.feasible;
     if (m->timing) m->t_guid = g.t_solve;
-    /* 3. stabilization */
-    sp = stabilization_params(m);
-    sst.x_att = m->blk[BLK_ATT];
-    sst.x_rate = m->blk[BLK_RATE];
-    ctrl_stabilization(&sp, &s, g.mu_c, m->euler_ref, m->euler_rate_ref, &sst, m->rate_c, dtau_c);
-    /* 4. inner allocation of dnu_c = [df_b_c; dtau_c] */
-    for (i = 0; i < 3; i++) {
-        m->dnu_c[i] = g.df_c[i];
-        m->dnu_c[3 + i] = dtau_c[i];
-    }
-    ap = allocation_params(m);
-    ctrl_allocation(&ap, &s, m->dnu_c, m->lost_mask, &m->alloc, &a);
+    memcpy(m->rate_c, rate_c, sizeof m->rate_c);
+    memcpy(m->dnu_c, dnu_c, sizeof m->dnu_c);
     m->alloc_status = (int32_t)a.status;
     m->alloc_iter = a.iterations;
     memcpy(m->alloc_residual, a.residual, sizeof m->alloc_residual);
     m->sat_flags = a.sat_flags;
     if (m->timing) m->t_alloc = a.t_solve;
-    if (!all_finite(a.alpha_cmd, n) || !all_finite(a.beta_cmd, n) || !all_finite(a.omega_cmd, n) ||
-        !all_finite(g.mu_c, 3)) {
-        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
-               "non-finite actuator command computed: holding the last valid command");
-        return FP_WARNING;
-    }
     for (i = 0; i < 3; i++) m->mu_c[i] = ctrl_wrap_pi(g.mu_c[i]);
     memcpy(m->omega_cmd, a.omega_cmd, sizeof m->omega_cmd);
     memcpy(m->alpha_cmd, a.alpha_cmd, sizeof m->alpha_cmd);

@@ -63,6 +63,7 @@ typedef struct {
     double fail_d[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS]; /* the same per failure set */
     int32_t hover_ok[FP_MAX_ROTORS + 1];   /* hover force inside: [0] nominal, [i] rotor i lost */
     int32_t lost_mask;                     /* rotors treated as lost (bit i-1: rotor i) */
+    int32_t holding;                       /* samples held since an unusable input (0: none) */
     FpWls guid, alloc;
 } ControllerModel;
 

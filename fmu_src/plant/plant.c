@@ -370,16 +370,54 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
 }
 
 
-#define MAX_SUBSTEPS 10000000.0
+/* The most RK4 steps one doStep may take: 10^6 (500 s at the default 0.5 ms, about a second
+ * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait. */
+#define MAX_SUBSTEPS 1000000.0
+
+/* The physically meaningful range of the vehicle state: beyond it the rigid-body and rotor
+ * model mean nothing and RK4 soon overflows to NaN, so a step that leaves it is refused with
+ * the state kept from before the step (docs/robustness.md). */
+#define PLANT_MAX_DISTANCE 1e7 /* m from the origin */
+#define PLANT_MAX_SPEED 1e3    /* m/s */
+#define PLANT_MAX_RATE 1e3     /* rad/s body rate */
+
+/* 0 if x is finite and inside the physical range; else logs the first quantity outside it. */
+static int state_outside(const double *x, double t, const FpLogger *logger) {
+    static const char *const names[] = {"pos", "vel", "quat", "rate"};
+    static const int first[] = {X_POS, X_VEL, X_QUAT, X_RATE}, size[] = {3, 3, 4, 3};
+    static const double limit[] = {PLANT_MAX_DISTANCE, PLANT_MAX_SPEED, 2.0, PLANT_MAX_RATE};
+    int g, i;
+    for (g = 0; g < 4; g++)
+        for (i = 0; i < size[g]; i++) {
+            double v = x[first[g] + i];
+            if (!(fabs(v) <= limit[g])) {
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                       "the vehicle state left its physical range in the step from t = %.6g s: "
+                       "%s[%d] = %g (limit %g); the step is refused and the state kept from "
+                       "before it (are the inputs f_d, tau_d, a_d plausible?)",
+                       t, names[g], i + 1, v, limit[g]);
+                return 1;
+            }
+        }
+    for (i = X_OMEGA; i < PLANT_NX; i++)
+        if (!isfinite(x[i])) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                   "the actuator state is not finite after the step from t = %.6g s; the step "
+                   "is refused and the state kept from before it", t);
+            return 1;
+        }
+    return 0;
+}
 
 static FpStatus plant_step(void *model, double t, double h, const FpLogger *logger) {
     PlantModel *m = (PlantModel *)model;
     Commands u;
     double ratio = h / m->h_internal, substeps = floor(ratio + 0.5), hi;
     double t_start = m->timing ? fp_clock_seconds() : 0.0;
+    double x_before[PLANT_NX];
+    int32_t flags_before = m->sat_flags;
     long k, n;
-    (void)t;
-    if (substeps < 1.0 || fabs(ratio - substeps) > 1e-9 * substeps) {
+    if (!(substeps >= 1.0) || !(fabs(ratio - substeps) <= 1e-9 * substeps)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                "communication step %.12g s is not a whole multiple of the internal RK4 step "
                "h_internal = %.12g s; use a multiple or change h_internal",
@@ -393,10 +431,16 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
         return FP_ERROR;
     }
     if (check_inputs(m, logger) != 0) return FP_ERROR;
+    memcpy(x_before, m->x, sizeof x_before);
     saturate(m, &u, &m->sat_flags);
     n = (long)substeps;
     hi = h / substeps;
     for (k = 0; k < n; k++) rk4_step(m, &u, m->x, hi);
+    if (state_outside(m->x, t, logger)) {
+        memcpy(m->x, x_before, sizeof x_before);
+        m->sat_flags = flags_before;
+        return FP_ERROR;
+    }
     compute_outputs(m, &u);
     if (m->timing) m->t_step = fp_clock_seconds() - t_start;
     return FP_OK;
