@@ -164,3 +164,35 @@ def test_a_row_of_tiny_norm_is_a_constraint_not_a_zero_row(tiny):
     res = solve(A, b, None, None, C * tiny, d * tiny)
     assert res.status == "optimal", res
     np.testing.assert_allclose(res.x, ref.x, rtol=1e-9, atol=1e-12)
+
+
+@pytest.mark.parametrize(("model", "h", "limit"), [("plant", 600.0, " 1000000 "),
+                                                   ("controller", 400.0, " 100000)")])
+def test_one_dostep_has_a_bounded_cost(model, h, limit):
+    """A doStep cannot be cancelled: one that would take minutes is refused at once."""
+    import time
+
+    path = plant_fmu() if model == "plant" else controller_fmu()
+    with FmuInstance(path, model) as inst:
+        if model == "plant":
+            _plant_at_trim(inst)
+        else:
+            _hovering_controller(inst)
+        t0 = time.perf_counter()
+        with pytest.raises(FMICallException):
+            inst.step(h)
+        assert time.perf_counter() - t0 < 1.0
+        assert any(limit in m for m in _errors(inst)), inst.messages
+
+
+@pytest.mark.parametrize("model", ["plant", "controller"])
+def test_a_nan_step_size_is_refused_with_a_message(model):
+    path = plant_fmu() if model == "plant" else controller_fmu()
+    with FmuInstance(path, model) as inst:
+        if model == "plant":
+            _plant_at_trim(inst)
+        else:
+            _hovering_controller(inst)
+        with pytest.raises(FMICallException):
+            inst.step(float("nan"))
+        assert _errors(inst), inst.messages

@@ -249,6 +249,10 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
 /* The plausible range of each measurement: beyond it a value is finite but absurd (a sensor
  * glitch, a unit error) and would poison the filters for seconds.  The vehicle's own range
  * matches the plant's (docs/robustness.md); the actuators' comes from the airframe. */
+/* The most control samples one doStep may run: 10^5 (200 s at Ts = 2 ms, about two seconds
+ * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait. */
+#define CTRL_MAX_SAMPLES 1e5
+
 #define CTRL_MAX_DISTANCE 1e7 /* m */
 #define CTRL_MAX_SPEED 1e3    /* m/s */
 #define CTRL_MAX_ACC 1e4      /* m/s^2 */
@@ -491,16 +495,17 @@ static FpStatus controller_step(void *model, double t, double h, const FpLogger 
     FpStatus status = FP_OK;
     long k, n;
     (void)t;
-    if (samples < 1.0 || fabs(ratio - samples) > 1e-9 * samples) {
+    if (!(samples >= 1.0) || !(fabs(ratio - samples) <= 1e-9 * samples)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                "communication step %.12g s is not a whole multiple of the sample time Ts = "
                "%.12g s",
                h, m->Ts);
         return FP_ERROR;
     }
-    if (samples > 1e7) {
+    if (samples > CTRL_MAX_SAMPLES) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s would take %.0f samples (limit 1e7)", h, samples);
+               "communication step %.12g s would take %.0f samples (limit %.0f)", h, samples,
+               CTRL_MAX_SAMPLES);
         return FP_ERROR;
     }
     n = (long)samples;
