@@ -646,14 +646,23 @@ def test_deserializing_garbage_fails_with_a_message(make_plant):
 
 
 
+def _fnv1a64(data: bytes) -> int:
+    """The state checksum: FNV-1a 64 (its published offset basis and prime)."""
+    h = 0xcbf29ce484222325
+    for byte in data:
+        h = ((h ^ byte) * 0x100000001b3) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
 def test_restoring_a_structurally_corrupt_state_is_refused(make_plant):
     inst = make_plant()
     good = bytearray(inst.slave.serializeFMUstate(inst.slave.getFMUstate()))
-    header = 72  # snapshot header; the model struct follows, n_rotors is its first member
+    header = 80  # state header (docs/robustness.md); the model struct follows, n_rotors first
     assert int.from_bytes(good[header:header + 4], "little") == 6
     bad = bytearray(good)
     bad[header:header + 4] = (40).to_bytes(4, "little")
-    state = inst.slave.deSerializeFMUstate(bytes(bad))
+    bad[72:80] = _fnv1a64(bytes(bad[:72]) + bytes(8) + bytes(bad[80:])).to_bytes(8, "little")
+    state = inst.slave.deSerializeFMUstate(bytes(bad))  # resealed: only the model can tell
     with pytest.raises(FMICallException):
         inst.slave.setFMUstate(state)
     assert any("rotor count 40" in m for m in errors(inst)), inst.messages

@@ -27,30 +27,61 @@ enum {
 
 #define S_ANY_BUT_FATAL \
     (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
+/* fmi2Get{Real,Integer,Boolean,String}: from initialization on, and in Error for diagnosis */
 #define S_READABLE (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
+/* fmi2Get*Status (FMI 2.0.4 co-simulation state table): StepComplete, StepInProgress,
+ * StepFailed, Terminated; this FMU has no asynchronous step, so no StepInProgress */
+#define S_STATUS (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)
+/* a saved state's payload is a model after initialization */
+#define S_INITIALIZED (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)
 
-#define SNAPSHOT_MAGIC 0x31535046u /* "FPS1" */
+/*
+ * FMU state, in memory and serialized alike: this header, then the model struct (the
+ * payload, so a state's last model_size bytes are the model: host/fp_controller_api.c reads
+ * it there).  Every field is naturally aligned and in the byte order of the machine that
+ * saved it (the endianness marker tells).  The checksum is 64-bit FNV-1a over the header
+ * with the checksum field zeroed, then the payload.
+ */
+#define STATE_MAGIC "FPST"
+#define STATE_MAGIC_V1 "FPS1" /* format 1: unversioned, unchecked (before this one) */
+#define STATE_VERSION 2u
+#define STATE_ENDIAN 0x0102u
+#define STATE_FLAG_DIRTY 1u          /* parameters changed since the last initialize */
+#define STATE_FLAG_TUNABLES_DIRTY 2u /* tunable parameters changed while stepping */
+#define STATE_FLAGS_KNOWN (STATE_FLAG_DIRTY | STATE_FLAG_TUNABLES_DIRTY)
 
 typedef struct {
-    uint32_t magic;
-    uint32_t model_size;
+    char magic[4];         /*  0: "FPST" */
+    uint16_t version;      /*  4: format version, 2 */
+    uint16_t endian;       /*  6: 0x0102 as the saving machine stores it */
+    uint32_t header_size;  /*  8: sizeof(StateHeader), 80 */
+    uint32_t payload_size; /* 12: sizeof the model struct */
+    char guid[40];         /* 16: the FMU's GUID, NUL-terminated */
+    int32_t state;         /* 56: FMI lifecycle state, one S_* bit */
+    uint32_t flags;        /* 60: STATE_FLAG_* */
+    double time;           /* 64: the FMU's time */
+    uint64_t checksum;     /* 72: FNV-1a 64 over header (this field 0) and payload */
+} StateHeader;
+
+FP_STATIC_ASSERT(sizeof(StateHeader) == 80, state_header_is_80_bytes);
+FP_STATIC_ASSERT(sizeof(StateHeader) % 8 == 0, state_payload_stays_aligned);
+
+/* Marks a live instance; cleared to INSTANCE_FREED by fmi2FreeInstance. */
+#define INSTANCE_LIVE 0x4650494eu  /* "FPIN" */
+#define INSTANCE_FREED 0x46524545u /* "FREE" */
+
+typedef struct {
+    /* First: an allocator may reuse the first words of a freed block for its own lists,
+     * so the freed marker and the logger come after it. */
     char guid[40];
-    int32_t state;
-    int32_t dirty;
-    int32_t tunables_dirty;
-    int32_t pad;
-    double time;
-} SnapshotHeader;
-
-typedef struct {
+    uint32_t magic; /* INSTANCE_LIVE while the instance exists */
+    int state;
     fmi2CallbackLogger logger;
     fmi2CallbackAllocateMemory allocate;
     fmi2CallbackFreeMemory release;
     fmi2ComponentEnvironment env;
     char *name;
     const FpModelInfo *info;
-    char guid[40];
-    int state;
     int logging_on;
     unsigned categories; /* bit per FpLogCategory enabled for debug logging */
     double time;
@@ -59,6 +90,8 @@ typedef struct {
     uint32_t n_vr;      /* size of vr_map */
     int32_t *vr_map;    /* value reference -> index into info->vars, or -1 */
     void *model;
+    void *scratch;                /* model_size bytes: a restored state is checked here */
+    const FpVar *internal_step;   /* parameter of the internal step (NULL: none) */
     FpLogger model_logger;
 } Instance;
 
@@ -123,9 +156,29 @@ static void logf_(Instance *inst, FpStatus status, FpLogCategory category, const
     emit(inst, to_fmi(status), fp_log_category_name(category), message);
 }
 
+/* A call on an instance fmi2FreeInstance has freed.  Best effort: the memory is freed, so
+ * this only works while the allocator has not reused it; the logger is called without the
+ * (freed) instance name. */
+static void log_freed(const Instance *inst, const char *fn) {
+    char message[160];
+    if (inst->logger == NULL) return;
+    snprintf(message, sizeof message,
+             "%s: the instance was freed by fmi2FreeInstance; the call is refused", fn);
+    inst->logger(inst->env, "", fmi2Error, fp_log_category_name(FP_LOG_ERROR), message);
+}
+
+/* The instance behind c, or NULL (with a message where one can be given) when c is not a
+ * live instance: NULL, freed, or not an instance of this FMU. */
+static Instance *instance(fmi2Component c, const char *fn) {
+    Instance *inst = (Instance *)c;
+    if (inst == NULL) return NULL; /* no instance, no logger to report through */
+    if (inst->magic == INSTANCE_LIVE) return inst;
+    if (inst->magic == INSTANCE_FREED) log_freed(inst, fn);
+    return NULL;
+}
+
 /* Checks a call is legal in the current state; illegal calls change nothing. */
 static int allowed(Instance *inst, const char *fn, int states) {
-    if (inst == NULL) return 0;
     if (inst->state & states) {
         if (inst->logging_on && (inst->categories & (1u << FP_LOG_CALLS)))
             logf_(inst, FP_OK, FP_LOG_CALLS, "%s", fn);
@@ -136,11 +189,33 @@ static int allowed(Instance *inst, const char *fn, int states) {
     return 0;
 }
 
-#define CHECK(fn, states)                                                   \
-    do {                                                                    \
-        if (!allowed((Instance *)c, fn, states)) return fmi2Error;          \
-    } while (0)
+/* Entry of every function taking an instance: a live instance in one of `states`. */
+static Instance *enter(fmi2Component c, const char *fn, int states) {
+    Instance *inst = instance(c, fn);
+    if (inst == NULL || !allowed(inst, fn, states)) return NULL;
+    return inst;
+}
 
+#define CHECK(fn, states)                                     \
+    Instance *inst = enter(c, fn, states);                    \
+    if (inst == NULL) return fmi2Error
+
+/* A NULL array or pointer argument: refused with a message naming it. */
+static fmi2Status null_argument(Instance *inst, const char *fn, const char *what) {
+    logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is NULL", fn, what);
+    return fmi2Error;
+}
+
+static fmi2Status null_arrays(Instance *inst, const char *fn, const void *vr, size_t nvr,
+                              const void *value) {
+    char what[64];
+    if (nvr == 0 || (vr != NULL && value != NULL)) return fmi2OK;
+    snprintf(what, sizeof what, "%s (nvr = %lu)", vr == NULL ? "vr" : "value",
+             (unsigned long)nvr);
+    return null_argument(inst, fn, what);
+}
+
+/* A failure of the model's computation (initialization, a step): Error (or StepFailed). */
 static fmi2Status fail(Instance *inst, fmi2Status status) {
     if (status == fmi2Error) inst->state = S_ERROR;
     if (status == fmi2Discard) inst->state = S_STEP_FAILED;
@@ -216,15 +291,12 @@ const char *fmi2GetVersion(void) { return fmi2Version; }
 
 fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nCategories,
                                const fmi2String categories[]) {
-    Instance *inst = (Instance *)c;
     size_t i;
     int j;
     unsigned mask = 0;
     CHECK("fmi2SetDebugLogging", S_ANY_BUT_FATAL);
-    if (nCategories > 0 && categories == NULL) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetDebugLogging: categories is NULL");
-        return fmi2Error;
-    }
+    if (nCategories > 0 && categories == NULL)
+        return null_argument(inst, "fmi2SetDebugLogging", "categories");
     if (nCategories == 0) {
         mask = (1u << FP_LOG_N_CATEGORIES) - 1u;
     } else {
@@ -259,9 +331,24 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
 static void release_instance(Instance *inst) {
     fmi2CallbackFreeMemory release = inst->release;
     if (inst->model) release(inst->model);
+    if (inst->scratch) release(inst->scratch);
     if (inst->vr_map) release(inst->vr_map);
     if (inst->name) release(inst->name);
+    inst->magic = INSTANCE_FREED;
     release(inst);
+}
+
+/* The fixed Real scalar parameter holding the model's internal step (fp_model.h). */
+static const FpVar *find_internal_step(const FpModelInfo *info) {
+    static const char *const names[] = FP_INTERNAL_STEP_NAMES;
+    size_t i, j;
+    for (i = 0; i < info->n_vars; i++) {
+        const FpVar *v = &info->vars[i];
+        if (v->type != FP_REAL || v->kind != FP_PARAM_FIXED || fp_var_count(v) != 1) continue;
+        for (j = 0; j < sizeof names / sizeof names[0]; j++)
+            if (strcmp(v->name, names[j]) == 0) return v;
+    }
+    return NULL;
 }
 
 fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2String fmuGUID,
@@ -274,10 +361,25 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     size_t i;
     (void)fmuResourceLocation;
     (void)visible;
-    if (functions == NULL || functions->allocateMemory == NULL || functions->freeMemory == NULL)
+    if (functions == NULL) return NULL; /* no logger to report through */
+    if (functions->allocateMemory == NULL || functions->freeMemory == NULL) {
+        if (functions->logger != NULL)
+            functions->logger(functions->componentEnvironment, instanceName ? instanceName : "",
+                              fmi2Error, fp_log_category_name(FP_LOG_ERROR),
+                              "fmi2Instantiate: the allocateMemory and freeMemory callbacks are "
+                              "required");
         return NULL;
+    }
     inst = (Instance *)functions->allocateMemory(1, sizeof(Instance));
-    if (inst == NULL) return NULL;
+    if (inst == NULL) {
+        if (functions->logger != NULL)
+            functions->logger(functions->componentEnvironment, instanceName ? instanceName : "",
+                              fmi2Error, fp_log_category_name(FP_LOG_ERROR),
+                              "fmi2Instantiate: out of memory");
+        return NULL;
+    }
+    memset(inst, 0, sizeof *inst);
+    inst->magic = INSTANCE_LIVE;
     inst->logger = functions->logger;
     inst->allocate = functions->allocateMemory;
     inst->release = functions->freeMemory;
@@ -290,7 +392,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->model_logger.env = inst;
     inst->name = (char *)inst->allocate(strlen(instanceName ? instanceName : "") + 1, 1);
     if (inst->name == NULL) {
-        inst->release(inst);
+        inst->name = (char *)""; /* for the message only; never released */
+        logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: out of memory");
+        inst->name = NULL;
+        release_instance(inst);
         return NULL;
     }
     strcpy(inst->name, instanceName ? instanceName : "");
@@ -322,7 +427,8 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->n_vr = max_vr + 1;
     inst->vr_map = (int32_t *)inst->allocate(inst->n_vr, sizeof(int32_t));
     inst->model = inst->allocate(1, info->model_size);
-    if (inst->vr_map == NULL || inst->model == NULL) {
+    inst->scratch = inst->allocate(1, info->model_size);
+    if (inst->vr_map == NULL || inst->model == NULL || inst->scratch == NULL) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: out of memory");
         release_instance(inst);
         return NULL;
@@ -332,6 +438,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         uint32_t k, n = fp_var_count(&info->vars[i]);
         for (k = 0; k < n; k++) inst->vr_map[info->vars[i].vr + k] = (int32_t)i;
     }
+    inst->internal_step = find_internal_step(info);
     info->set_defaults(inst->model);
     inst->dirty = 1;
     logf_(inst, FP_OK, FP_LOG_EVENTS, "instantiated %s", info->model_name);
@@ -339,19 +446,17 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 }
 
 void fmi2FreeInstance(fmi2Component c) {
-    Instance *inst = (Instance *)c;
+    Instance *inst = enter(c, "fmi2FreeInstance", S_ANY_BUT_FATAL | S_FATAL);
     if (inst == NULL) return;
-    if (!allowed(inst, "fmi2FreeInstance", S_ANY_BUT_FATAL | S_FATAL)) return;
     release_instance(inst);
 }
 
 fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                fmi2Real tolerance, fmi2Real startTime,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
-    Instance *inst = (Instance *)c;
+    CHECK("fmi2SetupExperiment", S_INSTANTIATED);
     (void)toleranceDefined;
     (void)tolerance;
-    CHECK("fmi2SetupExperiment", S_INSTANTIATED);
     if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR,
               "fmi2SetupExperiment: startTime %g / stopTime %g are not a valid interval",
@@ -364,14 +469,12 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
 }
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2EnterInitializationMode", S_INSTANTIATED);
     inst->state = S_INIT;
     return fmi2OK;
 }
 
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
-    Instance *inst = (Instance *)c;
     fmi2Status s;
     CHECK("fmi2ExitInitializationMode", S_INIT);
     inst->dirty = 1; /* always validate the final parameter set */
@@ -384,14 +487,12 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2Terminate", S_STEP_COMPLETE | S_STEP_FAILED);
     inst->state = S_TERMINATED;
     return fmi2OK;
 }
 
 fmi2Status fmi2Reset(fmi2Component c) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2Reset", S_ANY_BUT_FATAL);
     memset(inst->model, 0, inst->info->model_size);
     inst->info->set_defaults(inst->model);
@@ -408,11 +509,10 @@ fmi2Status fmi2Reset(fmi2Component c) {
 
 fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        fmi2Real value[]) {
-    Instance *inst = (Instance *)c;
     fmi2Status s;
     size_t i;
     CHECK("fmi2GetReal", S_READABLE);
-    if (nvr > 0 && (vr == NULL || value == NULL)) return fmi2Error;
+    if (null_arrays(inst, "fmi2GetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
     s = refresh(inst);
     if (s > fmi2Warning) return s;
     for (i = 0; i < nvr; i++) {
@@ -424,12 +524,12 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     return s;
 }
 
-static fmi2Status get_ints(Instance *inst, const fmi2ValueReference vr[], size_t nvr, int *value,
+static fmi2Status get_ints(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, int *value,
                            FpVarType type, const char *fn) {
     fmi2Status s;
     size_t i;
-    if (!allowed(inst, fn, S_READABLE)) return fmi2Error;
-    if (nvr > 0 && (vr == NULL || value == NULL)) return fmi2Error;
+    CHECK(fn, S_READABLE);
+    if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
     s = refresh(inst);
     if (s > fmi2Warning) return s;
     for (i = 0; i < nvr; i++) {
@@ -443,51 +543,60 @@ static fmi2Status get_ints(Instance *inst, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           fmi2Integer value[]) {
-    return get_ints((Instance *)c, vr, nvr, value, FP_INTEGER, "fmi2GetInteger");
+    return get_ints(c, vr, nvr, value, FP_INTEGER, "fmi2GetInteger");
 }
 
 fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           fmi2Boolean value[]) {
-    return get_ints((Instance *)c, vr, nvr, value, FP_BOOLEAN, "fmi2GetBoolean");
+    return get_ints(c, vr, nvr, value, FP_BOOLEAN, "fmi2GetBoolean");
 }
 
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          fmi2String value[]) {
-    Instance *inst = (Instance *)c;
-    (void)value;
     CHECK("fmi2GetString", S_READABLE);
+    if (null_arrays(inst, "fmi2GetString", vr, nvr, value) != fmi2OK) return fmi2Error;
     if (nvr == 0) return fmi2OK;
-    if (vr == NULL) return fmi2Error;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2GetString: unknown value reference %u (no strings)",
           (unsigned)vr[0]);
     return fmi2Error;
 }
 
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       const fmi2Real value[]) {
-    Instance *inst = (Instance *)c;
+/* Every element is checked before any is written: a refused set changes nothing. */
+static fmi2Status check_sets(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
+                             FpVarType type, const char *fn) {
     size_t i;
-    CHECK("fmi2SetReal", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
-    if (nvr > 0 && (vr == NULL || value == NULL)) return fmi2Error;
     for (i = 0; i < nvr; i++) {
         uint32_t k;
+        const FpVar *v = lookup(inst, vr[i], type, &k, fn);
+        if (v == NULL || may_set(inst, v, k, fn) != fmi2OK) return fmi2Error;
+    }
+    return fmi2OK;
+}
+
+fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
+                       const fmi2Real value[]) {
+    size_t i;
+    CHECK("fmi2SetReal", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    if (null_arrays(inst, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
+    if (check_sets(inst, vr, nvr, FP_REAL, "fmi2SetReal") != fmi2OK) return fmi2Error;
+    for (i = 0; i < nvr; i++) {
+        uint32_t k = 0;
         const FpVar *v = lookup(inst, vr[i], FP_REAL, &k, "fmi2SetReal");
-        if (v == NULL || may_set(inst, v, k, "fmi2SetReal") != fmi2OK) return fmi2Error;
         *(double *)element(inst, v, k) = value[i];
         mark_changed(inst, v);
     }
     return fmi2OK;
 }
 
-static fmi2Status set_ints(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
+static fmi2Status set_ints(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                            const int *value, FpVarType type, const char *fn) {
     size_t i;
-    if (!allowed(inst, fn, S_INSTANTIATED | S_INIT | S_STEP_COMPLETE)) return fmi2Error;
-    if (nvr > 0 && (vr == NULL || value == NULL)) return fmi2Error;
+    CHECK(fn, S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
+    if (check_sets(inst, vr, nvr, type, fn) != fmi2OK) return fmi2Error;
     for (i = 0; i < nvr; i++) {
-        uint32_t k;
+        uint32_t k = 0;
         const FpVar *v = lookup(inst, vr[i], type, &k, fn);
-        if (v == NULL || may_set(inst, v, k, fn) != fmi2OK) return fmi2Error;
         *(int32_t *)element(inst, v, k) = type == FP_BOOLEAN ? (value[i] != 0) : value[i];
         mark_changed(inst, v);
     }
@@ -496,21 +605,19 @@ static fmi2Status set_ints(Instance *inst, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           const fmi2Integer value[]) {
-    return set_ints((Instance *)c, vr, nvr, value, FP_INTEGER, "fmi2SetInteger");
+    return set_ints(c, vr, nvr, value, FP_INTEGER, "fmi2SetInteger");
 }
 
 fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                           const fmi2Boolean value[]) {
-    return set_ints((Instance *)c, vr, nvr, value, FP_BOOLEAN, "fmi2SetBoolean");
+    return set_ints(c, vr, nvr, value, FP_BOOLEAN, "fmi2SetBoolean");
 }
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          const fmi2String value[]) {
-    Instance *inst = (Instance *)c;
-    (void)value;
     CHECK("fmi2SetString", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    if (null_arrays(inst, "fmi2SetString", vr, nvr, value) != fmi2OK) return fmi2Error;
     if (nvr == 0) return fmi2OK;
-    if (vr == NULL) return fmi2Error;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetString: unknown value reference %u (no strings)",
           (unsigned)vr[0]);
     return fmi2Error;
@@ -520,65 +627,198 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 /* FMU state                                                                */
 
 static size_t snapshot_size(const Instance *inst) {
-    return sizeof(SnapshotHeader) + inst->info->model_size;
+    return sizeof(StateHeader) + inst->info->model_size;
+}
+
+static uint64_t state_checksum(const StateHeader *h, const void *payload, size_t n) {
+    StateHeader copy = *h;
+    copy.checksum = 0;
+    return fp_fnv1a64(fp_fnv1a64(FP_FNV1A64_BASIS, &copy, sizeof copy), payload, n);
 }
 
 static void snapshot_write(const Instance *inst, unsigned char *buf) {
-    SnapshotHeader h;
+    StateHeader h;
     memset(&h, 0, sizeof h);
-    h.magic = SNAPSHOT_MAGIC;
-    h.model_size = (uint32_t)inst->info->model_size;
+    memcpy(h.magic, STATE_MAGIC, sizeof h.magic);
+    h.version = (uint16_t)STATE_VERSION;
+    h.endian = (uint16_t)STATE_ENDIAN;
+    h.header_size = (uint32_t)sizeof h;
+    h.payload_size = (uint32_t)inst->info->model_size;
     memcpy(h.guid, inst->guid, sizeof h.guid);
     h.state = inst->state;
-    h.dirty = inst->dirty;
-    h.tunables_dirty = inst->tunables_dirty;
+    h.flags = (inst->dirty ? STATE_FLAG_DIRTY : 0u) |
+              (inst->tunables_dirty ? STATE_FLAG_TUNABLES_DIRTY : 0u);
     h.time = inst->time;
+    h.checksum = state_checksum(&h, inst->model, inst->info->model_size);
     memcpy(buf, &h, sizeof h);
     memcpy(buf + sizeof h, inst->model, inst->info->model_size);
 }
 
-static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, size_t size,
-                                const char *fn) {
-    SnapshotHeader h;
-    if (buf == NULL || size != snapshot_size(inst)) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: state of %lu bytes, expected %lu", fn,
-              (unsigned long)size, (unsigned long)snapshot_size(inst));
-        return fmi2Error;
+/* How much of a state check_state verifies. */
+enum {
+    STATE_HEADER = 0, /* magic, version, byte order, sizes, FMU identity: before reusing,
+                         sizing or freeing a state (the payload is not read) */
+    STATE_ALL = 1     /* and the checksum and the lifecycle fields: before reading it */
+};
+
+/*
+ * Checks a state buffer before anything reads or writes beyond what is checked: the magic
+ * first (4 bytes), then the header, then (STATE_ALL) header and payload.  `size` is the
+ * buffer's size when the caller knows it (serialized data), 0 for an FMUstate (a buffer
+ * this FMU allocated, whose size the header must confirm).  Logs what is wrong and returns
+ * 0, or fills *out and returns 1.
+ */
+static int check_state(Instance *inst, const unsigned char *buf, size_t size, int level,
+                       const char *fn, const char *what, StateHeader *out) {
+    const char *model = inst->info->model_name;
+    const unsigned long expected = (unsigned long)snapshot_size(inst);
+    const int serialized = size > 0;
+    StateHeader h;
+    if (buf == NULL) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is NULL", fn, what);
+        return 0;
+    }
+    if (serialized && size < sizeof h.magic) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s is truncated: %lu bytes, a state of %s has %lu bytes", fn, what,
+              (unsigned long)size, model, expected);
+        return 0;
+    }
+    if (memcmp(buf, STATE_MAGIC, 4) != 0) {
+        if (memcmp(buf, STATE_MAGIC_V1, 4) == 0)
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s is in state format 1 (FPS1); this FMU reads format %u only", fn, what,
+                  STATE_VERSION);
+        else if (serialized)
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s was not serialized by this model (%s): no \"%s\" magic (%02x %02x "
+                  "%02x %02x); %lu bytes, a state of %s has %lu",
+                  fn, what, model, STATE_MAGIC, buf[0], buf[1], buf[2], buf[3],
+                  (unsigned long)size, model, expected);
+        else
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s was not saved by this model (%s): no \"%s\" magic (%02x %02x %02x "
+                  "%02x)",
+                  fn, what, model, STATE_MAGIC, buf[0], buf[1], buf[2], buf[3]);
+        return 0;
+    }
+    if (serialized && size < sizeof h) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s is truncated: %lu bytes, shorter than the %lu-byte header (a state of %s "
+              "has %lu bytes)",
+              fn, what, (unsigned long)size, (unsigned long)sizeof h, model, expected);
+        return 0;
     }
     memcpy(&h, buf, sizeof h);
-    if (h.magic != SNAPSHOT_MAGIC || h.model_size != inst->info->model_size ||
-        memcmp(h.guid, inst->guid, sizeof h.guid) != 0) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state was not saved by this model (%s)", fn,
-              inst->info->model_name);
-        return fmi2Error;
+    if (h.version != STATE_VERSION) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s is in state format version %u; this FMU reads version %u only", fn, what,
+              (unsigned)h.version, STATE_VERSION);
+        return 0;
     }
-    if (!(h.state & S_ANY_BUT_FATAL) || (h.state & (h.state - 1)) != 0 || !isfinite(h.time)) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state is corrupt", fn);
-        return fmi2Error;
+    if (h.endian != STATE_ENDIAN) {
+        if (h.endian == (uint16_t)((STATE_ENDIAN >> 8) | ((STATE_ENDIAN & 0xffu) << 8)))
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s was saved on a machine of the other byte order", fn, what);
+        else
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s is damaged: byte-order marker 0x%04x, expected 0x%04x", fn, what,
+                  (unsigned)h.endian, STATE_ENDIAN);
+        return 0;
     }
-    /* TODO(issue 13 glue): validate an aligned copy, not the importer's buffer */
+    if (h.header_size != sizeof h) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s is damaged: header size %lu, expected %lu", fn, what,
+              (unsigned long)h.header_size, (unsigned long)sizeof h);
+        return 0;
+    }
+    if (memchr(h.guid, '\0', sizeof h.guid) == NULL) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is damaged: its GUID is not terminated", fn,
+              what);
+        return 0;
+    }
+    if (strcmp(h.guid, inst->guid) != 0) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s belongs to another FMU (GUID %s), not to this %s (GUID %s)", fn, what,
+              h.guid, model, inst->guid);
+        return 0;
+    }
+    if (h.payload_size != inst->info->model_size) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s is damaged: payload of %lu bytes, the model of %s has %lu", fn, what,
+              (unsigned long)h.payload_size, model, (unsigned long)inst->info->model_size);
+        return 0;
+    }
+    if (serialized && size != expected) {
+        logf_(inst, FP_ERROR, FP_LOG_ERROR,
+              "%s: %s is %s: %lu bytes, its header says %lu", fn, what,
+              size < expected ? "truncated" : "too long", (unsigned long)size, expected);
+        return 0;
+    }
+    if (level == STATE_ALL) {
+        uint64_t sum = state_checksum(&h, buf + sizeof h, h.payload_size);
+        int initialized = (h.state & S_INITIALIZED) != 0;
+        if (sum != h.checksum) {
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s is damaged: checksum mismatch (stored %016llx, computed %016llx)", fn,
+                  what, (unsigned long long)h.checksum, (unsigned long long)sum);
+            return 0;
+        }
+        if (!(h.state & S_ANY_BUT_FATAL) || (h.state & (h.state - 1)) != 0) {
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s is damaged: lifecycle state 0x%x is not one FMI state", fn, what,
+                  (unsigned)h.state);
+            return 0;
+        }
+        if ((h.flags & ~STATE_FLAGS_KNOWN) != 0 ||
+            (initialized && (h.flags & STATE_FLAG_DIRTY)) ||
+            ((h.state & (S_INSTANTIATED | S_INIT)) && (h.flags & STATE_FLAG_TUNABLES_DIRTY))) {
+            logf_(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: %s is damaged: flags 0x%x do not fit its lifecycle state %s", fn, what,
+                  (unsigned)h.flags, state_name(h.state));
+            return 0;
+        }
+        if (!isfinite(h.time)) {
+            logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is damaged: its time is not finite", fn,
+                  what);
+            return 0;
+        }
+    }
+    if (out != NULL) *out = h;
+    return 1;
+}
+
+/* Restores a state: checked whole, its model checked on the aligned scratch copy by the
+ * model, and only then copied into the live model. */
+static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, const char *fn) {
+    StateHeader h;
+    if (!check_state(inst, buf, 0, STATE_ALL, fn, "FMUstate", &h)) return fmi2Error;
+    memcpy(inst->scratch, buf + sizeof h, inst->info->model_size);
     if (inst->info->check_restored != NULL &&
-        inst->info->check_restored(
-            buf + sizeof h, (h.state & (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)) != 0,
-            &inst->model_logger) != FP_OK) {
+        inst->info->check_restored(inst->scratch, (h.state & S_INITIALIZED) != 0,
+                                   &inst->model_logger) != FP_OK) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state is refused", fn);
         return fmi2Error;
     }
-    memcpy(inst->model, buf + sizeof h, inst->info->model_size);
+    memcpy(inst->model, inst->scratch, inst->info->model_size);
     inst->state = h.state;
-    inst->dirty = h.dirty;
-    inst->tunables_dirty = h.tunables_dirty;
+    inst->dirty = (h.flags & STATE_FLAG_DIRTY) != 0;
+    inst->tunables_dirty = (h.flags & STATE_FLAG_TUNABLES_DIRTY) != 0;
     inst->time = h.time;
     return fmi2OK;
 }
 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    Instance *inst = (Instance *)c;
     unsigned char *buf;
     CHECK("fmi2GetFMUstate", S_ANY_BUT_FATAL);
-    if (FMUstate == NULL) return fmi2Error;
+    if (FMUstate == NULL) return null_argument(inst, "fmi2GetFMUstate", "FMUstate");
     buf = (unsigned char *)*FMUstate;
-    if (buf == NULL) {
+    if (buf != NULL) {
+        /* a state to reuse: only one of ours has room for this one */
+        if (!check_state(inst, buf, 0, STATE_HEADER, "fmi2GetFMUstate", "the FMUstate to reuse",
+                         NULL))
+            return fmi2Error;
+    } else {
         buf = (unsigned char *)inst->allocate(1, snapshot_size(inst));
         if (buf == NULL) {
             logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2GetFMUstate: out of memory");
@@ -591,39 +831,45 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
 }
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2SetFMUstate", S_ANY_BUT_FATAL);
-    return snapshot_read(inst, (const unsigned char *)FMUstate, snapshot_size(inst),
-                         "fmi2SetFMUstate");
+    return snapshot_read(inst, (const unsigned char *)FMUstate, "fmi2SetFMUstate");
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2FreeFMUstate", S_ANY_BUT_FATAL);
-    if (FMUstate != NULL && *FMUstate != NULL) {
-        inst->release(*FMUstate);
-        *FMUstate = NULL;
-    }
+    if (FMUstate == NULL) return null_argument(inst, "fmi2FreeFMUstate", "FMUstate");
+    if (*FMUstate == NULL) return fmi2OK; /* FMI 2.0: a NULL state is ignored */
+    if (!check_state(inst, (const unsigned char *)*FMUstate, 0, STATE_HEADER, "fmi2FreeFMUstate",
+                     "FMUstate", NULL))
+        return fmi2Error; /* not ours: never handed to the allocator */
+    memset(*FMUstate, 0, sizeof(StateHeader)); /* a second free is refused (best effort) */
+    inst->release(*FMUstate);
+    *FMUstate = NULL;
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
-    Instance *inst = (Instance *)c;
-    (void)FMUstate;
     CHECK("fmi2SerializedFMUstateSize", S_ANY_BUT_FATAL);
-    if (size == NULL) return fmi2Error;
+    if (size == NULL) return null_argument(inst, "fmi2SerializedFMUstateSize", "size");
+    if (!check_state(inst, (const unsigned char *)FMUstate, 0, STATE_HEADER,
+                     "fmi2SerializedFMUstateSize", "FMUstate", NULL))
+        return fmi2Error;
     *size = snapshot_size(inst);
     return fmi2OK;
 }
 
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[],
                                  size_t size) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2SerializeFMUstate", S_ANY_BUT_FATAL);
-    if (FMUstate == NULL || serializedState == NULL || size < snapshot_size(inst)) {
+    if (!check_state(inst, (const unsigned char *)FMUstate, 0, STATE_ALL,
+                     "fmi2SerializeFMUstate", "FMUstate", NULL))
+        return fmi2Error;
+    if (serializedState == NULL)
+        return null_argument(inst, "fmi2SerializeFMUstate", "serializedState");
+    if (size < snapshot_size(inst)) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2SerializeFMUstate: need a state and a buffer of %lu bytes",
-              (unsigned long)snapshot_size(inst));
+              "fmi2SerializeFMUstate: a buffer of %lu bytes is too small, the state has %lu",
+              (unsigned long)size, (unsigned long)snapshot_size(inst));
         return fmi2Error;
     }
     memcpy(serializedState, FMUstate, snapshot_size(inst));
@@ -632,25 +878,32 @@ fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byt
 
 fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
                                    fmi2FMUstate *FMUstate) {
-    Instance *inst = (Instance *)c;
-    SnapshotHeader h;
     unsigned char *buf;
     CHECK("fmi2DeSerializeFMUstate", S_ANY_BUT_FATAL);
-    if (FMUstate == NULL || serializedState == NULL || size != snapshot_size(inst)) {
+    if (FMUstate == NULL) return null_argument(inst, "fmi2DeSerializeFMUstate", "FMUstate");
+    if (serializedState == NULL)
+        return null_argument(inst, "fmi2DeSerializeFMUstate", "serializedState");
+    if (size == 0) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2DeSerializeFMUstate: serialized state of %lu bytes, expected %lu",
-              (unsigned long)size, (unsigned long)snapshot_size(inst));
+              "fmi2DeSerializeFMUstate: the data is empty; a state of %s has %lu bytes",
+              inst->info->model_name, (unsigned long)snapshot_size(inst));
         return fmi2Error;
     }
-    memcpy(&h, serializedState, sizeof h);
-    if (h.magic != SNAPSHOT_MAGIC || memcmp(h.guid, inst->guid, sizeof h.guid) != 0) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2DeSerializeFMUstate: the data was not serialized by this model (%s)",
-              inst->info->model_name);
+    if (!check_state(inst, (const unsigned char *)serializedState, size, STATE_ALL,
+                     "fmi2DeSerializeFMUstate", "the data", NULL))
         return fmi2Error;
+    buf = (unsigned char *)*FMUstate;
+    if (buf != NULL) {
+        if (!check_state(inst, buf, 0, STATE_HEADER, "fmi2DeSerializeFMUstate",
+                         "the FMUstate to reuse", NULL))
+            return fmi2Error;
+    } else {
+        buf = (unsigned char *)inst->allocate(1, size);
+        if (buf == NULL) {
+            logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2DeSerializeFMUstate: out of memory");
+            return fmi2Error;
+        }
     }
-    buf = (unsigned char *)(*FMUstate ? *FMUstate : inst->allocate(1, size));
-    if (buf == NULL) return fmi2Error;
     memcpy(buf, serializedState, size);
     *FMUstate = buf;
     return fmi2OK;
@@ -663,10 +916,9 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         size_t nUnknown, const fmi2ValueReference vKnown_ref[],
                                         size_t nKnown, const fmi2Real dvKnown[],
                                         fmi2Real dvUnknown[]) {
-    Instance *inst = (Instance *)c;
+    CHECK("fmi2GetDirectionalDerivative", S_ANY_BUT_FATAL);
     (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
         (void)dvUnknown;
-    CHECK("fmi2GetDirectionalDerivative", S_ANY_BUT_FATAL);
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2GetDirectionalDerivative: not provided (providesDirectionalDerivative=false)");
     return fmi2Error;
@@ -674,9 +926,8 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {
-    Instance *inst = (Instance *)c;
-    (void)vr, (void)nvr, (void)order, (void)value;
     CHECK("fmi2SetRealInputDerivatives", S_ANY_BUT_FATAL);
+    (void)vr, (void)nvr, (void)order, (void)value;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2SetRealInputDerivatives: inputs are held constant (canInterpolateInputs=false)");
     return fmi2Error;
@@ -684,16 +935,14 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
 
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
                                         size_t nvr, const fmi2Integer order[], fmi2Real value[]) {
-    Instance *inst = (Instance *)c;
-    (void)vr, (void)nvr, (void)order, (void)value;
     CHECK("fmi2GetRealOutputDerivatives", S_ANY_BUT_FATAL);
+    (void)vr, (void)nvr, (void)order, (void)value;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2GetRealOutputDerivatives: not provided (maxOutputDerivativeOrder=0)");
     return fmi2Error;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
-    Instance *inst = (Instance *)c;
     CHECK("fmi2CancelStep", S_ANY_BUT_FATAL);
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2CancelStep: steps are synchronous, nothing to cancel");
     return fmi2Error;
@@ -702,13 +951,28 @@ fmi2Status fmi2CancelStep(fmi2Component c) {
 /* ------------------------------------------------------------------------ */
 /* Stepping                                                                 */
 
+/* Refuses a step of more than FP_MAX_INTERNAL_STEPS internal steps (fp_model.h). */
+static int within_work_cap(Instance *inst, double h) {
+    double hi, n;
+    if (inst->internal_step == NULL) return 1;
+    hi = *(const double *)element(inst, inst->internal_step, 0);
+    if (!(hi > 0.0) || !isfinite(hi)) return 1; /* the model refuses it itself */
+    n = h / hi;
+    if (n <= FP_MAX_INTERNAL_STEPS * (1.0 + 1e-9)) return 1;
+    logf_(inst, FP_ERROR, FP_LOG_ERROR,
+          "fmi2DoStep: communication step h = %.12g s would take %.0f internal steps of %s = "
+          "%.12g s; the cap is %.0f internal steps per fmi2DoStep (%.12g s); use shorter steps",
+          h, floor(n + 0.5), inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
+          FP_MAX_INTERNAL_STEPS * hi);
+    return 0;
+}
+
 fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
                       fmi2Real communicationStepSize, fmi2Boolean noSetFMUStatePriorToCurrentPoint) {
-    Instance *inst = (Instance *)c;
     FpStatus s;
     double tol;
-    (void)noSetFMUStatePriorToCurrentPoint;
     CHECK("fmi2DoStep", S_STEP_COMPLETE);
+    (void)noSetFMUStatePriorToCurrentPoint;
     if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR,
               "fmi2DoStep: communicationStepSize %g must be positive and finite",
@@ -723,6 +987,7 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
               currentCommunicationPoint, inst->time);
         return fail(inst, fmi2Error);
     }
+    if (!within_work_cap(inst, communicationStepSize)) return fail(inst, fmi2Error);
     if (inst->tunables_dirty && inst->info->tunables_changed != NULL) {
         s = inst->info->tunables_changed(inst->model, &inst->model_logger);
         if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi2Error);
@@ -735,54 +1000,62 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     return to_fmi(s);
 }
 
-fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
-    Instance *inst = (Instance *)c;
-    (void)value;
-    CHECK("fmi2GetStatus", S_READABLE);
+/* fmi2Get*Status: only StepComplete, StepFailed and Terminated (S_STATUS). */
+static Instance *status_call(fmi2Component c, const char *fn, const void *value) {
+    Instance *inst = enter(c, fn, S_STATUS);
+    if (inst != NULL && value == NULL) {
+        null_argument(inst, fn, "value");
+        return NULL;
+    }
+    return inst;
+}
+
+static fmi2Status unsupported_status(Instance *inst, const char *fn, fmi2StatusKind s) {
+    static const char *const kinds[] = {"fmi2DoStepStatus", "fmi2PendingStatus",
+                                        "fmi2LastSuccessfulTime", "fmi2Terminated"};
+    const char *kind = ((int)s >= 0 && (int)s < 4) ? kinds[(int)s] : "unknown";
     logf_(inst, FP_WARNING, FP_LOG_WARNING,
-          "fmi2GetStatus: status kind %d is only defined for asynchronous steps", (int)s);
+          "%s: status kind %d (%s) is not provided: steps are synchronous (no fmi2Pending)", fn,
+          (int)s, kind);
     return fmi2Discard;
+}
+
+fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
+    Instance *inst = status_call(c, "fmi2GetStatus", value);
+    if (inst == NULL) return fmi2Error;
+    return unsupported_status(inst, "fmi2GetStatus", s);
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
-    Instance *inst = (Instance *)c;
-    CHECK("fmi2GetRealStatus", S_READABLE);
-    if (s == fmi2LastSuccessfulTime && value != NULL) {
+    Instance *inst = status_call(c, "fmi2GetRealStatus", value);
+    if (inst == NULL) return fmi2Error;
+    if (s == fmi2LastSuccessfulTime) {
         *value = inst->time;
         return fmi2OK;
     }
-    logf_(inst, FP_WARNING, FP_LOG_WARNING, "fmi2GetRealStatus: unsupported status kind %d", (int)s);
-    return fmi2Discard;
+    return unsupported_status(inst, "fmi2GetRealStatus", s);
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
-    Instance *inst = (Instance *)c;
-    (void)value;
-    CHECK("fmi2GetIntegerStatus", S_READABLE);
-    logf_(inst, FP_WARNING, FP_LOG_WARNING, "fmi2GetIntegerStatus: unsupported status kind %d",
-          (int)s);
-    return fmi2Discard;
+    Instance *inst = status_call(c, "fmi2GetIntegerStatus", value);
+    if (inst == NULL) return fmi2Error;
+    return unsupported_status(inst, "fmi2GetIntegerStatus", s);
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
-    Instance *inst = (Instance *)c;
-    CHECK("fmi2GetBooleanStatus", S_READABLE);
-    if (s == fmi2Terminated && value != NULL) {
+    Instance *inst = status_call(c, "fmi2GetBooleanStatus", value);
+    if (inst == NULL) return fmi2Error;
+    if (s == fmi2Terminated) {
         *value = fmi2False;
         return fmi2OK;
     }
-    logf_(inst, FP_WARNING, FP_LOG_WARNING, "fmi2GetBooleanStatus: unsupported status kind %d",
-          (int)s);
-    return fmi2Discard;
+    return unsupported_status(inst, "fmi2GetBooleanStatus", s);
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
-    Instance *inst = (Instance *)c;
-    (void)value;
-    CHECK("fmi2GetStringStatus", S_READABLE);
-    logf_(inst, FP_WARNING, FP_LOG_WARNING, "fmi2GetStringStatus: unsupported status kind %d",
-          (int)s);
-    return fmi2Discard;
+    Instance *inst = status_call(c, "fmi2GetStringStatus", value);
+    if (inst == NULL) return fmi2Error;
+    return unsupported_status(inst, "fmi2GetStringStatus", s);
 }
 
 /* Model-exchange entry points are absent on purpose: this is a CS-only FMU. */

@@ -25,7 +25,7 @@ void fp_log(const FpLogger *logger, FpStatus status, FpLogCategory category, con
     logger->log(logger->env, status, category, message);
 }
 
-static uint64_t fnv1a(uint64_t h, const void *data, size_t n) {
+uint64_t fp_fnv1a64(uint64_t h, const void *data, size_t n) {
     const unsigned char *p = (const unsigned char *)data;
     size_t i;
     for (i = 0; i < n; i++) {
@@ -35,13 +35,15 @@ static uint64_t fnv1a(uint64_t h, const void *data, size_t n) {
     return h;
 }
 
-static uint64_t fnv1a_str(uint64_t h, const char *s) { return fnv1a(h, s, strlen(s) + 1); }
+static uint64_t fnv1a_str(uint64_t h, const char *s) {
+    return fp_fnv1a64(h, s, strlen(s) + 1);
+}
 
 static uint64_t hash_model(const FpModelInfo *info, uint64_t seed) {
     uint64_t h = fnv1a_str(seed, info->model_name);
     uint64_t layout = (uint64_t)info->model_size;
     size_t i;
-    h = fnv1a(h, &layout, sizeof layout); /* a state saved by another build must not fit */
+    h = fp_fnv1a64(h, &layout, sizeof layout); /* a state saved by another build must not fit */
     for (i = 0; i < info->n_vars; i++) {
         const FpVar *v = &info->vars[i];
         uint32_t fields[6];
@@ -52,14 +54,14 @@ static uint64_t hash_model(const FpModelInfo *info, uint64_t seed) {
         fields[4] = v->cols;
         fields[5] = (uint32_t)v->offset;
         h = fnv1a_str(h, v->name);
-        h = fnv1a(h, fields, sizeof fields);
+        h = fp_fnv1a64(h, fields, sizeof fields);
         h = fnv1a_str(h, v->unit);
     }
     return h;
 }
 
 void fp_model_guid(const FpModelInfo *info, char buf[40]) {
-    uint64_t a = hash_model(info, 14695981039346656037ULL);
+    uint64_t a = hash_model(info, FP_FNV1A64_BASIS);
     uint64_t b = hash_model(info, 0x9e3779b97f4a7c15ULL);
     snprintf(buf, 40, "{%08llx-%04llx-%04llx-%04llx-%012llx}", (unsigned long long)(a >> 32),
              (unsigned long long)((a >> 16) & 0xffffULL), (unsigned long long)(a & 0xffffULL),

@@ -111,6 +111,21 @@ typedef struct {
     FpStatus (*check_restored)(const void *model, int initialized, const FpLogger *logger);
 } FpModelInfo;
 
+/*
+ * The work of one communication step.  A model that subdivides a step (the plant's RK4
+ * step, the controller's sample time) keeps that internal step in a fixed Real scalar
+ * parameter with one of these names; the FMI layer refuses, before any work, a
+ * communication step of more than FP_MAX_INTERNAL_STEPS of them (10^6: 500 s per call at
+ * the plant's default 0.5 ms, 2000 s at the controller's 2 ms; about a second or two of
+ * CPU time per call).  A model with none of these parameters is not capped by the FMI layer.
+ */
+#define FP_INTERNAL_STEP_NAMES {"h_internal", "Ts"}
+#define FP_MAX_INTERNAL_STEPS 1000000.0
+
+/* 64-bit FNV-1a over n bytes, continuing from h (start with FP_FNV1A64_BASIS). */
+#define FP_FNV1A64_BASIS 14695981039346656037ULL
+uint64_t fp_fnv1a64(uint64_t h, const void *data, size_t n);
+
 /* Each FMU links exactly one model that provides this. */
 const FpModelInfo *fp_model_info(void);
 

@@ -133,41 +133,56 @@ static int pick_drop(Ctx *c) {
     FpWlsWork *k = c->k;
     int nv = c->nv, nw = c->nw, nr = nrows(c), i, j, q, drop = -1;
     double *lam = k->rr, *mu = k->rb, worst, tol, xn = vnorm(k->x, nv), gs = 0.0;
+    /* per variable: the rounding scale of its own gradient entry, so that a badly scaled
+     * column's bound multiplier is judged on its own scale, not on the largest column's */
+    double gsj[FP_WLS_MAX_VARS + 1], tolj[FP_WLS_MAX_VARS + 1];
     /* gradient g = -2 A' r, and the scale of its rounding error:
-     * 2 sum_i ||a_i|| (|r_i| + |b_i| + ||a_i|| ||x||) */
+     * 2 sum_i ||a_i|| (|r_i| + |b_i| + ||a_i|| ||x||), per variable with |a_ij| for the
+     * first ||a_i|| */
     residual(c);
+    for (j = 0; j < nv; j++) gsj[j] = 0.0;
     if (c->ph1) {
         for (j = 0; j < nv; j++) k->g[j] = j == c->n ? -2.0 * k->r[0] : 0.0;
         gs = 2.0 * (fabs(k->r[0]) + xn);
+        for (j = 0; j < nv; j++) gsj[j] = gs;
     } else {
         for (j = 0; j < nv; j++) k->g[j] = 0.0;
         for (i = 0; i < nr; i++) {
             const double *a = c->w->A + i * c->n;
             double ri = -2.0 * k->r[i], an = vnorm(a, nv);
-            for (j = 0; j < nv; j++) k->g[j] += a[j] * ri;
-            gs += 2.0 * an * (fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn);
+            double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
+            for (j = 0; j < nv; j++) {
+                k->g[j] += a[j] * ri;
+                gsj[j] += 2.0 * fabs(a[j]) * ei;
+            }
+            gs += 2.0 * an * ei;
         }
     }
     tol = TOL_MULT * gs;
     if (!(tol > DBL_MIN)) tol = DBL_MIN;
+    for (j = 0; j < nv; j++) {
+        tolj[j] = TOL_MULT * gsj[j];
+        if (!(tolj[j] > DBL_MIN)) tolj[j] = DBL_MIN;
+    }
     /* stationarity: -g = sum lam c + sum mu n (+ z = 0 at the face minimiser) */
     for (j = 0; j < nv; j++) k->nvec[j] = -k->g[j];
     wls_decompose(c, k->nvec, k->zvec, lam, mu);
-    worst = -tol;
+    /* the most negative multiplier relative to its own tolerance */
+    worst = -1.0;
     for (j = 0; j < nv; j++) {
         if (k->state[j] != ST_LB && k->state[j] != ST_UB) continue;
         if (c->bland) {
-            if (mu[j] < -tol) return j;
-        } else if (mu[j] < worst) {
-            worst = mu[j];
+            if (mu[j] < -tolj[j]) return j;
+        } else if (mu[j] / tolj[j] < worst) {
+            worst = mu[j] / tolj[j];
             drop = j;
         }
     }
     for (q = 0; q < nw; q++) {
         if (c->bland) {
             if (lam[q] < -tol) return nv + k->act_idx[q];
-        } else if (lam[q] < worst) {
-            worst = lam[q];
+        } else if (lam[q] / tol < worst) {
+            worst = lam[q] / tol;
             drop = nv + k->act_idx[q];
         }
     }

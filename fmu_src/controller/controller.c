@@ -316,8 +316,13 @@ static int inputs_valid(ControllerModel *m, const FpLogger *logger) {
         m->holding = 0;
         return 1;
     }
+    /* every held sample says so (an fmi2Warning always comes with a message); the first in
+     * full, the others briefly */
     if (m->holding == 0)
         fp_log(logger, FP_WARNING, FP_LOG_WARNING, "%s: holding the last valid command", why);
+    else
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING, "still holding (sample %ld): %s",
+               (long)m->holding + 1, why);
     if (m->holding < INT32_MAX) m->holding++;
     return 0;
 }
@@ -426,9 +431,15 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     ControllerModel *m = (ControllerModel *)model;
     CtrlFilterInputs fin;
     int i, n;
+    char why[160];
     (void)t0;
     if (ctrl_check_parameters(m, logger) != 0 || prepare_force_sets(m, logger) != FP_OK)
         return FP_ERROR;
+    if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "initialization: %s", why);
+        return FP_ERROR;
+    }
+    m->holding = 0;
     n = m->n_rotors;
     FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
     ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
