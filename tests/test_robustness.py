@@ -9,6 +9,9 @@ violated point optimal after a huge warm start and a tiny row a zero row.
 
 from __future__ import annotations
 
+from collections.abc import Iterator
+from contextlib import contextmanager
+
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
@@ -166,18 +169,24 @@ def test_a_row_of_tiny_norm_is_a_constraint_not_a_zero_row(tiny):
     np.testing.assert_allclose(res.x, ref.x, rtol=1e-9, atol=1e-12)
 
 
+@contextmanager
+def _ready(model: str) -> Iterator[FmuInstance]:
+    """The plant at trim or the controller hovering, initialized."""
+    with FmuInstance(plant_fmu() if model == "plant" else controller_fmu(), model) as inst:
+        if model == "plant":
+            _plant_at_trim(inst)
+        else:
+            _hovering_controller(inst)
+        yield inst
+
+
 @pytest.mark.parametrize(("model", "h", "limit"), [("plant", 600.0, " 1000000 "),
                                                    ("controller", 400.0, " 100000)")])
 def test_one_dostep_has_a_bounded_cost(model, h, limit):
     """A doStep cannot be cancelled: one that would take minutes is refused at once."""
     import time
 
-    path = plant_fmu() if model == "plant" else controller_fmu()
-    with FmuInstance(path, model) as inst:
-        if model == "plant":
-            _plant_at_trim(inst)
-        else:
-            _hovering_controller(inst)
+    with _ready(model) as inst:
         t0 = time.perf_counter()
         with pytest.raises(FMICallException):
             inst.step(h)
@@ -187,12 +196,7 @@ def test_one_dostep_has_a_bounded_cost(model, h, limit):
 
 @pytest.mark.parametrize("model", ["plant", "controller"])
 def test_a_nan_step_size_is_refused_with_a_message(model):
-    path = plant_fmu() if model == "plant" else controller_fmu()
-    with FmuInstance(path, model) as inst:
-        if model == "plant":
-            _plant_at_trim(inst)
-        else:
-            _hovering_controller(inst)
+    with _ready(model) as inst:
         with pytest.raises(FMICallException):
             inst.step(float("nan"))
         assert _errors(inst), inst.messages
