@@ -196,6 +196,7 @@ I, N, C, F, T, E, X, U = (  # noqa: E741
 ALL_BUT_FATAL = frozenset({I, N, C, F, T, E})
 GETTERS = frozenset({N, C, F, T, E})
 ENTERS_ERROR = frozenset({"fmi2ExitInitializationMode", "fmi2DoStep"})
+VARIABLE_GETS = frozenset({"fmi2GetReal", "fmi2GetInteger", "fmi2GetBoolean", "fmi2GetString"})
 """The calls whose fmi2Error is a failed computation: the instance is then in Error."""
 
 ALLOWED = {
@@ -504,14 +505,13 @@ class Child:
         if status == ERROR:
             # docs/robustness.md: a call refused before it changes anything (a forbidden call,
             # a bad argument, a rejected state buffer) leaves the instance as it was; a failed
-            # computation (initialization, a step) puts it in Error.  A get in Initialization
-            # mode may run the initialization (and fail it): the state is then not known.
-            if legal and fn in ENTERS_ERROR:
+            # computation (initialization, a step) puts it in Error.  A get with valid
+            # arguments in Initialization mode runs the initialization: its fmi2Error is a
+            # refused initialization.
+            if legal and (fn in ENTERS_ERROR or (inst.state == N and fn in VARIABLE_GETS)):
                 if inst.state != E:
                     inst.pre_error, inst.error_from = inst.state, fn
                 inst.state = E
-            elif legal and inst.state == N and fn.startswith("fmi2Get"):
-                inst.state = U
         elif status == FATAL:
             inst.state = X
         elif status == DISCARD and fn == "fmi2DoStep":
