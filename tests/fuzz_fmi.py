@@ -79,16 +79,16 @@ class Finding:
 class FuzzReport:
     fmu: str
     seed: int
-    calls: int = 0
-    helper_calls: int = 0
+    findings: list[Finding] = field(default_factory=list)
+    calls: int = 0  # calls on the fuzzed FMU
+    helper_calls: int = 0  # calls on the other FMU (foreign states)
     episodes: int = 0
-    children: int = 0
+    state_calls: Counter = field(default_factory=Counter)  # by expected state
+    children: int = 0  # child processes (a crash or a hang starts a new one)
     crashes: int = 0
     hangs: int = 0
     seconds: float = 0.0
-    findings: list[Finding] = field(default_factory=list)
     truncated: bool = False
-    state_calls: Counter = field(default_factory=Counter)
 
     def by_kind(self) -> Counter:
         return Counter(f.kind for f in self.findings)

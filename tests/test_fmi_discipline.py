@@ -213,27 +213,19 @@ def _null_calls(inst: FmuInstance):
     state = inst.slave.getFMUstate()
     size = c_size_t()
     vp, pvp = c_void_p, POINTER(c_void_p)
+    # (function, the NULL argument, the value buffer): the array get/set functions
+    arrays = [("fmi2GetReal", "vr", real), ("fmi2GetReal", "value", real),
+              ("fmi2SetReal", "vr", real), ("fmi2SetReal", "value", real),
+              ("fmi2GetInteger", "vr", integer), ("fmi2SetInteger", "value", integer),
+              ("fmi2GetBoolean", "value", integer), ("fmi2SetBoolean", "vr", integer),
+              ("fmi2GetString", "vr", real), ("fmi2SetString", "vr", real)]
+
+    def array_call(fn: str, null: str, buf: object):
+        return lambda: raw(inst, fn, vp, vp, c_size_t, vp)(
+            comp, None if null == "vr" else vr, 1, None if null == "value" else buf)
+
     return {
-        "fmi2GetReal vr": lambda: raw(inst, "fmi2GetReal", vp, vp, c_size_t, vp)(
-            comp, None, 1, real),
-        "fmi2GetReal value": lambda: raw(inst, "fmi2GetReal", vp, vp, c_size_t, vp)(
-            comp, vr, 1, None),
-        "fmi2SetReal vr": lambda: raw(inst, "fmi2SetReal", vp, vp, c_size_t, vp)(
-            comp, None, 1, real),
-        "fmi2SetReal value": lambda: raw(inst, "fmi2SetReal", vp, vp, c_size_t, vp)(
-            comp, vr, 1, None),
-        "fmi2GetInteger vr": lambda: raw(inst, "fmi2GetInteger", vp, vp, c_size_t, vp)(
-            comp, None, 1, integer),
-        "fmi2SetInteger value": lambda: raw(inst, "fmi2SetInteger", vp, vp, c_size_t, vp)(
-            comp, vr, 1, None),
-        "fmi2GetBoolean value": lambda: raw(inst, "fmi2GetBoolean", vp, vp, c_size_t, vp)(
-            comp, vr, 1, None),
-        "fmi2SetBoolean vr": lambda: raw(inst, "fmi2SetBoolean", vp, vp, c_size_t, vp)(
-            comp, None, 1, integer),
-        "fmi2GetString vr": lambda: raw(inst, "fmi2GetString", vp, vp, c_size_t, vp)(
-            comp, None, 1, real),
-        "fmi2SetString vr": lambda: raw(inst, "fmi2SetString", vp, vp, c_size_t, vp)(
-            comp, None, 1, real),
+        **{f"{fn} {null}": array_call(fn, null, buf) for fn, null, buf in arrays},
         "fmi2SetDebugLogging categories": lambda: raw(
             inst, "fmi2SetDebugLogging", vp, c_int, c_size_t, vp)(comp, 1, 1, None),
         "fmi2GetFMUstate FMUstate": lambda: raw(inst, "fmi2GetFMUstate", vp, pvp)(comp, None),

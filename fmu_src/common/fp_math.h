@@ -3,6 +3,15 @@
 #define FP_MATH_H
 
 #include <math.h>
+#include <stddef.h>
+
+/* 1 if all n values are finite. */
+static inline int fp_all_finite(const double *v, size_t n) {
+    size_t i;
+    for (i = 0; i < n; i++)
+        if (!isfinite(v[i])) return 0;
+    return 1;
+}
 
 static inline void v3_cross(const double a[3], const double b[3], double out[3]) {
     double x = a[1] * b[2] - a[2] * b[1];

@@ -27,6 +27,7 @@
 #include "controller_vars.h"
 #include "default_gains.h"
 #include "fp_clock.h"
+#include "fp_math.h"
 #include "stages.h"
 
 #define ELEM_SIZE_REAL sizeof(double)
@@ -327,13 +328,6 @@ static int inputs_valid(ControllerModel *m, const FpLogger *logger) {
     return 0;
 }
 
-static int all_finite(const double *v, int n) {
-    int i;
-    for (i = 0; i < n; i++)
-        if (!isfinite(v[i])) return 0;
-    return 1;
-}
-
 static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlFilterInputs fin;
     CtrlFiltered s;
@@ -386,10 +380,11 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     ctrl_allocation(&ap, &s, dnu_c, m->lost_mask, &m->alloc, &a);
     /* never a non-finite output: a sample that computed one is discarded whole (states
      * restored, the QPs' warm starts dropped) and the last valid outputs held */
-    if (!all_finite(a.alpha_cmd, n) || !all_finite(a.beta_cmd, n) || !all_finite(a.omega_cmd, n) ||
-        !all_finite(g.mu_c, 3) || !all_finite(g.acc_c, 3) || !all_finite(g.f_b_ref, 3) ||
-        !all_finite(g.f_b_c, 3) || !all_finite(rate_c, 3) || !all_finite(dnu_c, 6) ||
-        !all_finite(a.residual, 6)) {
+    if (!fp_all_finite(a.alpha_cmd, (size_t)n) || !fp_all_finite(a.beta_cmd, (size_t)n) ||
+        !fp_all_finite(a.omega_cmd, (size_t)n) ||
+        !fp_all_finite(g.mu_c, 3) || !fp_all_finite(g.acc_c, 3) || !fp_all_finite(g.f_b_ref, 3) ||
+        !fp_all_finite(g.f_b_c, 3) || !fp_all_finite(rate_c, 3) || !fp_all_finite(dnu_c, 6) ||
+        !fp_all_finite(a.residual, 6)) {
         memcpy(m->filt, filt_before, sizeof filt_before);
         memcpy(m->blk, blk_before, sizeof blk_before);
         m->psi_raw = psi_before[0], m->psi_unwrapped = psi_before[1];
@@ -542,13 +537,6 @@ static int structure_valid(const ControllerModel *m) {
     return 1;
 }
 
-static int finite_array(const double *v, size_t n) {
-    size_t i;
-    for (i = 0; i < n; i++)
-        if (!isfinite(v[i])) return 0;
-    return 1;
-}
-
 static FpStatus controller_check_restored(const void *model, int initialized,
                                           const FpLogger *logger) {
     const ControllerModel *m = (const ControllerModel *)model;
@@ -563,9 +551,9 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
         return FP_ERROR;
     }
-    if (!finite_array(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
-        !finite_array(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
-        !finite_array(&m->filt_phi[0][0], 4) || !finite_array(m->filt_gamma, 2)) {
+    if (!fp_all_finite(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
+        !fp_all_finite(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
+        !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                "restored state: the filter or block states are not finite");
         return FP_ERROR;

@@ -446,13 +446,6 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
     return FP_OK;
 }
 
-static int all_finite(const double *v, size_t n) {
-    size_t i;
-    for (i = 0; i < n; i++)
-        if (!isfinite(v[i])) return 0;
-    return 1;
-}
-
 static FpStatus plant_check_restored(const void *model, int initialized,
                                      const FpLogger *logger) {
     const PlantModel *m = (const PlantModel *)model;
@@ -468,9 +461,9 @@ static FpStatus plant_check_restored(const void *model, int initialized,
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
         return FP_ERROR;
     }
-    if (!all_finite(m->x, PLANT_NX) || !all_finite(&m->inertia_inv[0][0], 9) ||
-        !all_finite(m->pos, 3) || !all_finite(m->vel, 3) || !all_finite(m->euler, 3) ||
-        !all_finite(m->rate, 3)) {
+    if (!fp_all_finite(m->x, PLANT_NX) || !fp_all_finite(&m->inertia_inv[0][0], 9) ||
+        !fp_all_finite(m->pos, 3) || !fp_all_finite(m->vel, 3) || !fp_all_finite(m->euler, 3) ||
+        !fp_all_finite(m->rate, 3)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: the vehicle state is not finite");
         return FP_ERROR;
     }
