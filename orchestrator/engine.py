@@ -29,6 +29,7 @@ command inputs in the ``ctrl`` block and holds whatever the caller wrote there.
 from __future__ import annotations
 
 import ctypes
+from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 
@@ -167,6 +168,7 @@ class Recording:
         self.data = np.zeros((rows + 1, len(self.columns)))
         self.ints = np.zeros((rows + 1, len(self.int_columns)), dtype=np.int32)
         self.n_commands = len(conn.commands)
+        self._vectors: dict[str, slice] = {}  # columns_of, found once per name
 
     def block(self, name: str) -> np.ndarray:
         """The float64 view of one block (``ref``, ``plant``, ``dist``, ``ctrl``) of all rows."""
@@ -197,11 +199,15 @@ class Recording:
     def columns_of(self, name: str) -> slice:
         """Columns of a recorded vector by full name, e.g. ``plant.pos`` (its elements are
         consecutive)."""
-        first = self.columns.index(f"{name}[1]")
-        n = 1
-        while first + n < len(self.columns) and self.columns[first + n].startswith(f"{name}["):
-            n += 1
-        return slice(first, first + n)
+        found = self._vectors.get(name)
+        if found is None:
+            first = self.columns.index(f"{name}[1]")
+            n = 1
+            while first + n < len(self.columns) and \
+                    self.columns[first + n].startswith(f"{name}["):
+                n += 1
+            found = self._vectors[name] = slice(first, first + n)
+        return found
 
 
 def _refs(inst: FmuInstance, names: Sequence[str]) -> ctypes.Array[ctypes.c_uint]:
@@ -218,15 +224,17 @@ _CTRL_FNS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger", "fmi2
 _PLANT_FNS = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger")
 
 
-class Engine:
+class Engine(ABC):
     """Steps rows [first, last) of a recording: ``engine.steps(first, last, t0)``."""
 
     def __init__(self, plant: FmuInstance, ctrl: FmuInstance | None, conn: Connections,
                  rec: Recording, h: float, jacobi: bool) -> None:
         self.plant, self.ctrl, self.conn, self.rec = plant, ctrl, conn, rec
         self.h, self.jacobi = h, jacobi
-        c_refs = ((lambda names: _refs(ctrl, names)) if ctrl is not None
-                  else (lambda names: _refs(plant, [])))
+        def c_refs(names: Sequence[str]) -> ctypes.Array[ctypes.c_uint]:
+            # an open loop has no controller variables: its groups are empty
+            return _refs(ctrl, names) if ctrl is not None else _refs(plant, [])
+
         self.vrs = {
             "c_in": c_refs(conn.ref_names + list(conn.measured)),
             "c_out": c_refs(conn.ctrl_out), "c_int": c_refs(conn.ctrl_int),
@@ -252,8 +260,9 @@ class Engine:
             self.rec.ref[0] = ref0
         self.record_initial(0)
 
+    @abstractmethod
     def steps(self, first: int, last: int, t0: float) -> None:
-        raise NotImplementedError
+        """Rows first .. last-1: each FMU called as the coupling says; RunError on a failure."""
 
     def fail(self, t: float, row: int = -1) -> None:
         insts = [i for i in (self.plant, self.ctrl) if i is not None]

@@ -63,8 +63,8 @@ def run_hover(airframe: str = "paper_hexacopter", duration: float = 10.0,
         engine.steps(0, steps, 0.0)
         wall = time.perf_counter() - t0
         trim = rec.commands[0, :n]
-        outputs = [c for g in OUTPUTS for c in range(*rec.columns_of(f"plant.{g}").indices(
-            len(rec.columns)))]
+        blocks = [rec.columns_of(f"plant.{g}") for g in OUTPUTS]
+        outputs = [c for b in blocks for c in range(b.start, b.stop)]
         table = rec.data[:steps + 1][:, [0, *outputs]].copy()
         names = ["time", *(rec.columns[c].split(".", 1)[1] for c in outputs)]
     drift = np.linalg.norm(table[:, 1:4] - np.asarray(pos0), axis=1)

@@ -161,11 +161,13 @@ class CoSimulation:
 
     # -- setup ---------------------------------------------------------------
 
-    def start_values(self) -> StartValues:
-        """Both FMUs' start values: the airframe, the pose at the reference's start, S(0)
-        (and the failure sets when the scenario has rotor faults), the overrides."""
+    def start_values(self, refs0: dict[str, np.ndarray] | None = None) -> StartValues:
+        """Both FMUs' start values: the airframe, the pose at the reference's start (``refs0``,
+        the references sampled at t = 0), S(0) (and the failure sets when the scenario has
+        rotor faults), the overrides."""
         sc = self.scenario
-        refs0 = sc.references(np.zeros(1))
+        if refs0 is None:
+            refs0 = sc.references(np.zeros(1))
         pose = Pose.of(refs0["pos_ref"][0], refs0["euler_ref"][0], refs0["vel_ref"][0])
         return start_values(sc.airframe, pose, failures=bool(sc.faults), timing=self.timing,
                             plant_overrides=sc.plant_parameters,
@@ -176,7 +178,7 @@ class CoSimulation:
         sc = self.scenario
         refs0 = sc.references(np.zeros(1))
         refs0["rotor_health"] = sc.health(np.zeros(1))
-        start = self.start_values()
+        start = self.start_values(refs0)
         conn = Connections.closed_loop(plant_inst, ctrl_inst, sc.airframe.n_rotors)
         check_memory(planned_rows or rows, sum(conn.widths()))  # refuses too large first
         engine = make_engine(self.engine, plant_inst, ctrl_inst, conn, Recording(conn, rows),
