@@ -159,6 +159,27 @@ def _cmd_fmus(args: argparse.Namespace) -> int:
     return 0
 
 
+def _cmd_build_fmus(args: argparse.Namespace) -> int:
+    from orchestrator.fmu_build import build_fmus
+    from orchestrator.platforms import parse_platforms
+
+    platforms = parse_platforms(args.platforms)
+    print(f"building the FMUs for {', '.join(p.name for p in platforms)} (Zig, from each "
+          f"FMU's sources/) -> {args.out}")
+    sys.stdout.flush()
+    report = build_fmus(platforms, args.out)
+    models = sorted({m for m, _ in report.binary_sizes}, key=lambda m: m != "MultirotorPlant")
+    print(f"{'platform':16s} {'binaries/':16s} {'time':>8s}  "
+          + "  ".join(f"{m:>18s}" for m in models))
+    for p in platforms:
+        sizes = "  ".join(f"{report.binary_sizes[(m, p.name)] / 1024:15.0f} KiB" for m in models)
+        print(f"{p.name:16s} {p.folder:16s} {report.seconds[p.name]:6.1f} s  {sizes}")
+    for name, size in report.sizes().items():
+        print(f"wrote {args.out / name} ({size / 1024:.0f} KiB)")
+    print(f"built in {report.total_seconds:.1f} s")
+    return 0
+
+
 def _cmd_sweep(args: argparse.Namespace) -> int:
     import time
 
@@ -263,6 +284,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     fmus = sub.add_parser("fmus", help="print where the installed FMUs are")
     fmus.set_defaults(func=_cmd_fmus)
+
+    bf = sub.add_parser("build-fmus", help="build both FMUs with binaries for several platforms "
+                                           "from their sources (Zig cross compiler)")
+    bf.add_argument("--platforms", default="all",
+                    help="all, host, or a comma list of x86_64-linux, aarch64-linux, "
+                         "x86_64-windows, x86_64-darwin, aarch64-darwin (default: all)")
+    bf.add_argument("--out", type=Path, required=True, help="folder for the two .fmu files")
+    bf.set_defaults(func=_cmd_build_fmus)
     for command in entry_points(group=COMMANDS_GROUP):
         command.load()(sub)
     return parser

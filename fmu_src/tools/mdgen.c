@@ -1,7 +1,13 @@
 /*
  * Writes modelDescription.xml for the model it is linked with, straight from
  * the model's variable table and default values, so the XML and the binary
- * cannot drift.  Run at build time: mdgen OUTPUT.xml VERSION
+ * cannot drift.  Run at build time:
+ *
+ *     mdgen OUTPUT.xml VERSION [--sources DIR FILE.c ...]
+ *
+ * With --sources, the C files the FMU's binary is built from (the build's one list of them,
+ * as laid out flat in the FMU's sources/ folder DIR) go into the FMI 2.0 <SourceFiles> of
+ * <CoSimulation> and into DIR/buildDescription.xml (the FMI 2.0.4 / FMI 3.0 form).
  */
 #include <stdio.h>
 #include <stdlib.h>
@@ -136,6 +142,54 @@ static int check_table(const FpModelInfo *info) {
     return 0;
 }
 
+/* The FMU's C files: argv[first..argc-1] after "--sources DIR" (none without it). */
+typedef struct {
+    const char *dir;
+    char **files;
+    int n;
+} SourceList;
+
+static void write_source_files(FILE *f, const SourceList *src) {
+    int i;
+    if (src->n == 0) return;
+    fputs("    <SourceFiles>\n", f);
+    for (i = 0; i < src->n; i++) {
+        fputs("      <File name=\"", f);
+        xml_text(f, src->files[i]);
+        fputs("\"/>\n", f);
+    }
+    fputs("    </SourceFiles>\n", f);
+}
+
+/* sources/buildDescription.xml: one build configuration, the C99 files compiled together with
+ * sources/ as the include directory (implicit in FMI 3.0: the files are listed relative to
+ * it). */
+static int write_build_description(const FpModelInfo *info, const SourceList *src) {
+    char path[4096];
+    FILE *f;
+    int i;
+    if (snprintf(path, sizeof path, "%s/buildDescription.xml", src->dir) >= (int)sizeof path) {
+        fprintf(stderr, "mdgen: path of %s too long\n", src->dir);
+        return -1;
+    }
+    f = fopen(path, "w");
+    if (f == NULL) {
+        perror(path);
+        return -1;
+    }
+    fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n", f);
+    fputs("<fmiBuildDescription fmiVersion=\"3.0\">\n", f);
+    fprintf(f, "  <BuildConfiguration modelIdentifier=\"%s\">\n", info->model_name);
+    fputs("    <SourceFileSet language=\"C99\">\n", f);
+    for (i = 0; i < src->n; i++) {
+        fputs("      <SourceFile name=\"", f);
+        xml_text(f, src->files[i]);
+        fputs("\"/>\n", f);
+    }
+    fputs("    </SourceFileSet>\n  </BuildConfiguration>\n</fmiBuildDescription>\n", f);
+    return fclose(f) == 0 ? 0 : -1;
+}
+
 int main(int argc, char **argv) {
     const FpModelInfo *info = fp_model_info();
     char guid[40];
@@ -144,9 +198,16 @@ int main(int argc, char **argv) {
     size_t i;
     uint32_t k, index = 0;
     int c;
-    if (argc < 3) {
-        fprintf(stderr, "usage: mdgen OUTPUT.xml VERSION\n");
+    SourceList src = {NULL, NULL, 0};
+    if (argc < 3 || (argc > 3 && (strcmp(argv[3], "--sources") != 0 || argc < 6))) {
+        fprintf(stderr, "usage: mdgen OUTPUT.xml VERSION [--sources DIR FILE.c ...]\n");
         return 2;
+    }
+    if (argc > 3) {
+        src.dir = argv[4];
+        src.files = argv + 5;
+        src.n = argc - 5;
+        if (write_build_description(info, &src) != 0) return 1;
     }
     if (check_table(info) != 0) return 1;
     model = calloc(1, info->model_size);
@@ -174,8 +235,12 @@ int main(int argc, char **argv) {
             " canInterpolateInputs=\"false\" maxOutputDerivativeOrder=\"0\""
             " canRunAsynchronuously=\"false\" canBeInstantiatedOnlyOncePerProcess=\"false\""
             " canNotUseMemoryManagementFunctions=\"false\" canGetAndSetFMUstate=\"true\""
-            " canSerializeFMUstate=\"true\" providesDirectionalDerivative=\"false\"/>\n",
-            info->model_name);
+            " canSerializeFMUstate=\"true\" providesDirectionalDerivative=\"false\"%s\n",
+            info->model_name, src.n > 0 ? ">" : "/>");
+    if (src.n > 0) {
+        write_source_files(f, &src);
+        fputs("  </CoSimulation>\n", f);
+    }
     write_units(f, info);
     fputs("  <LogCategories>\n", f);
     for (c = 0; c < FP_LOG_N_CATEGORIES; c++)
