@@ -137,7 +137,8 @@ static int load(Master *m, Fmu *f, const char *path) {
     f->library = dlopen(path, RTLD_NOW | RTLD_LOCAL);
     if (f->library == NULL) return fail(m, "cannot load library", dlerror());
 #endif
-    if (SYMBOL(m, f, instantiate, "fmi2Instantiate") || SYMBOL(m, f, free_instance, "fmi2FreeInstance")
+    if (SYMBOL(m, f, instantiate, "fmi2Instantiate")
+        || SYMBOL(m, f, free_instance, "fmi2FreeInstance")
         || SYMBOL(m, f, setup_experiment, "fmi2SetupExperiment")
         || SYMBOL(m, f, enter_init, "fmi2EnterInitializationMode")
         || SYMBOL(m, f, exit_init, "fmi2ExitInitializationMode")
@@ -228,7 +229,7 @@ static int cmd_fmu(Master *m, char **arg, int n) {
     if (m->n_fmus == MAX_FMUS) return fail(m, "too many FMUs", NULL);
     if (strlen(arg[1]) >= ID_LEN) return fail(m, "FMU id too long", arg[1]);
     f = &m->fmus[m->n_fmus++];
-    strcpy(f->id, arg[1]);
+    memcpy(f->id, arg[1], strlen(arg[1]) + 1);
     if (load(m, f, arg[2]) != 0) return -1;
     f->c = f->instantiate(f->id, fmi2CoSimulation, arg[3], arg[4], &m->callbacks, fmi2False,
                           fmi2False);
