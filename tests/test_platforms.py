@@ -30,9 +30,12 @@ import fmpy
 import numpy as np
 import pytest
 from fmpy import read_model_description
+from fmpy.validation import validate_fmu
 
 from orchestrator.fmu_build import build_fmus
+from orchestrator.master import run
 from orchestrator.platforms import PLATFORMS, platform_named
+from orchestrator.runner import prepare
 
 pytest.importorskip("ziglang", reason="the Zig cross compiler (pip install -e '.[test]')")
 pytestmark = pytest.mark.platforms
@@ -81,17 +84,23 @@ FMI2_CS = fmi2_cs_functions()
 
 
 @pytest.fixture(scope="module")
-def built(tmp_path_factory):
-    """Both FMUs built for every platform, and unzipped: {model: folder}."""
-    dist = tmp_path_factory.mktemp("dist")
-    report = build_fmus(PLATFORMS, dist)
+def dist(tmp_path_factory):
+    """The folder of both FMUs built for every platform."""
+    folder = tmp_path_factory.mktemp("dist")
+    report = build_fmus(PLATFORMS, folder)
+    for name, seconds in report.seconds.items():
+        print(f"{name}: {seconds:.1f} s")
+    return folder
+
+
+@pytest.fixture(scope="module")
+def built(dist, tmp_path_factory):
+    """Both FMUs of every platform unzipped: {model: folder}."""
     dirs = {}
     for model in MODELS:
         dirs[model] = tmp_path_factory.mktemp(model)
         with zipfile.ZipFile(dist / f"{model}.fmu") as z:
             z.extractall(dirs[model])
-    for name, seconds in report.seconds.items():
-        print(f"{name}: {seconds:.1f} s")
     return dirs
 
 
@@ -100,8 +109,9 @@ def binaries(built, platform):
     return {m: built[m] / "binaries" / p.folder / f"{m}{p.suffix}" for m in MODELS}
 
 
-def test_every_platform_folder_and_nothing_else(built):
+def test_every_platform_folder_and_nothing_else(built, dist):
     for model in MODELS:
+        assert validate_fmu(str(dist / f"{model}.fmu")) == []  # fmpy's checks
         found = sorted(p.relative_to(built[model] / "binaries").as_posix()
                        for p in (built[model] / "binaries").rglob("*") if p.is_file())
         assert found == sorted(f"{p.folder}/{model}{p.suffix}" for p in PLATFORMS)
@@ -171,6 +181,19 @@ def test_darwin_binaries_are_dylibs_exporting_the_fmi_api(built, platform, arche
             thin = lib.parent / "arm64-from-darwin64"
             out([lipo, universal, "-thin", "arm64", "-output", thin])
             assert thin.read_bytes() == lib.read_bytes()
+
+
+@pytest.mark.skipif(fmpy.platform != "linux64", reason="the shipped binaries are x86_64 Linux")
+def test_cross_built_linux64_flies_bit_identically_to_the_shipped_binaries(dist, monkeypatch):
+    """The Zig build (clang, glibc 2.17 symbols) computes what the host's gcc build does:
+    the first 3 s of a shipped scenario, every signal, to the bit."""
+    monkeypatch.delenv("FULLPOSE_BUILD_DIR", raising=False)
+    shipped = run(prepare("full_pose_with_disturbances", 3.0), progress=False)
+    monkeypatch.setenv("FULLPOSE_BUILD_DIR", str(dist))
+    cross = run(prepare("full_pose_with_disturbances", 3.0), progress=False)
+    assert cross.columns == shipped.columns
+    a, b = shipped.data, cross.data
+    assert a.shape == b.shape and bool(np.all((a == b) | (np.isnan(a) & np.isnan(b))))
 
 
 # -- flying: our master, per platform ----------------------------------------------------
