@@ -14,6 +14,7 @@ fmpy's FMI headers, the run of the shipped binaries.
 import re
 import shutil
 import subprocess
+import xml.etree.ElementTree as ET
 import zipfile
 from pathlib import Path
 
@@ -57,6 +58,10 @@ def test_sources_list_the_c_files_once_and_hold_nothing_else(model):
     assert len(configs) == 1 and configs[0].modelIdentifier == md.coSimulation.modelIdentifier
     (file_set,) = configs[0].sourceFileSets
     assert file_set.language == "C99" and file_set.sourceFiles == listed
+    with zipfile.ZipFile(fmu) as z:  # the one library to link: the system's maths library
+        root = ET.fromstring(z.read("sources/buildDescription.xml"))
+    assert [(lib.get("name"), lib.get("external")) for lib in root.iter("Library")] == [
+        ("m", "true")]
     assert all("/" not in n for n in files), "sources/ is flat"
     assert {n for n in files if not n.endswith((".c", ".h"))} == {"buildDescription.xml"}
     # neither the build tools nor the Python host API

@@ -162,8 +162,8 @@ static void write_source_files(FILE *f, const SourceList *src) {
 }
 
 /* sources/buildDescription.xml: one build configuration, the C99 files compiled together with
- * sources/ as the include directory (implicit in FMI 3.0: the files are listed relative to
- * it). */
+ * sources/ as the include directory (the files are listed relative to it) and linked with the
+ * system's maths library. */
 static int write_build_description(const FpModelInfo *info, const SourceList *src) {
     char path[4096];
     FILE *f;
@@ -186,7 +186,10 @@ static int write_build_description(const FpModelInfo *info, const SourceList *sr
         xml_text(f, src->files[i]);
         fputs("\"/>\n", f);
     }
-    fputs("    </SourceFileSet>\n  </BuildConfiguration>\n</fmiBuildDescription>\n", f);
+    fputs("    </SourceFileSet>\n", f);
+    /* the maths functions: libm on Linux (-lm), part of the C runtime elsewhere */
+    fputs("    <Library name=\"m\" external=\"true\" description=\"the C maths library\"/>\n", f);
+    fputs("  </BuildConfiguration>\n</fmiBuildDescription>\n", f);
     return fclose(f) == 0 ? 0 : -1;
 }
 
