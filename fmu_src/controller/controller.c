@@ -576,8 +576,8 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||
         !isfinite(m->grid_t0) || m->samples_run < 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "restored state: the filter or block states or the sample grid are not "
-               "finite");
+               "restored state: the filter or block states are not finite, or the sample "
+               "grid is invalid");
         return FP_ERROR;
     }
     return FP_OK;
