@@ -957,12 +957,12 @@ static int within_work_cap(Instance *inst, double h) {
     if (inst->internal_step == NULL) return 1;
     hi = *(const double *)element(inst, inst->internal_step, 0);
     if (!(hi > 0.0) || !isfinite(hi)) return 1; /* the model refuses it itself */
-    n = h / hi;
-    if (n <= FP_MAX_INTERNAL_STEPS * (1.0 + 1e-9)) return 1;
+    n = fp_steps_to_cover(h, hi, FP_STEP_TOL * h);
+    if (n <= FP_MAX_INTERNAL_STEPS) return 1;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2DoStep: communication step h = %.12g s would take %.0f internal steps of %s = "
           "%.12g s; the cap is %.0f internal steps per fmi2DoStep (%.12g s); use shorter steps",
-          h, floor(n + 0.5), inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
+          h, n, inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
           FP_MAX_INTERNAL_STEPS * hi);
     return 0;
 }

@@ -1,5 +1,6 @@
 #include "fp_model.h"
 
+#include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -23,6 +24,28 @@ void fp_log(const FpLogger *logger, FpStatus status, FpLogCategory category, con
     vsnprintf(message, sizeof message, fmt, args);
     va_end(args);
     logger->log(logger->env, status, category, message);
+}
+
+double fp_steps_to_cover(double span, double step, double tol) {
+    double n;
+    if (!(span - tol > 0.0)) return 0.0;
+    n = ceil((span - tol) / step);
+    return n < 1.0 ? 1.0 : n; /* a span far below step may underflow the ratio to 0 */
+}
+
+FpStatus fp_check_step_work(double h, double n, double cap, const char *what,
+                            const FpLogger *logger) {
+    if (!(h > 0.0) || !isfinite(h)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "communication step %g s must be positive and finite", h);
+        return FP_ERROR;
+    }
+    if (!(n <= cap)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "communication step %.12g s would take %.0f %s (limit %.0f)", h, n, what, cap);
+        return FP_ERROR;
+    }
+    return FP_OK;
 }
 
 uint64_t fp_fnv1a64(uint64_t h, const void *data, size_t n) {

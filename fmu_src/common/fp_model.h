@@ -115,12 +115,38 @@ typedef struct {
  * The work of one communication step.  A model that subdivides a step (the plant's RK4
  * step, the controller's sample time) keeps that internal step in a fixed Real scalar
  * parameter with one of these names; the FMI layer refuses, before any work, a
- * communication step of more than FP_MAX_INTERNAL_STEPS of them (10^6: 500 s per call at
- * the plant's default 0.5 ms, 2000 s at the controller's 2 ms; about a second or two of
- * CPU time per call).  A model with none of these parameters is not capped by the FMI layer.
+ * communication step h that needs more than FP_MAX_INTERNAL_STEPS of them (counted as
+ * fp_steps_to_cover(h, step, FP_STEP_TOL * h); 10^6: 500 s per call at the plant's default
+ * 0.5 ms, 2000 s at the controller's 2 ms; about a second or two of CPU time per call).
+ * A model with none of these parameters is not capped by the FMI layer.
  */
 #define FP_INTERNAL_STEP_NAMES {"h_internal", "Ts"}
 #define FP_MAX_INTERNAL_STEPS 1000000.0
+
+/*
+ * How many of the grid points 0, step, 2 step, ... lie before `span` by more than `tol`:
+ * ceil((span - tol) / step), at least 1 when span > tol; 0 when span <= tol (or NaN),
+ * infinity when the count is.  The tolerance makes a span meant as a whole multiple n of
+ * step count n although rounding put it a hair above (0.002 / 0.0005 is 4 only up to
+ * rounding): without it a sliver step would be added, or a grid instant taken one
+ * communication step early.  It is FP_STEP_TOL of a step h (the plant's RK4 substeps of h:
+ * fp_steps_to_cover(h, h_internal, FP_STEP_TOL * h)), plus FP_TIME_TOL of the absolute
+ * times in a span made of them: an importer that sums its steps (t += h) drifts by up to
+ * ~1e-17 of t per step (measured at 2 ms: 1.7e-11 after 10^6 steps, 1.6e-10 after 10^7).
+ * Beyond the tolerance a grid instant that coincides with a communication point may be
+ * taken one communication step early or late: one sample's timing, nothing worse.
+ */
+#define FP_STEP_TOL 1e-9
+#define FP_TIME_TOL 1e-10
+double fp_steps_to_cover(double span, double step, double tol);
+
+/*
+ * FP_OK when a communication step h is positive and finite and its n internal steps
+ * (`what`, e.g. "RK4 steps of h_internal") are at most `cap`; else logs why and FP_ERROR.
+ * Called before any work, so a refused step leaves the model untouched.
+ */
+FpStatus fp_check_step_work(double h, double n, double cap, const char *what,
+                            const FpLogger *logger);
 
 /* 64-bit FNV-1a over n bytes, continuing from h (start with FP_FNV1A64_BASIS). */
 #define FP_FNV1A64_BASIS 14695981039346656037ULL

@@ -251,7 +251,8 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
  * glitch, a unit error) and would poison the filters for seconds.  The vehicle's own range
  * matches the plant's (docs/robustness.md); the actuators' comes from the airframe. */
 /* The most control samples one doStep may run: 10^5 (200 s at Ts = 2 ms, about two seconds
- * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait. */
+ * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait.
+ * Tighter than the FMI layer's cap of 10^6 internal steps: a sample costs ~10x an RK4 step. */
 #define CTRL_MAX_SAMPLES 1e5
 
 #define CTRL_MAX_DISTANCE 1e7 /* m */
@@ -427,7 +428,6 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     CtrlFilterInputs fin;
     int i, n;
     char why[160];
-    (void)t0;
     if (ctrl_check_parameters(m, logger) != 0 || prepare_force_sets(m, logger) != FP_OK)
         return FP_ERROR;
     if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
@@ -435,6 +435,9 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
         return FP_ERROR;
     }
     m->holding = 0;
+    m->grid_t0 = t0;
+    m->samples_run = 0;
+    m->warned_coarse = 0;
     n = m->n_rotors;
     FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
     ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
@@ -495,28 +498,45 @@ static FpStatus controller_tunables_changed(void *model, const FpLogger *logger)
     return ctrl_check_tunables((const ControllerModel *)model, logger) ? FP_ERROR : FP_OK;
 }
 
+/*
+ * The sampling semantics (docs/controller.md, "Communication steps"): the controller samples
+ * on its own grid t_k = t0 + k Ts (t0: the experiment's start time), whatever h is.  A doStep
+ * from t to t + h runs, in order, the samples of the grid instants in [t, t + h): an FMU's
+ * inputs hold from the communication point they were set at to the next, so the inputs set
+ * before the call are the values at those instants.  Each sample advances the filters and
+ * blocks by one Ts.  The outputs after the call are those of the last sample run, held
+ * until the next one; an instant at t + h (within the tolerance of fp_steps_to_cover, which
+ * covers importers that sum their steps) is the next call's, with the inputs set at t + h.
+ * With h = Ts that is one sample per step, from the inputs at t_k, as it always was.  The
+ * instants are counted (samples_run) against t0 + k Ts, never found by summing steps, so
+ * the grid cannot drift.
+ */
 static FpStatus controller_step(void *model, double t, double h, const FpLogger *logger) {
     ControllerModel *m = (ControllerModel *)model;
-    double ratio = h / m->Ts, samples = floor(ratio + 0.5);
+    double tol = FP_STEP_TOL * h + FP_TIME_TOL * (fabs(t) + fabs(m->grid_t0));
+    double due = fp_steps_to_cover(t + h - m->grid_t0, m->Ts, tol);
+    double samples = due - (double)m->samples_run;
     FpStatus status = FP_OK;
     long k, n;
-    (void)t;
-    if (!(samples >= 1.0) || !(fabs(ratio - samples) <= 1e-9 * samples)) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s is not a whole multiple of the sample time Ts = "
-               "%.12g s",
+    if (!(samples > 0.0)) samples = 0.0; /* no grid instant in [t, t + h): outputs held */
+    if (fp_check_step_work(h, samples, CTRL_MAX_SAMPLES, "control samples", logger) != FP_OK)
+        return FP_ERROR;
+    if (!m->warned_coarse && fp_steps_to_cover(h, m->Ts, FP_STEP_TOL * h) > 1.0) {
+        /* once per run: every such step degrades control the same way */
+        m->warned_coarse = 1;
+        status = FP_WARNING;
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+               "communication step %.12g s is longer than the sample time Ts = %.12g s: the "
+               "samples within one step all use the inputs of its start, held, so control "
+               "degrades (docs/controller.md, \"Communication steps\"); use steps of at "
+               "most Ts (said once)",
                h, m->Ts);
-        return FP_ERROR;
-    }
-    if (samples > CTRL_MAX_SAMPLES) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s would take %.0f samples (limit %.0f)", h, samples,
-               CTRL_MAX_SAMPLES);
-        return FP_ERROR;
     }
     n = (long)samples;
-    for (k = 0; k < n; k++)
+    for (k = 0; k < n; k++) {
         if (control_sample(m, logger) != FP_OK) status = FP_WARNING;
+        m->samples_run++;
+    }
     return status;
 }
 
@@ -553,9 +573,11 @@ static FpStatus controller_check_restored(const void *model, int initialized,
     }
     if (!fp_all_finite(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
         !fp_all_finite(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
-        !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2)) {
+        !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||
+        !isfinite(m->grid_t0) || m->samples_run < 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "restored state: the filter or block states are not finite");
+               "restored state: the filter or block states are not finite, or the sample "
+               "grid is invalid");
         return FP_ERROR;
     }
     return FP_OK;

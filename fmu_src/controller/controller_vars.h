@@ -11,7 +11,7 @@
 
 #define CONTROLLER_VARIABLES(X)                                                                   \
     /* parameters: sampling and airframe model (nominal) */                                       \
-    X(Ts, 1, REAL, PARAM_FIXED, 1, 1, "s", "Sample time; every communication step must be a multiple of it") \
+    X(Ts, 1, REAL, PARAM_FIXED, 1, 1, "s", "Sample time; samples run at t0 + k Ts for any communication step, outputs held between them") \
     X(n_rotors, 2, INTEGER, PARAM_FIXED, 1, 1, "", "Number of rotors in use (1..8)")            \
     X(mass, 3, REAL, PARAM_FIXED, 1, 1, "kg", "Nominal mass used by the outer INDI")           \
     X(inertia, 4, REAL, PARAM_FIXED, 3, 3, "kg.m2", "Nominal inertia used by the inner INDI")  \

@@ -370,10 +370,6 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
 }
 
 
-/* The most RK4 steps one doStep may take: 10^6 (500 s at the default 0.5 ms, about a second
- * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait. */
-#define MAX_SUBSTEPS 1000000.0
-
 /* The physically meaningful range of the vehicle state: beyond it the rigid-body and rotor
  * model mean nothing and RK4 soon overflows to NaN, so a step that leaves it is refused with
  * the state kept from before the step (docs/robustness.md). */
@@ -409,27 +405,22 @@ static int state_outside(const double *x, double t, const FpLogger *logger) {
     return 0;
 }
 
+/* Any h > 0: ceil(h / h_internal) equal RK4 steps (fp_steps_to_cover), so a step that is a
+ * multiple of h_internal takes exactly the steps of h_internal it always did, and any other
+ * step the fewest equal steps no longer than h_internal.  At most FP_MAX_INTERNAL_STEPS
+ * (10^6, 500 s at the default 0.5 ms, about a second of CPU): a call that cannot be cancelled
+ * must stay short enough for an importer to wait. */
 static FpStatus plant_step(void *model, double t, double h, const FpLogger *logger) {
     PlantModel *m = (PlantModel *)model;
     Commands u;
-    double ratio = h / m->h_internal, substeps = floor(ratio + 0.5), hi;
+    double substeps = fp_steps_to_cover(h, m->h_internal, FP_STEP_TOL * h), hi;
     double t_start = m->timing ? fp_clock_seconds() : 0.0;
     double x_before[PLANT_NX];
     int32_t flags_before = m->sat_flags;
     long k, n;
-    if (!(substeps >= 1.0) || !(fabs(ratio - substeps) <= 1e-9 * substeps)) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s is not a whole multiple of the internal RK4 step "
-               "h_internal = %.12g s; use a multiple or change h_internal",
-               h, m->h_internal);
+    if (fp_check_step_work(h, substeps, FP_MAX_INTERNAL_STEPS, "RK4 steps of h_internal",
+                           logger) != FP_OK)
         return FP_ERROR;
-    }
-    if (substeps > MAX_SUBSTEPS) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s would take %.0f internal steps (limit %.0f)", h,
-               substeps, MAX_SUBSTEPS);
-        return FP_ERROR;
-    }
     if (check_inputs(m, logger) != 0) return FP_ERROR;
     memcpy(x_before, m->x, sizeof x_before);
     saturate(m, &u, &m->sat_flags);

@@ -28,7 +28,7 @@
     X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, "rad/s", "Upper limit of rotor speed")           \
     X(tau_motor, 112, REAL, PARAM_FIXED, 1, 1, "s", "Time constant of the first-order motor model") \
     X(tau_servo, 113, REAL, PARAM_FIXED, 1, 1, "s", "Time constant of the first-order servo model") \
-    X(h_internal, 114, REAL, PARAM_FIXED, 1, 1, "s", "Internal RK4 step; every communication step must be a multiple of it") \
+    X(h_internal, 114, REAL, PARAM_FIXED, 1, 1, "s", "Internal RK4 step; a communication step h takes ceil(h / h_internal) equal RK4 steps") \
     /* parameters: initial state */                                                               \
     X(pos0, 120, REAL, PARAM_FIXED, 3, 1, "m", "Initial position, world NED")                   \
     X(vel0, 123, REAL, PARAM_FIXED, 3, 1, "m/s", "Initial velocity, world NED")                 \
