@@ -49,9 +49,9 @@ typedef enum {
     T(ROTOR_SPEED, "RotorSpeed", "AngularVelocity", "rad/s", 1e2)                           \
     T(FORCE, "Force", "Force", "N", 0.0)                                                    \
     T(TORQUE, "Torque", "Torque", "N.m", 0.0)                                               \
-    T(THRUST_COEFFICIENT, "ThrustCoefficient", "ThrustCoefficient", "N.s2/rad2", 1e-5)      \
+    T(THRUST_COEFFICIENT, "ThrustCoefficient", "ThrustCoefficient", "N.s2/rad2", 1e-4)      \
     T(DRAG_COEFFICIENT, "DragTorqueCoefficient", "DragTorqueCoefficient", "N.m.s2/rad2",    \
-      1e-7)                                                                                 \
+      1e-6)                                                                                 \
     T(RATIO, "Ratio", "Ratio", "1", 0.0) /* efficiencies, health, margins, damping */       \
     T(WEIGHT, "Weight", "Weight", "1", 0.0) /* QP weights */                                \
     T(DIMENSIONLESS, "Dimensionless", "Dimensionless", "1", 0.0) /* normals, quaternion */  \
