@@ -3,9 +3,11 @@
  *
  * An FpCheck collects the errors of one validation: every bad value is logged through the
  * model's FpLogger as "parameter NAME[INDEX] = VALUE: REASON" and counted, so one
- * initialization reports every bad parameter, not just the first.  The element checks
- * (finite, positive, within a range, ordered) name each element as the FMU variable table
- * does: NAME for a scalar, NAME[i] for a vector element, NAME[i,j] for a matrix element.
+ * initialization reports every bad parameter, not just the first.  The element checks read
+ * the static bound of each parameter from its row in the model's variable table (the range
+ * that modelDescription.xml declares as min/max), so the check and the declaration cannot
+ * differ, and name each element as the table does: NAME for a scalar, NAME[i] for a vector
+ * element, NAME[i,j] for a matrix element.
  *
  * fp_check_airframe holds the one set of rules for the airframe parameters that both FMUs
  * carry under the same names, so the plant and the controller accept and refuse the same
