@@ -33,9 +33,10 @@
 #define ELEM_SIZE_REAL sizeof(double)
 #define ELEM_SIZE_INTEGER sizeof(int32_t)
 #define ELEM_SIZE_BOOLEAN sizeof(int32_t)
-#define CTRL_CHECK(name, vr, type, kind, rows, cols, unit, desc)                                  \
+#define CTRL_CHECK(name, vr, type, kind, rows, cols, dtype, range, desc)                         \
     FP_STATIC_ASSERT(sizeof(((ControllerModel *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type, \
-                     name##_size);
+                     name##_size);                                                               \
+    FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
 CONTROLLER_VARIABLES(CTRL_CHECK)
 FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS == 64, polytope_cap_matches_table);
 FP_STATIC_ASSERT(FP_FAIL_POLYTOPE_FACETS * FP_MAX_ROTORS == 256, fail_polytope_cap_matches_table);
@@ -43,9 +44,15 @@ FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS <= FP_WLS_MAX_CONS, polytope_fits_qp);
 FP_STATIC_ASSERT(3 * FP_MAX_ROTORS <= FP_WLS_MAX_VARS, allocation_fits_qp);
 FP_STATIC_ASSERT(6 + 3 * FP_MAX_ROTORS <= FP_WLS_MAX_ROWS, allocation_rows_fit_qp);
 
-#define CTRL_ROW(name, vr, type, kind, rows, cols, unit, desc) \
-    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(ControllerModel, name), unit, desc},
+#define CTRL_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                           \
+    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(ControllerModel, name), FP_T_##dtype,  \
+     range, desc},
 static const FpVar controller_vars[] = {CONTROLLER_VARIABLES(CTRL_ROW)};
+#define N_CTRL_VARS (sizeof controller_vars / sizeof controller_vars[0])
+
+/* Row indices (CV_pos, ...): the input checks read their plausible ranges from the rows. */
+#define CTRL_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc) CV_##name,
+enum { CONTROLLER_VARIABLES(CTRL_INDEX) CV_COUNT };
 
 /* ------------------------------------------------------------------------ */
 /* Defaults                                                                 */
@@ -199,7 +206,7 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     FpCheck c;
     double hover_fz = -m->mass * m->g;
     int i;
-    fp_check_init(&c, logger);
+    fp_check_init(&c, logger, controller_vars, N_CTRL_VARS);
     if (ctrl_force_set_prepare(&c, "poly_A, poly_b", (const double(*)[3])m->poly_A, m->poly_b,
                                m->poly_n, hover_fz, m->poly_margin, &m->guid, m->poly_d,
                                &m->fz_min, &m->fz_max, &m->hover_ok[0]) != FP_OK)
@@ -246,30 +253,23 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     ctrl_log_losses(&l, logger);
 }
 
-/* Every input finite and the rotor health within [0, 1]; else a warning naming it. */
-/* The plausible range of each measurement: beyond it a value is finite but absurd (a sensor
- * glitch, a unit error) and would poison the filters for seconds.  The vehicle's own range
- * matches the plant's (docs/robustness.md); the actuators' comes from the airframe. */
 /* The most control samples one doStep may run: 10^5 (200 s at Ts = 2 ms, about two seconds
  * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait.
  * Tighter than the FMI layer's cap of 10^6 internal steps: a sample costs ~10x an RK4 step. */
 #define CTRL_MAX_SAMPLES 1e5
 
-#define CTRL_MAX_DISTANCE 1e7 /* m */
-#define CTRL_MAX_SPEED 1e3    /* m/s */
-#define CTRL_MAX_ACC 1e4      /* m/s^2 */
-#define CTRL_MAX_ANGLE 1e3    /* rad (Euler angles, also unwrapped) */
-#define CTRL_MAX_RATE 1e3     /* rad/s */
-#define CTRL_SERVO_MARGIN (CTRL_PI / 4.0) /* rad beyond the servo limits */
-
-/* 1 if every input is usable; else the first unusable one is described in why. */
+/* 1 if every input is usable: finite and within its plausible range, the range of its table
+ * row (a value beyond it is finite but absurd, a sensor glitch or a unit error, and would
+ * poison the filters for seconds; the vehicle's own range matches the plant's,
+ * docs/robustness.md).  The actuator measurements are also held to the airframe: omega to
+ * [-omega_max, 2 omega_max], alpha and beta to the servo limits +- CTRL_SERVO_MARGIN.
+ * Else the first unusable input is described in why. */
 static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
-    static const char *const names[] = {"pos_ref", "euler_ref", "vel_ref", "acc_ref",
-                                        "euler_rate_ref", "pos", "vel", "acc", "euler", "rate",
-                                        "omega", "alpha", "beta", "rotor_health"};
+    static const int rows[] = {CV_pos_ref, CV_euler_ref, CV_vel_ref, CV_acc_ref,
+                               CV_euler_rate_ref, CV_pos, CV_vel, CV_acc, CV_euler, CV_rate,
+                               CV_omega, CV_alpha, CV_beta, CV_rotor_health};
     const double *inputs[14];
     int counts[14] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0};
-    double lo[14], hi[14];
     int i, k, n = m->n_rotors;
     inputs[0] = m->pos_ref, inputs[1] = m->euler_ref, inputs[2] = m->vel_ref;
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
@@ -277,32 +277,33 @@ static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
     inputs[10] = m->omega, inputs[11] = m->alpha, inputs[12] = m->beta;
     inputs[13] = m->rotor_health;
     counts[10] = counts[11] = counts[12] = counts[13] = n;
-    /* the references and the measurements of the same quantities share one range */
-    hi[0] = hi[5] = CTRL_MAX_DISTANCE; /* pos_ref, pos */
-    hi[1] = hi[8] = CTRL_MAX_ANGLE;    /* euler_ref, euler */
-    hi[2] = hi[6] = CTRL_MAX_SPEED;    /* vel_ref, vel */
-    hi[3] = hi[7] = CTRL_MAX_ACC;      /* acc_ref, acc */
-    hi[4] = hi[9] = CTRL_MAX_RATE;     /* euler_rate_ref, rate */
-    for (k = 0; k < 10; k++) lo[k] = -hi[k];
-    lo[10] = -m->omega_max, hi[10] = 2.0 * m->omega_max;
-    lo[13] = 0.0, hi[13] = 1.0;
-    for (k = 0; k < 14; k++)
+    for (k = 0; k < 14; k++) {
+        const FpVar *row = &controller_vars[rows[k]];
         for (i = 0; i < counts[k]; i++) {
-            double v = inputs[k][i], a = lo[k], b = hi[k];
-            if (k == 11 || k == 12) { /* servo angles: the airframe's limits plus a margin */
-                a = (k == 11 ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
-                b = (k == 11 ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
+            double v = inputs[k][i], a = -HUGE_VAL, b = HUGE_VAL;
+            char range[96];
+            if (rows[k] == CV_omega) {
+                a = -m->omega_max, b = 2.0 * m->omega_max;
+            } else if (rows[k] == CV_alpha || rows[k] == CV_beta) {
+                a = (rows[k] == CV_alpha ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
+                b = (rows[k] == CV_alpha ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
             }
             if (!isfinite(v)) {
-                snprintf(why, size, "input %s[%d] = %g is not finite", names[k], i + 1, v);
+                snprintf(why, size, "input %s[%d] = %g is not finite", row->name, i + 1, v);
+                return 0;
+            }
+            if (!fp_range_contains(&row->range, v)) {
+                snprintf(why, size, "input %s[%d] = %g is outside its plausible range %s",
+                         row->name, i + 1, v, fp_range_text(&row->range, 0, range, sizeof range));
                 return 0;
             }
             if (v < a || v > b) {
                 snprintf(why, size, "input %s[%d] = %g is outside its plausible range [%g, %g]",
-                         names[k], i + 1, v, a, b);
+                         row->name, i + 1, v, a, b);
                 return 0;
             }
         }
+    }
     return 1;
 }
 
@@ -483,13 +484,6 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->rotors_lost = 0;
     m->active_polytope = 0;
     m->hover_possible = m->hover_ok[0];
-    for (i = 0; i < n; i++)
-        if (!isfinite(m->rotor_health[i]) || m->rotor_health[i] < 0.0 ||
-            m->rotor_health[i] > 1.0) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-                   "input rotor_health[%d] = %g: must be in [0, 1]", i + 1, m->rotor_health[i]);
-            return FP_ERROR;
-        }
     update_rotor_losses(m, logger);
     return FP_OK;
 }
@@ -590,7 +584,7 @@ static const FpModelInfo controller_info = {
     "(Hachem et al., section III)",
     sizeof(ControllerModel),
     controller_vars,
-    sizeof controller_vars / sizeof controller_vars[0],
+    N_CTRL_VARS,
     0.002,
     10.0,
     controller_set_defaults,
