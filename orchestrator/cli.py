@@ -116,8 +116,9 @@ def _cmd_check(args: argparse.Namespace) -> int:
 def _cmd_export_ssp(args: argparse.Namespace) -> int:
     from orchestrator.ssp import export_ssp
 
+    euler0 = tuple(math.radians(x) for x in args.euler0_deg)
     path = export_ssp(args.output, airframe=args.airframe, pos0=tuple(args.pos0),
-                      stop_time=args.stop_time)
+                      stop_time=args.stop_time, euler0=euler0)
     print(f"wrote {path}")
     return 0
 
@@ -245,6 +246,10 @@ def build_parser() -> argparse.ArgumentParser:
     ssp.add_argument("--airframe", default="paper_hexacopter")
     ssp.add_argument("--pos0", type=float, nargs=3, default=[0.0, 0.0, -3.0],
                      metavar=("X", "Y", "Z"), help="hover position (m, NED)")
+    ssp.add_argument("--euler0-deg", type=float, nargs=3, default=[0.0, 0.0, 0.0],
+                     metavar=("ROLL", "PITCH", "YAW"),
+                     help="hover attitude (deg), held by the controller: the same pose is "
+                          "written to both FMUs")
     ssp.add_argument("--stop-time", type=float, default=10.0)
     ssp.set_defaults(func=_cmd_export_ssp)
 

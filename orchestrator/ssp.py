@@ -24,8 +24,13 @@ controller's reference is that hover point; the controller's measurement inputs 
 plant's command inputs get the plant's initial outputs / trim as start values, so the loop is
 consistent at t = 0 for a runner that initialises inputs from start values.
 
-The step size (SSP 1.0 has no element for it) is written as a ``ssc:Annotation`` of type
-``org.fullpose.fixedStepMaster`` in the ``DefaultExperiment``, next to start and stop time.
+The step size (SSP 1.0 has no element for it) is written twice in the ``DefaultExperiment``,
+next to start and stop time: as the Open Simulation Platform's annotation
+(``com.opensimulationplatform``: ``osp:Algorithm/osp:FixedStepAlgorithm baseStepSize``),
+which libcosim's SSP loader applies, and as our own ``org.fullpose.fixedStepMaster``.
+libcosim also applies the ParameterBindings (to parameters and inputs), so it plays the
+archive as written: ``CosimExecution.from_ssp_file(path)`` hovers to ~1e-15 m
+(tests/test_ssp.py).
 
 What fmpy's SSP runner (``fmpy.ssp.simulation.simulate_ssp``, fmpy 0.3.x) does, read from its
 source, and how this module deals with it:
@@ -43,7 +48,8 @@ source, and how this module deals with it:
   true.  :func:`parameter_set` converts values to Python bool/int/float by the SSV type, which
   avoids that (the only Boolean written is ``init_trim = true`` anyway).
 * It ignores DefaultExperiment, annotations and connector types: pass ``stop_time`` and
-  ``step_size`` explicitly (its default step is stop_time / 100).
+  ``step_size`` explicitly (its default step is stop_time / 100); :func:`fmpy_options`
+  reads them, and the parameter set, from the archive.
 * It steps all components with the same inputs and then copies outputs to inputs (Jacobi:
   one-step delay in both directions), and it sets every declared *input* connector from its
   connection at every step, starting from 0.0 at the first step (input start values are not
@@ -101,6 +107,11 @@ NS_SSC = "http://ssp-standard.org/SSP1/SystemStructureCommon"
 NS_SSV = "http://ssp-standard.org/SSP1/SystemStructureParameterValues"
 NS_FP = "urn:fullpose:ssp:annotations"
 STEP_ANNOTATION = "org.fullpose.fixedStepMaster"
+# The Open Simulation Platform's annotation, which libcosim's SSP loader applies as the base
+# step of its fixed-step algorithm.  libcosim reads the XML with prefixes taken literally
+# (boost property_tree), so the prefix must be "osp" and the elements exactly these.
+NS_OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
+OSP_ANNOTATION = "com.opensimulationplatform"
 
 # fixed zip metadata: the same inputs give the same bytes
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
@@ -193,24 +204,28 @@ def _initial_outputs(params: Mapping[str, Value], names: Iterable[str]) -> dict[
 def component_parameters(airframe: str | Path = "paper_hexacopter",
                          pos0: Sequence[float] = (0.0, 0.0, -3.0),
                          connections: Iterable[Connection] = (),
+                         euler0: Sequence[float] = (0.0, 0.0, 0.0),
                          ) -> dict[str, dict[str, Value]]:
-    """Start values per component (by FMU variable name) for a hover at ``pos0``.
+    """Start values per component (by FMU variable name) for a hover at ``pos0``, ``euler0``.
 
-    Plant: its start values (``orchestrator.start_values``) at ``pos0``, ``init_trim = true``
-    and, for its connected command inputs, the trim it initialises to.  Controller: its start
-    values (the shared airframe numbers and S(0)), the hover reference (pos_ref = pos0,
-    everything else 0) and, for its connected measurement inputs, the plant's initial
-    outputs.
+    One pose, written to both FMUs: the plant starts there (``pos0``, ``euler0``,
+    ``init_trim = true``, and for its connected command inputs the trim it initialises to)
+    and the controller holds it (``pos_ref = pos0``, ``euler_ref = euler0``, rates and
+    accelerations 0), with the shared airframe numbers and S(0) and, for its connected
+    measurement inputs, the plant's initial outputs.  An attitude the airframe cannot hold is
+    refused by the plant's initialization (no hover trim), with its message.
     """
-    p0 = [float(x) for x in pos0]
-    if len(p0) != 3 or not all(math.isfinite(x) for x in p0):
-        raise ValueError(f"pos0 must be 3 finite numbers, got {pos0!r}")
+    pose = Pose.of(pos0, euler0)
+    for what, v in (("pos0", pose.pos), ("euler0", pose.euler)):
+        if not all(math.isfinite(x) for x in v):
+            raise ValueError(f"{what} must be 3 finite numbers, got {v!r}")
     af = load_airframe(airframe)
-    plant: dict[str, Value] = plant_start_values(af, Pose.of(p0), overrides={"init_trim": True})
+    plant: dict[str, Value] = plant_start_values(af, pose, overrides={"init_trim": True})
     ctrl: dict[str, Value] = controller_start_values(af)
+    held = {"pos_ref": pose.pos, "euler_ref": pose.euler}
     for ref in _REFERENCES:
         for i in range(3):
-            ctrl[f"{ref}[{i + 1}]"] = p0[i] if ref == "pos_ref" else 0.0
+            ctrl[f"{ref}[{i + 1}]"] = held[ref][i] if ref in held else 0.0
     conns = list(connections)
     measured = [fv for fc, fv, _, _ in conns if fc == PLANT]
     commanded = [tv for _, _, tc, tv in conns if tc == PLANT]
@@ -259,7 +274,8 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
                  step: float, stop_time: float) -> bytes:
     """The SystemStructure.ssd (SSP 1.0) of the components ``mds`` (name -> modelDescription)."""
     root = etree.Element(_q(NS_SSD, "SystemStructureDescription"),
-                         nsmap={"ssd": NS_SSD, "ssc": NS_SSC}, version="1.0", name=name,
+                         nsmap={"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP}, version="1.0",
+                         name=name,
                          generationTool="fullpose orchestrator.ssp")
     system = etree.SubElement(root, _q(NS_SSD, "System"), name=SYSTEM,
                               description="Multirotor plant flown by the full-pose controller")
@@ -288,6 +304,10 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
     exp = etree.SubElement(root, _q(NS_SSD, "DefaultExperiment"), startTime=_num(0.0),
                            stopTime=_num(stop_time))
     notes = etree.SubElement(exp, _q(NS_SSD, "Annotations"))
+    osp = etree.SubElement(notes, _q(NS_SSC, "Annotation"), type=OSP_ANNOTATION)
+    # declared on the root: libcosim takes an xmlns attribute on osp:Algorithm for an algorithm
+    algorithm = etree.SubElement(osp, _q(NS_OSP, "Algorithm"))
+    etree.SubElement(algorithm, _q(NS_OSP, "FixedStepAlgorithm"), baseStepSize=_num(step))
     note = etree.SubElement(notes, _q(NS_SSC, "Annotation"), type=STEP_ANNOTATION)
     etree.SubElement(note, _q(NS_FP, "FixedStepMaster"), nsmap={"fp": NS_FP},
                      stepSize=_num(step))
@@ -307,12 +327,13 @@ def _add(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> None:
 
 def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
                pos0: Sequence[float] = (0.0, 0.0, -3.0), step: float = 0.002,
-               stop_time: float = 10.0) -> Path:
-    """Write the closed loop hovering at ``pos0`` as an SSP 1.0 archive; returns its path.
+               stop_time: float = 10.0, euler0: Sequence[float] = (0.0, 0.0, 0.0)) -> Path:
+    """Write the closed loop hovering at ``pos0``, ``euler0`` as an SSP 1.0 archive.
 
-    ``path`` gets the ``.ssp`` suffix if it has another one.  ``step`` and ``stop_time`` are
-    recorded in the SSD's DefaultExperiment (runners may ignore them: pass them to the runner).
-    The output is deterministic: the same inputs (and installed FMUs) give identical bytes.
+    Returns its path; ``path`` gets the ``.ssp`` suffix if it has another one.  ``step`` and
+    ``stop_time`` are recorded in the SSD's DefaultExperiment (libcosim applies both; for
+    fmpy's runner pass :func:`fmpy_options`).  The output is deterministic: the same inputs
+    (and installed FMUs) give identical bytes.
     """
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"step must be positive, got {step}")
@@ -324,7 +345,7 @@ def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
     fmus = {PLANT: Path(plant_fmu()), CONTROLLER: Path(controller_fmu())}
     mds = {comp: read_model_description(str(p)) for comp, p in fmus.items()}
     connections = connection_table(mds[PLANT], mds[CONTROLLER])
-    values = component_parameters(airframe, pos0, connections)
+    values = component_parameters(airframe, pos0, connections, euler0)
     af_name = load_airframe(airframe).name
     ssv_files = {comp: f"resources/{comp}.ssv" for comp in fmus}
     entries: dict[str, tuple[bytes, int]] = {}
@@ -369,6 +390,38 @@ def parameter_set(ssp_path: str | Path) -> ParameterSet:
 
     walk(ssd.system, "")
     return ParameterSet(name=ssd.name, parameters=list(merged.values()))
+
+
+def experiment(ssp_path: str | Path) -> tuple[float, float, float]:
+    """(start time, stop time, step size) the archive's DefaultExperiment records.
+
+    The step is read from the OSP annotation (what libcosim applies), else from ours.
+    """
+    with zipfile.ZipFile(ssp_path) as zf:
+        root = etree.fromstring(zf.read(SSD_NAME))
+    ns = {"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP, "fp": NS_FP}
+    exp = root.find("ssd:DefaultExperiment", ns)
+    if exp is None:
+        raise ValueError(f"{ssp_path}: {SSD_NAME} has no DefaultExperiment")
+    steps = exp.xpath("ssd:Annotations/ssc:Annotation/osp:Algorithm/osp:FixedStepAlgorithm"
+                      "/@baseStepSize | ssd:Annotations/ssc:Annotation/fp:FixedStepMaster"
+                      "/@stepSize", namespaces=ns)
+    if not steps:
+        raise ValueError(f"{ssp_path}: {SSD_NAME} records no step size")
+    return (float(exp.get("startTime", 0.0)), float(exp.get("stopTime")), float(steps[0]))
+
+
+def fmpy_options(ssp_path: str | Path) -> dict[str, object]:
+    """Keyword arguments that make fmpy's runner play the archive as recorded.
+
+    fmpy 0.3.x's ``simulate_ssp`` reads neither the DefaultExperiment nor the parameter
+    bindings from an archive (its step defaults to stop_time / 100, 0.1 s for a 10 s
+    experiment, far beyond the controller's 2 ms sample time): ``simulate_ssp(path,
+    **fmpy_options(path))`` passes the recorded start, stop and step and the bindings.
+    """
+    start, stop, step = experiment(ssp_path)
+    return {"start_time": start, "stop_time": stop, "step_size": step,
+            "parameter_set": parameter_set(ssp_path)}
 
 
 def _parse(p: object) -> Value | str:

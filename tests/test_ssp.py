@@ -26,7 +26,9 @@ from orchestrator.ssp import (
     CONTROLLER,
     PLANT,
     connection_table,
+    experiment,
     export_ssp,
+    fmpy_options,
     parameter_set,
     unconnected_inputs,
 )
@@ -128,8 +130,16 @@ def test_ssd_and_ssv_validate_against_fmpy_schemas(hover_ssp, mds):
     assert len(ends) == len(set(ends))
     # every declared input is connected (fmpy's runner cannot resolve unconnected ones)
     assert {k for k, kind in kinds.items() if kind == "input"} == set(ends)
-    step = ssd.find("ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation/*", NS)
-    assert float(step.get("stepSize")) == H
+    # the step in the two forms written: the OSP annotation libcosim applies, and ours
+    ns = {**NS, "osp": "http://opensimulationplatform.com/SSP/OSPAnnotations",
+          "fp": "urn:fullpose:ssp:annotations"}
+    notes = ssd.findall("ssd:DefaultExperiment/ssd:Annotations/ssc:Annotation", ns)
+    assert [n.get("type") for n in notes] == ["com.opensimulationplatform",
+                                              "org.fullpose.fixedStepMaster"]
+    assert float(notes[0].find("osp:Algorithm/osp:FixedStepAlgorithm", ns)
+                 .get("baseStepSize")) == H
+    assert float(notes[1].find("fp:FixedStepMaster", ns).get("stepSize")) == H
+    assert experiment(hover_ssp) == (0.0, 10.0, H)
 
 
 def test_connection_table_is_the_name_match(hover_ssp, mds, caplog):
@@ -287,3 +297,86 @@ def test_bad_arguments(tmp_path):
     with pytest.raises(AirframeError):
         export_ssp(tmp_path / "x.ssp", airframe="no_such_airframe")
     assert not (tmp_path / "x.ssp").exists()
+
+
+def test_fmpy_runner_with_the_recorded_options_hovers(tmp_path):
+    """``fmpy_options`` gives fmpy's runner the archive's own step, stop time and bindings
+    (it reads none of them itself; its default step would be 0.1 s here)."""
+    path = export_ssp(tmp_path / "short.ssp", stop_time=1.0)
+    options = fmpy_options(path)
+    assert options["step_size"] == H and options["stop_time"] == 1.0
+    res = ssp_sim.simulate_ssp(str(path), **options)
+    assert len(res) == 500
+    # the same start-up dip as test_fmpy_runner_hovers (fmpy's zero inputs in the first step)
+    assert np.linalg.norm(positions(res) - HOVER, axis=1).max() < 2e-3
+
+
+def test_one_tilted_hover_pose_reaches_both_fmus(tmp_path, consistent_start):
+    """The hexacopter hovers rolled 20 deg and yawed 30 deg: the plant starts at that pose
+    (trim included) and the controller holds the same one."""
+    euler0 = (np.radians(20.0), 0.0, np.radians(30.0))
+    path = export_ssp(tmp_path / "tilted.ssp", pos0=(1.0, -2.0, -5.0), euler0=euler0)
+    plant, ctrl = ssv_values(path, PLANT), ssv_values(path, CONTROLLER)
+    assert [float(plant[f"euler0[{i}]"][1]) for i in (1, 2, 3)] == list(euler0)
+    assert [float(ctrl[f"euler_ref[{i}]"][1]) for i in (1, 2, 3)] == list(euler0)
+    assert [float(ctrl[f"euler[{i}]"][1]) for i in (1, 2, 3)] == pytest.approx(euler0, abs=1e-12)
+    res = run(path)
+    euler = np.stack([res[f"{PLANT}.euler[{i}]"] for i in (1, 2, 3)], axis=1)
+    assert np.linalg.norm(positions(res) - [1.0, -2.0, -5.0], axis=1).max() < 1e-6
+    assert np.abs(euler - euler0).max() < 1e-6
+
+
+def test_an_attitude_the_airframe_cannot_hover_at_is_refused(tmp_path):
+    with pytest.raises(Exception, match="trim"):  # the plant FMU's own message
+        export_ssp(tmp_path / "x.ssp", airframe="quadrotor", euler0=(0.5, 0.0, 0.0))
+    with pytest.raises(ValueError, match="euler0"):
+        export_ssp(tmp_path / "x.ssp", euler0=(float("inf"), 0.0, 0.0))
+    assert not (tmp_path / "x.ssp").exists()
+
+
+# -- libcosim (Open Simulation Platform), a second runner nobody here wrote ------------------
+
+
+def libcosim_hover(path, seconds):
+    """Play the archive with libcosim as it is (no step, no parameters passed) and return
+    (its step in s, plant positions and Euler angles after every step)."""
+    pytest.importorskip("libcosimpy")
+    from libcosimpy.CosimExecution import CosimExecution
+    from libcosimpy.CosimLogging import CosimLogLevel, log_output_level
+    from libcosimpy.CosimObserver import CosimObserver
+
+    log_output_level(CosimLogLevel.ERROR)
+    execution = CosimExecution.from_ssp_file(str(path))  # no step_size: the archive's own
+    plant = execution.slave_index_from_instance_name(PLANT)
+    refs = {v.name.decode(): v.reference for v in execution.slave_variables(plant)}
+    names = [f"pos[{i}]" for i in (1, 2, 3)] + [f"euler[{i}]" for i in (1, 2, 3)]
+    observer = CosimObserver.create_last_value()
+    execution.add_observer(observer)
+    rows = []
+    assert execution.step(1)
+    step = execution.status().current_time * 1e-9
+    rows.append(observer.last_real_values(plant, [refs[n] for n in names]))
+    for _ in range(round(seconds / step) - 1):
+        assert execution.step(1)
+        rows.append(observer.last_real_values(plant, [refs[n] for n in names]))
+    return step, np.array(rows)
+
+
+def test_libcosim_plays_the_archive_with_its_step_and_bindings(hover_ssp):
+    step, rows = libcosim_hover(hover_ssp, 10.0)
+    assert step == pytest.approx(H, abs=1e-12)  # from the OSP annotation
+    drift = np.linalg.norm(rows[:, :3] - HOVER, axis=1)
+    print(f"\nlibcosim hover, 10 s: max |pos - pos0| = {drift.max():.3g} m")
+    # the bindings reach both FMUs (pos0 and the reference, trim and measurement start
+    # values): the hover holds (measured ~2.5e-15 m), far within the paper's 2 cm
+    assert drift.max() < 1e-6
+    assert np.abs(rows[:, 3:]).max() < 1e-6
+
+
+def test_libcosim_holds_a_tilted_pose(tmp_path):
+    euler0 = (np.radians(20.0), 0.0, np.radians(30.0))
+    path = export_ssp(tmp_path / "tilted.ssp", pos0=(1.0, -2.0, -5.0), euler0=euler0,
+                      stop_time=3.0)
+    _, rows = libcosim_hover(path, 3.0)
+    assert np.linalg.norm(rows[:, :3] - [1.0, -2.0, -5.0], axis=1).max() < 1e-6
+    assert np.abs(rows[:, 3:] - euler0).max() < 1e-6

@@ -66,6 +66,12 @@ typedef struct {
 FP_STATIC_ASSERT(sizeof(StateHeader) == 80, state_header_is_80_bytes);
 FP_STATIC_ASSERT(sizeof(StateHeader) % 8 == 0, state_payload_stays_aligned);
 
+/* The distinct warnings one initialization reports once each (beyond them, repeats show). */
+#define MAX_WARNINGS_SEEN 32
+
+/* logCalls shows at most this many values of one get or set. */
+#define CALL_VALUES 8
+
 /* Marks a live instance; cleared to INSTANCE_FREED by fmi2FreeInstance. */
 #define INSTANCE_LIVE 0x4650494eu  /* "FPIN" */
 #define INSTANCE_FREED 0x46524545u /* "FREE" */
@@ -93,6 +99,12 @@ typedef struct {
     void *scratch;                /* model_size bytes: a restored state is checked here */
     const FpVar *internal_step;   /* parameter of the internal step (NULL: none) */
     FpLogger model_logger;
+    /* The model validates its parameters at every read in initialization mode, at its end
+     * and on a restored state: each distinct warning of those checks is reported once per
+     * initialization (from instantiation or reset on), not at every repeat. */
+    int checking;                            /* the model is validating parameters */
+    uint64_t warned[MAX_WARNINGS_SEEN];      /* FNV-1a of the warnings reported */
+    int n_warned;
 } Instance;
 
 static const char *state_name(int state) {
@@ -134,9 +146,21 @@ static int wants(const Instance *inst, FpStatus status, FpLogCategory category) 
     return inst->logging_on && (inst->categories & (1u << category));
 }
 
+/* 1 if this warning of a parameter check was reported already in this initialization
+ * (else it is remembered, while there is room). */
+static int warned_before(Instance *inst, const char *message) {
+    uint64_t h = fp_fnv1a64(FP_FNV1A64_BASIS, message, strlen(message));
+    int i;
+    for (i = 0; i < inst->n_warned; i++)
+        if (inst->warned[i] == h) return 1;
+    if (inst->n_warned < MAX_WARNINGS_SEEN) inst->warned[inst->n_warned++] = h;
+    return 0;
+}
+
 static void model_log(void *env, FpStatus status, FpLogCategory category, const char *message) {
     Instance *inst = (Instance *)env;
     if (!wants(inst, status, category)) return;
+    if (inst->checking && status == FP_WARNING && warned_before(inst, message)) return;
     emit(inst, to_fmi(status), fp_log_category_name(category), message);
 }
 
@@ -177,13 +201,10 @@ static Instance *instance(fmi2Component c, const char *fn) {
     return NULL;
 }
 
-/* Checks a call is legal in the current state; illegal calls change nothing. */
+/* Checks a call is legal in the current state; illegal calls change nothing (and are
+ * logged as errors, not as calls). */
 static int allowed(Instance *inst, const char *fn, int states) {
-    if (inst->state & states) {
-        if (inst->logging_on && (inst->categories & (1u << FP_LOG_CALLS)))
-            logf_(inst, FP_OK, FP_LOG_CALLS, "%s", fn);
-        return 1;
-    }
+    if (inst->state & states) return 1;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s may not be called in state %s", fn,
           state_name(inst->state));
     return 0;
@@ -199,6 +220,69 @@ static Instance *enter(fmi2Component c, const char *fn, int states) {
 #define CHECK(fn, states)                                     \
     Instance *inst = enter(c, fn, states);                    \
     if (inst == NULL) return fmi2Error
+
+/* logCalls: every accepted call with its arguments, e.g. "fmi2DoStep(currentCommunication
+ * Point = 0.5, communicationStepSize = 0.002, ...)"; formatted only when enabled. */
+static int calls_on(const Instance *inst) {
+    return inst->logging_on && (inst->categories & (1u << FP_LOG_CALLS));
+}
+
+#define LOG_CALL(inst, ...)                                             \
+    do {                                                                \
+        if (calls_on(inst)) logf_(inst, FP_OK, FP_LOG_CALLS, __VA_ARGS__); \
+    } while (0)
+
+/* A bounded message built piece by piece (what does not fit is cut). */
+typedef struct {
+    char text[640];
+    size_t used;
+} Text;
+
+static void text_add(Text *t, const char *fmt, ...)
+#if defined(__GNUC__)
+    __attribute__((format(printf, 2, 3)))
+#endif
+    ;
+
+static void text_add(Text *t, const char *fmt, ...) {
+    va_list args;
+    int n;
+    if (t->used >= sizeof t->text - 1) return;
+    va_start(args, fmt);
+    n = vsnprintf(t->text + t->used, sizeof t->text - t->used, fmt, args);
+    va_end(args);
+    if (n > 0) t->used += (size_t)n;
+    if (t->used > sizeof t->text - 1) t->used = sizeof t->text - 1;
+}
+
+/* The arguments of a get or set, "fmi2SetReal(nvr = 2: mass (vr 2) = 1.5, k_t (vr 13) =
+ * 2e-05)", at most CALL_VALUES of them ("..., 12 more").  A get logs what it returned:
+ * `shown` values are given (0 when the call failed: only the references are listed). */
+static void log_values(Instance *inst, const char *fn, const fmi2ValueReference vr[],
+                       size_t nvr, const void *values, FpVarType type, size_t shown) {
+    Text t;
+    size_t i, n = nvr < CALL_VALUES ? nvr : CALL_VALUES;
+    if (!calls_on(inst)) return;
+    t.used = 0;
+    t.text[0] = '\0';
+    text_add(&t, "%s(nvr = %lu%s", fn, (unsigned long)nvr, nvr > 0 && vr != NULL ? ":" : "");
+    for (i = 0; i < n && vr != NULL; i++) {
+        char name[96] = "?", value[FP_REAL_TEXT];
+        uint32_t r = vr[i];
+        if (r < inst->n_vr && inst->vr_map[r] >= 0) {
+            const FpVar *v = &inst->info->vars[inst->vr_map[r]];
+            fp_var_element_name(v, r - v->vr, name, sizeof name);
+        }
+        text_add(&t, "%s %s (vr %u)", i > 0 ? "," : "", name, (unsigned)r);
+        if (values == NULL || i >= shown) continue;
+        if (type == FP_REAL) text_add(&t, " = %s", fp_real_text(value, ((const fmi2Real *)values)[i]));
+        else if (type == FP_INTEGER) text_add(&t, " = %d", (int)((const fmi2Integer *)values)[i]);
+        else text_add(&t, " = %s", ((const fmi2Boolean *)values)[i] ? "true" : "false");
+    }
+    if (nvr > n && vr != NULL) text_add(&t, ", ... %lu more", (unsigned long)(nvr - n));
+    text_add(&t, ")");
+    logf_(inst, FP_OK, FP_LOG_CALLS, "%s", t.text);
+}
 
 /* A NULL array or pointer argument: refused with a message naming it. */
 static fmi2Status null_argument(Instance *inst, const char *fn, const char *what) {
@@ -250,7 +334,9 @@ static void *element(Instance *inst, const FpVar *v, uint32_t k) {
 static fmi2Status refresh(Instance *inst) {
     FpStatus s;
     if (!(inst->state & (S_INIT | S_INSTANTIATED)) || !inst->dirty) return fmi2OK;
+    inst->checking = 1;
     s = inst->info->initialize(inst->model, inst->time, &inst->model_logger);
+    inst->checking = 0;
     if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi2Error);
     inst->dirty = 0;
     return to_fmi(s);
@@ -295,6 +381,11 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
     int j;
     unsigned mask = 0;
     CHECK("fmi2SetDebugLogging", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2SetDebugLogging(loggingOn = %d, nCategories = %lu%s%s%s)",
+             (int)loggingOn, (unsigned long)nCategories,
+             nCategories > 0 && categories != NULL ? ": " : "",
+             nCategories > 0 && categories != NULL && categories[0] ? categories[0] : "",
+             nCategories > 1 ? ", ..." : "");
     if (nCategories > 0 && categories == NULL)
         return null_argument(inst, "fmi2SetDebugLogging", "categories");
     if (nCategories == 0) {
@@ -359,8 +450,6 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     Instance *inst;
     uint32_t max_vr = 0;
     size_t i;
-    (void)fmuResourceLocation;
-    (void)visible;
     if (functions == NULL) return NULL; /* no logger to report through */
     if (functions->allocateMemory == NULL || functions->freeMemory == NULL) {
         if (functions->logger != NULL)
@@ -441,6 +530,11 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->internal_step = find_internal_step(info);
     info->set_defaults(inst->model);
     inst->dirty = 1;
+    LOG_CALL(inst,
+             "fmi2Instantiate(instanceName = \"%.64s\", fmuType = %d, fmuGUID = \"%s\", "
+             "fmuResourceLocation = \"%.200s\", visible = %d, loggingOn = %d)",
+             instanceName, (int)fmuType, fmuGUID,
+             fmuResourceLocation ? fmuResourceLocation : "(null)", (int)visible, (int)loggingOn);
     logf_(inst, FP_OK, FP_LOG_EVENTS, "instantiated %s", info->model_name);
     return inst;
 }
@@ -448,6 +542,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
 void fmi2FreeInstance(fmi2Component c) {
     Instance *inst = enter(c, "fmi2FreeInstance", S_ANY_BUT_FATAL | S_FATAL);
     if (inst == NULL) return;
+    LOG_CALL(inst, "fmi2FreeInstance()");
     release_instance(inst);
 }
 
@@ -455,8 +550,10 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
                                fmi2Real tolerance, fmi2Real startTime,
                                fmi2Boolean stopTimeDefined, fmi2Real stopTime) {
     CHECK("fmi2SetupExperiment", S_INSTANTIATED);
-    (void)toleranceDefined;
-    (void)tolerance;
+    LOG_CALL(inst,
+             "fmi2SetupExperiment(toleranceDefined = %d, tolerance = %.17g, startTime = %.17g, "
+             "stopTimeDefined = %d, stopTime = %.17g)",
+             (int)toleranceDefined, tolerance, startTime, (int)stopTimeDefined, stopTime);
     if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR,
               "fmi2SetupExperiment: startTime %g / stopTime %g are not a valid interval",
@@ -470,6 +567,7 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
 
 fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
     CHECK("fmi2EnterInitializationMode", S_INSTANTIATED);
+    LOG_CALL(inst, "fmi2EnterInitializationMode()");
     inst->state = S_INIT;
     return fmi2OK;
 }
@@ -477,6 +575,7 @@ fmi2Status fmi2EnterInitializationMode(fmi2Component c) {
 fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     fmi2Status s;
     CHECK("fmi2ExitInitializationMode", S_INIT);
+    LOG_CALL(inst, "fmi2ExitInitializationMode()");
     inst->dirty = 1; /* always validate the final parameter set */
     s = refresh(inst);
     if (s > fmi2Warning) return s;
@@ -488,18 +587,21 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
 
 fmi2Status fmi2Terminate(fmi2Component c) {
     CHECK("fmi2Terminate", S_STEP_COMPLETE | S_STEP_FAILED);
+    LOG_CALL(inst, "fmi2Terminate()");
     inst->state = S_TERMINATED;
     return fmi2OK;
 }
 
 fmi2Status fmi2Reset(fmi2Component c) {
     CHECK("fmi2Reset", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2Reset()");
     memset(inst->model, 0, inst->info->model_size);
     inst->info->set_defaults(inst->model);
     inst->state = S_INSTANTIATED;
     inst->time = 0.0;
     inst->dirty = 1;
     inst->tunables_dirty = 0;
+    inst->n_warned = 0; /* a new initialization: its warnings are news again */
     logf_(inst, FP_OK, FP_LOG_EVENTS, "reset");
     return fmi2OK;
 }
@@ -514,13 +616,13 @@ fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     CHECK("fmi2GetReal", S_READABLE);
     if (null_arrays(inst, "fmi2GetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
     s = refresh(inst);
-    if (s > fmi2Warning) return s;
-    for (i = 0; i < nvr; i++) {
+    for (i = 0; i < nvr && s <= fmi2Warning; i++) {
         uint32_t k;
         const FpVar *v = lookup(inst, vr[i], FP_REAL, &k, "fmi2GetReal");
-        if (v == NULL) return fmi2Error;
-        value[i] = *(const double *)element(inst, v, k);
+        if (v == NULL) s = fmi2Error;
+        else value[i] = *(const double *)element(inst, v, k);
     }
+    log_values(inst, "fmi2GetReal", vr, nvr, value, FP_REAL, s <= fmi2Warning ? nvr : 0);
     return s;
 }
 
@@ -531,13 +633,13 @@ static fmi2Status get_ints(fmi2Component c, const fmi2ValueReference vr[], size_
     CHECK(fn, S_READABLE);
     if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
     s = refresh(inst);
-    if (s > fmi2Warning) return s;
-    for (i = 0; i < nvr; i++) {
+    for (i = 0; i < nvr && s <= fmi2Warning; i++) {
         uint32_t k;
         const FpVar *v = lookup(inst, vr[i], type, &k, fn);
-        if (v == NULL) return fmi2Error;
-        value[i] = (int)*(const int32_t *)element(inst, v, k);
+        if (v == NULL) s = fmi2Error;
+        else value[i] = (int)*(const int32_t *)element(inst, v, k);
     }
+    log_values(inst, fn, vr, nvr, value, type, s <= fmi2Warning ? nvr : 0);
     return s;
 }
 
@@ -554,6 +656,7 @@ fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          fmi2String value[]) {
     CHECK("fmi2GetString", S_READABLE);
+    log_values(inst, "fmi2GetString", vr, nvr, NULL, FP_REAL, 0);
     if (null_arrays(inst, "fmi2GetString", vr, nvr, value) != fmi2OK) return fmi2Error;
     if (nvr == 0) return fmi2OK;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2GetString: unknown value reference %u (no strings)",
@@ -578,6 +681,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
     size_t i;
     CHECK("fmi2SetReal", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
     if (null_arrays(inst, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
+    log_values(inst, "fmi2SetReal", vr, nvr, value, FP_REAL, nvr);
     if (check_sets(inst, vr, nvr, FP_REAL, "fmi2SetReal") != fmi2OK) return fmi2Error;
     for (i = 0; i < nvr; i++) {
         uint32_t k = 0;
@@ -593,6 +697,7 @@ static fmi2Status set_ints(fmi2Component c, const fmi2ValueReference vr[], size_
     size_t i;
     CHECK(fn, S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
     if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
+    log_values(inst, fn, vr, nvr, value, type, nvr);
     if (check_sets(inst, vr, nvr, type, fn) != fmi2OK) return fmi2Error;
     for (i = 0; i < nvr; i++) {
         uint32_t k = 0;
@@ -616,6 +721,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          const fmi2String value[]) {
     CHECK("fmi2SetString", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    log_values(inst, "fmi2SetString", vr, nvr, NULL, FP_REAL, 0);
     if (null_arrays(inst, "fmi2SetString", vr, nvr, value) != fmi2OK) return fmi2Error;
     if (nvr == 0) return fmi2OK;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetString: unknown value reference %u (no strings)",
@@ -794,11 +900,16 @@ static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, const 
     StateHeader h;
     if (!check_state(inst, buf, 0, STATE_ALL, fn, "FMUstate", &h)) return fmi2Error;
     memcpy(inst->scratch, buf + sizeof h, inst->info->model_size);
-    if (inst->info->check_restored != NULL &&
-        inst->info->check_restored(inst->scratch, (h.state & S_INITIALIZED) != 0,
-                                   &inst->model_logger) != FP_OK) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state is refused", fn);
-        return fmi2Error;
+    if (inst->info->check_restored != NULL) {
+        FpStatus s;
+        inst->checking = 1;
+        s = inst->info->check_restored(inst->scratch, (h.state & S_INITIALIZED) != 0,
+                                       &inst->model_logger);
+        inst->checking = 0;
+        if (s != FP_OK) {
+            logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state is refused", fn);
+            return fmi2Error;
+        }
     }
     memcpy(inst->model, inst->scratch, inst->info->model_size);
     inst->state = h.state;
@@ -811,6 +922,8 @@ static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, const 
 fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     unsigned char *buf;
     CHECK("fmi2GetFMUstate", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2GetFMUstate(FMUstate = %p -> %p)", (void *)FMUstate,
+             FMUstate ? *FMUstate : NULL);
     if (FMUstate == NULL) return null_argument(inst, "fmi2GetFMUstate", "FMUstate");
     buf = (unsigned char *)*FMUstate;
     if (buf != NULL) {
@@ -832,11 +945,14 @@ fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
 
 fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
     CHECK("fmi2SetFMUstate", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2SetFMUstate(FMUstate = %p)", FMUstate);
     return snapshot_read(inst, (const unsigned char *)FMUstate, "fmi2SetFMUstate");
 }
 
 fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
     CHECK("fmi2FreeFMUstate", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2FreeFMUstate(FMUstate = %p -> %p)", (void *)FMUstate,
+             FMUstate ? *FMUstate : NULL);
     if (FMUstate == NULL) return null_argument(inst, "fmi2FreeFMUstate", "FMUstate");
     if (*FMUstate == NULL) return fmi2OK; /* FMI 2.0: a NULL state is ignored */
     if (!check_state(inst, (const unsigned char *)*FMUstate, 0, STATE_HEADER, "fmi2FreeFMUstate",
@@ -850,6 +966,7 @@ fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
 
 fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
     CHECK("fmi2SerializedFMUstateSize", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2SerializedFMUstateSize(FMUstate = %p)", FMUstate);
     if (size == NULL) return null_argument(inst, "fmi2SerializedFMUstateSize", "size");
     if (!check_state(inst, (const unsigned char *)FMUstate, 0, STATE_HEADER,
                      "fmi2SerializedFMUstateSize", "FMUstate", NULL))
@@ -861,6 +978,8 @@ fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, si
 fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[],
                                  size_t size) {
     CHECK("fmi2SerializeFMUstate", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2SerializeFMUstate(FMUstate = %p, serializedState = %p, size = %lu)",
+             FMUstate, (void *)serializedState, (unsigned long)size);
     if (!check_state(inst, (const unsigned char *)FMUstate, 0, STATE_ALL,
                      "fmi2SerializeFMUstate", "FMUstate", NULL))
         return fmi2Error;
@@ -880,6 +999,8 @@ fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedSta
                                    fmi2FMUstate *FMUstate) {
     unsigned char *buf;
     CHECK("fmi2DeSerializeFMUstate", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2DeSerializeFMUstate(serializedState = %p, size = %lu, FMUstate = %p)",
+             (const void *)serializedState, (unsigned long)size, (void *)FMUstate);
     if (FMUstate == NULL) return null_argument(inst, "fmi2DeSerializeFMUstate", "FMUstate");
     if (serializedState == NULL)
         return null_argument(inst, "fmi2DeSerializeFMUstate", "serializedState");
@@ -917,6 +1038,8 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
                                         size_t nKnown, const fmi2Real dvKnown[],
                                         fmi2Real dvUnknown[]) {
     CHECK("fmi2GetDirectionalDerivative", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2GetDirectionalDerivative(nUnknown = %lu, nKnown = %lu)",
+             (unsigned long)nUnknown, (unsigned long)nKnown);
     (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
         (void)dvUnknown;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
@@ -927,6 +1050,7 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
 fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                                        const fmi2Integer order[], const fmi2Real value[]) {
     CHECK("fmi2SetRealInputDerivatives", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2SetRealInputDerivatives(nvr = %lu)", (unsigned long)nvr);
     (void)vr, (void)nvr, (void)order, (void)value;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2SetRealInputDerivatives: inputs are held constant (canInterpolateInputs=false)");
@@ -936,6 +1060,7 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
 fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReference vr[],
                                         size_t nvr, const fmi2Integer order[], fmi2Real value[]) {
     CHECK("fmi2GetRealOutputDerivatives", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2GetRealOutputDerivatives(nvr = %lu)", (unsigned long)nvr);
     (void)vr, (void)nvr, (void)order, (void)value;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2GetRealOutputDerivatives: not provided (maxOutputDerivativeOrder=0)");
@@ -944,6 +1069,7 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
     CHECK("fmi2CancelStep", S_ANY_BUT_FATAL);
+    LOG_CALL(inst, "fmi2CancelStep()");
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2CancelStep: steps are synchronous, nothing to cancel");
     return fmi2Error;
 }
@@ -957,12 +1083,12 @@ static int within_work_cap(Instance *inst, double h) {
     if (inst->internal_step == NULL) return 1;
     hi = *(const double *)element(inst, inst->internal_step, 0);
     if (!(hi > 0.0) || !isfinite(hi)) return 1; /* the model refuses it itself */
-    n = h / hi;
-    if (n <= FP_MAX_INTERNAL_STEPS * (1.0 + 1e-9)) return 1;
+    n = fp_steps_to_cover(h, hi, FP_STEP_TOL * h);
+    if (n <= FP_MAX_INTERNAL_STEPS) return 1;
     logf_(inst, FP_ERROR, FP_LOG_ERROR,
           "fmi2DoStep: communication step h = %.12g s would take %.0f internal steps of %s = "
           "%.12g s; the cap is %.0f internal steps per fmi2DoStep (%.12g s); use shorter steps",
-          h, floor(n + 0.5), inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
+          h, n, inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
           FP_MAX_INTERNAL_STEPS * hi);
     return 0;
 }
@@ -972,7 +1098,11 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     FpStatus s;
     double tol;
     CHECK("fmi2DoStep", S_STEP_COMPLETE);
-    (void)noSetFMUStatePriorToCurrentPoint;
+    LOG_CALL(inst,
+             "fmi2DoStep(currentCommunicationPoint = %.17g, communicationStepSize = %.17g, "
+             "noSetFMUStatePriorToCurrentPoint = %d)",
+             currentCommunicationPoint, communicationStepSize,
+             (int)noSetFMUStatePriorToCurrentPoint);
     if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
         logf_(inst, FP_ERROR, FP_LOG_ERROR,
               "fmi2DoStep: communicationStepSize %g must be positive and finite",
@@ -1001,8 +1131,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
 }
 
 /* fmi2Get*Status: only StepComplete, StepFailed and Terminated (S_STATUS). */
-static Instance *status_call(fmi2Component c, const char *fn, const void *value) {
+static Instance *status_call(fmi2Component c, const char *fn, fmi2StatusKind s,
+                             const void *value) {
     Instance *inst = enter(c, fn, S_STATUS);
+    if (inst != NULL) LOG_CALL(inst, "%s(s = %d, value = %p)", fn, (int)s, value);
     if (inst != NULL && value == NULL) {
         null_argument(inst, fn, "value");
         return NULL;
@@ -1021,13 +1153,13 @@ static fmi2Status unsupported_status(Instance *inst, const char *fn, fmi2StatusK
 }
 
 fmi2Status fmi2GetStatus(fmi2Component c, const fmi2StatusKind s, fmi2Status *value) {
-    Instance *inst = status_call(c, "fmi2GetStatus", value);
+    Instance *inst = status_call(c, "fmi2GetStatus", s, value);
     if (inst == NULL) return fmi2Error;
     return unsupported_status(inst, "fmi2GetStatus", s);
 }
 
 fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *value) {
-    Instance *inst = status_call(c, "fmi2GetRealStatus", value);
+    Instance *inst = status_call(c, "fmi2GetRealStatus", s, value);
     if (inst == NULL) return fmi2Error;
     if (s == fmi2LastSuccessfulTime) {
         *value = inst->time;
@@ -1037,13 +1169,13 @@ fmi2Status fmi2GetRealStatus(fmi2Component c, const fmi2StatusKind s, fmi2Real *
 }
 
 fmi2Status fmi2GetIntegerStatus(fmi2Component c, const fmi2StatusKind s, fmi2Integer *value) {
-    Instance *inst = status_call(c, "fmi2GetIntegerStatus", value);
+    Instance *inst = status_call(c, "fmi2GetIntegerStatus", s, value);
     if (inst == NULL) return fmi2Error;
     return unsupported_status(inst, "fmi2GetIntegerStatus", s);
 }
 
 fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boolean *value) {
-    Instance *inst = status_call(c, "fmi2GetBooleanStatus", value);
+    Instance *inst = status_call(c, "fmi2GetBooleanStatus", s, value);
     if (inst == NULL) return fmi2Error;
     if (s == fmi2Terminated) {
         *value = fmi2False;
@@ -1053,7 +1185,7 @@ fmi2Status fmi2GetBooleanStatus(fmi2Component c, const fmi2StatusKind s, fmi2Boo
 }
 
 fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2String *value) {
-    Instance *inst = status_call(c, "fmi2GetStringStatus", value);
+    Instance *inst = status_call(c, "fmi2GetStringStatus", s, value);
     if (inst == NULL) return fmi2Error;
     return unsupported_status(inst, "fmi2GetStringStatus", s);
 }

@@ -29,6 +29,82 @@ typedef enum {
 } FpVarKind;
 
 /*
+ * Declared types: the physical kind of a Real variable, written to modelDescription.xml as a
+ * <SimpleType> with its quantity, unit and (where the magnitude is far from 1) nominal; a
+ * variable names its kind in its table row and inherits all three.
+ * T(id, name, quantity, unit, nominal); nominal 0: none (FMI's default, 1).
+ */
+#define FP_DECLARED_TYPES(T)                                                                 \
+    T(NONE, "", "", "", 0.0) /* Integer and Boolean variables */                           \
+    T(TIME, "Time", "Time", "s", 0.0)                                                       \
+    T(MASS, "Mass", "Mass", "kg", 0.0)                                                      \
+    T(INERTIA, "MomentOfInertia", "MomentOfInertia", "kg.m2", 1e-2)                         \
+    T(LENGTH, "Length", "Length", "m", 0.0)                                                 \
+    T(VELOCITY, "Velocity", "Velocity", "m/s", 0.0)                                         \
+    T(ACCELERATION, "Acceleration", "Acceleration", "m/s2", 0.0)                            \
+    T(ANGLE, "Angle", "Angle", "rad", 0.0)                                                  \
+    T(ANGULAR_VELOCITY, "AngularVelocity", "AngularVelocity", "rad/s", 0.0)                 \
+    T(ANGULAR_ACCELERATION, "AngularAcceleration", "AngularAcceleration", "rad/s2", 0.0)    \
+    T(ANGULAR_FREQUENCY, "AngularFrequency", "AngularFrequency", "rad/s", 0.0)              \
+    T(ROTOR_SPEED, "RotorSpeed", "AngularVelocity", "rad/s", 1e2)                           \
+    T(FORCE, "Force", "Force", "N", 0.0)                                                    \
+    T(TORQUE, "Torque", "Torque", "N.m", 0.0)                                               \
+    T(THRUST_COEFFICIENT, "ThrustCoefficient", "ThrustCoefficient", "N.s2/rad2", 1e-4)      \
+    T(DRAG_COEFFICIENT, "DragTorqueCoefficient", "DragTorqueCoefficient", "N.m.s2/rad2",    \
+      1e-6)                                                                                 \
+    T(RATIO, "Ratio", "Ratio", "1", 0.0) /* efficiencies, health, margins, damping */       \
+    T(WEIGHT, "Weight", "Weight", "1", 0.0) /* QP weights */                                \
+    T(DIMENSIONLESS, "Dimensionless", "Dimensionless", "1", 0.0) /* normals, quaternion */  \
+    T(BLOCK_GAIN, "BlockGain", "InverseTime", "1/s", 0.0) /* C, D of the control blocks */ \
+    /* a 6-vector [force (N); torque (N.m)]: elements 1-3 are FORCE, 4-6 TORQUE */          \
+    T(WRENCH, "", "", "", 0.0)
+
+#define FP_TYPE_ENUM(id, name, quantity, unit, nominal) FP_T_##id,
+typedef enum { FP_DECLARED_TYPES(FP_TYPE_ENUM) FP_N_TYPES } FpTypeId;
+#undef FP_TYPE_ENUM
+
+typedef struct {
+    const char *name; /* the SimpleType's name, "" for none */
+    const char *quantity;
+    const char *unit; /* "" for none */
+    double nominal;   /* 0: none */
+} FpDeclaredType;
+
+const FpDeclaredType *fp_declared_type(FpTypeId id);
+
+/*
+ * The range a variable's value must lie in.  It is both the min/max that modelDescription.xml
+ * declares and the bound the model's own checks read (fp_params.h), so the two cannot
+ * differ.  FMI's min and max are inclusive: an open bound (mass > 0) is declared at its
+ * boundary value (min="0") and the check refuses the boundary itself.
+ */
+typedef struct {
+    double lo, hi;
+    unsigned flags; /* FP_RANGE_* */
+} FpRange;
+
+#define FP_RANGE_LO 1u      /* lo is a bound */
+#define FP_RANGE_HI 2u      /* hi is a bound */
+#define FP_RANGE_LO_OPEN 4u /* v > lo, not v >= lo */
+#define FP_RANGE_HI_OPEN 8u /* v < hi, not v <= hi */
+
+/* The ranges a table row may give (in the row's range column). */
+#define FP_ANY {0.0, 0.0, 0u}
+#define FP_POSITIVE {0.0, 0.0, FP_RANGE_LO | FP_RANGE_LO_OPEN}                /* (0, inf) */
+#define FP_NONNEGATIVE {0.0, 0.0, FP_RANGE_LO}                                /* [0, inf) */
+#define FP_IN(a, b) {(a), (b), FP_RANGE_LO | FP_RANGE_HI}                     /* [a, b] */
+#define FP_IN_OPEN(a, b) \
+    {(a), (b), FP_RANGE_LO | FP_RANGE_HI | FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN} /* (a, b) */
+#define FP_IN_LOPEN(a, b) {(a), (b), FP_RANGE_LO | FP_RANGE_HI | FP_RANGE_LO_OPEN} /* (a, b] */
+
+/* 1 if v lies in r (NaN lies in no bounded range). */
+int fp_range_contains(const FpRange *r, double v);
+
+/* r as an interval, "[0, 1]", "(0, inf)", "1..8" (integer), with multiples of pi/4 written
+ * as such ("[-pi/2, pi/2]"). */
+const char *fp_range_text(const FpRange *r, int integer, char *buf, size_t size);
+
+/*
  * One row of a model's variable table.  An entry may be a scalar
  * (rows = cols = 1), a vector (cols = 1, names "x[1]".."x[rows]") or a
  * row-major matrix ("x[i,j]").  Element k has value reference vr + k.
@@ -42,9 +118,16 @@ typedef struct {
     FpVarKind kind;
     uint16_t rows, cols;
     size_t offset;
-    const char *unit; /* "" for none */
+    FpTypeId dtype; /* declared type (unit, quantity, nominal); FP_T_NONE if not Real */
+    FpRange range;  /* min/max of every element, checked by the model */
     const char *description;
 } FpVar;
+
+/* The declared type of element k of v (a WRENCH row is FORCE then TORQUE). */
+FpTypeId fp_var_element_type(const FpVar *v, uint32_t k);
+
+/* The row called name in a table, or NULL. */
+const FpVar *fp_var_find(const FpVar *vars, size_t n_vars, const char *name);
 
 /* Log categories, shared by every model (names appear in modelDescription.xml). */
 typedef enum {
@@ -115,12 +198,38 @@ typedef struct {
  * The work of one communication step.  A model that subdivides a step (the plant's RK4
  * step, the controller's sample time) keeps that internal step in a fixed Real scalar
  * parameter with one of these names; the FMI layer refuses, before any work, a
- * communication step of more than FP_MAX_INTERNAL_STEPS of them (10^6: 500 s per call at
- * the plant's default 0.5 ms, 2000 s at the controller's 2 ms; about a second or two of
- * CPU time per call).  A model with none of these parameters is not capped by the FMI layer.
+ * communication step h that needs more than FP_MAX_INTERNAL_STEPS of them (counted as
+ * fp_steps_to_cover(h, step, FP_STEP_TOL * h); 10^6: 500 s per call at the plant's default
+ * 0.5 ms, 2000 s at the controller's 2 ms; about a second or two of CPU time per call).
+ * A model with none of these parameters is not capped by the FMI layer.
  */
 #define FP_INTERNAL_STEP_NAMES {"h_internal", "Ts"}
 #define FP_MAX_INTERNAL_STEPS 1000000.0
+
+/*
+ * How many of the grid points 0, step, 2 step, ... lie before `span` by more than `tol`:
+ * ceil((span - tol) / step), at least 1 when span > tol; 0 when span <= tol (or NaN),
+ * infinity when the count is.  The tolerance makes a span meant as a whole multiple n of
+ * step count n although rounding put it a hair above (0.002 / 0.0005 is 4 only up to
+ * rounding): without it a sliver step would be added, or a grid instant taken one
+ * communication step early.  It is FP_STEP_TOL of a step h (the plant's RK4 substeps of h:
+ * fp_steps_to_cover(h, h_internal, FP_STEP_TOL * h)), plus FP_TIME_TOL of the absolute
+ * times in a span made of them: an importer that sums its steps (t += h) drifts by up to
+ * ~1e-17 of t per step (measured at 2 ms: 1.7e-11 after 10^6 steps, 1.6e-10 after 10^7).
+ * Beyond the tolerance a grid instant that coincides with a communication point may be
+ * taken one communication step early or late: one sample's timing, nothing worse.
+ */
+#define FP_STEP_TOL 1e-9
+#define FP_TIME_TOL 1e-10
+double fp_steps_to_cover(double span, double step, double tol);
+
+/*
+ * FP_OK when a communication step h is positive and finite and its n internal steps
+ * (`what`, e.g. "RK4 steps of h_internal") are at most `cap`; else logs why and FP_ERROR.
+ * Called before any work, so a refused step leaves the model untouched.
+ */
+FpStatus fp_check_step_work(double h, double n, double cap, const char *what,
+                            const FpLogger *logger);
 
 /* 64-bit FNV-1a over n bytes, continuing from h (start with FP_FNV1A64_BASIS). */
 #define FP_FNV1A64_BASIS 14695981039346656037ULL

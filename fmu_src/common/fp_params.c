@@ -6,9 +6,17 @@
 
 #define PI 3.14159265358979323846
 
-void fp_check_init(FpCheck *c, const FpLogger *logger) {
+void fp_check_init(FpCheck *c, const FpLogger *logger, const FpVar *vars, size_t n_vars) {
     c->logger = logger;
+    c->vars = vars;
+    c->n_vars = n_vars;
     c->errors = 0;
+}
+
+const FpVar *fp_check_row(FpCheck *c, const char *name) {
+    const FpVar *v = fp_var_find(c->vars, c->n_vars, name);
+    if (v == NULL) fp_check_error(c, "internal error: no variable %s in the table", name);
+    return v;
 }
 
 static void label_of(char *buf, size_t size, const char *name, int i, int j) {
@@ -54,48 +62,62 @@ void fp_check_warning(FpCheck *c, const char *fmt, ...) {
     va_end(args);
 }
 
-/* Element k of a parameter shaped by cols, reported as name / name[i] / name[i,j]. */
-static void bad_element(FpCheck *c, const char *name, int k, int cols, double value,
-                        const char *why) {
-    if (cols <= 0) fp_check_bad(c, name, 0, 0, value, why);
-    else if (cols == 1) fp_check_bad(c, name, k + 1, 0, value, why);
-    else fp_check_bad(c, name, k / cols + 1, k % cols + 1, value, why);
+const char *fp_range_why(const FpRange *r, int integer, char *buf, size_t size) {
+    char interval[2 * FP_REAL_TEXT + 8];
+    const unsigned both = FP_RANGE_LO | FP_RANGE_HI, opens = FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN;
+    fp_range_text(r, integer, interval, sizeof interval);
+    if ((r->flags & both) == FP_RANGE_LO && r->lo == 0.0)
+        snprintf(buf, size, "%s", (r->flags & FP_RANGE_LO_OPEN) ? "must be positive"
+                                                                : "must not be negative");
+    else if ((r->flags & both) == both && !integer && (r->flags & opens) == 0)
+        snprintf(buf, size, "must be within %s", interval);
+    else if ((r->flags & both) == both && !integer && (r->flags & opens) == opens)
+        snprintf(buf, size, "must be inside %s", interval);
+    else
+        snprintf(buf, size, "must be in %s", interval);
+    return buf;
 }
 
-void fp_need_finite(FpCheck *c, const char *name, const double *v, int n, int cols) {
-    int k;
-    for (k = 0; k < n; k++)
-        if (!isfinite(v[k])) bad_element(c, name, k, cols, v[k], "must be finite");
+/* Element k of row v, reported as name / name[i] / name[i,j]. */
+static void bad_element(FpCheck *c, const FpVar *v, int k, double value, const char *why) {
+    if (v->rows == 1 && v->cols == 1) fp_check_bad(c, v->name, 0, 0, value, why);
+    else if (v->cols == 1) fp_check_bad(c, v->name, k + 1, 0, value, why);
+    else fp_check_bad(c, v->name, k / v->cols + 1, k % v->cols + 1, value, why);
 }
 
-void fp_need_positive(FpCheck *c, const char *name, const double *v, int n, int cols) {
+void fp_need_param(FpCheck *c, const char *name, const double *v, int n, const char *note) {
+    const FpVar *row = fp_check_row(c, name);
+    char why[160], range[96];
     int k;
+    if (row == NULL) return;
+    fp_range_why(&row->range, 0, range, sizeof range);
+    snprintf(why, sizeof why, "%s%s%s", range, note != NULL ? ": " : "", note != NULL ? note : "");
     for (k = 0; k < n; k++) {
-        if (!isfinite(v[k])) bad_element(c, name, k, cols, v[k], "must be finite");
-        else if (!(v[k] > 0.0)) bad_element(c, name, k, cols, v[k], "must be positive");
+        if (!isfinite(v[k])) bad_element(c, row, k, v[k], "must be finite");
+        else if (!fp_range_contains(&row->range, v[k])) bad_element(c, row, k, v[k], why);
     }
 }
 
-void fp_need_nonnegative(FpCheck *c, const char *name, const double *v, int n, int cols) {
+void fp_need_int_param(FpCheck *c, const char *name, const int32_t *v, int n) {
+    const FpVar *row = fp_check_row(c, name);
+    char why[96];
     int k;
-    for (k = 0; k < n; k++) {
-        if (!isfinite(v[k])) bad_element(c, name, k, cols, v[k], "must be finite");
-        else if (v[k] < 0.0) bad_element(c, name, k, cols, v[k], "must not be negative");
-    }
-}
-
-void fp_need_range(FpCheck *c, const char *name, const double *v, int n, int cols, double lo,
-                   double hi, const char *why) {
-    int k;
+    if (row == NULL) return;
+    fp_range_why(&row->range, 1, why, sizeof why);
     for (k = 0; k < n; k++)
-        if (isfinite(v[k]) && (v[k] < lo || v[k] > hi)) bad_element(c, name, k, cols, v[k], why);
+        if (!fp_range_contains(&row->range, (double)v[k]))
+            fp_check_bad_int(c, name, row->rows * row->cols == 1 ? 0 : k + 1, (long)v[k], why);
 }
 
 void fp_need_ordered(FpCheck *c, const char *name, const double *lo, const double *hi, int n,
                      int cols, const char *why) {
     int k;
-    for (k = 0; k < n; k++)
-        if (lo[k] > hi[k]) bad_element(c, name, k, cols, lo[k], why);
+    for (k = 0; k < n; k++) {
+        if (!(lo[k] > hi[k])) continue;
+        if (cols <= 0) fp_check_bad(c, name, 0, 0, lo[k], why);
+        else if (cols == 1) fp_check_bad(c, name, k + 1, 0, lo[k], why);
+        else fp_check_bad(c, name, k / cols + 1, k % cols + 1, lo[k], why);
+    }
 }
 
 /* ------------------------------------------------------------------------ */
@@ -129,7 +151,7 @@ static void sym3_eigenvalues(double a[3][3], double e[3]) {
 static void check_inertia(FpCheck *c, const double *inertia) {
     double a[3][3], e[3], l[9], scale = 0.0, m1, m2;
     int i, j;
-    fp_need_finite(c, "inertia", inertia, 9, 3);
+    fp_need_param(c, "inertia", inertia, 9, NULL);
     for (i = 0; i < 9; i++)
         if (!isfinite(inertia[i])) return; /* reported as non-finite */
     for (i = 0; i < 9; i++) {
@@ -170,38 +192,36 @@ static void check_inertia(FpCheck *c, const double *inertia) {
 
 FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, double g,
                            const FpRotorSet *rs) {
-    static const char *const within = "must be within [-pi/2, pi/2]";
-    int i, n = rs->n;
-    char why[32];
-    if (n < 1 || n > FP_MAX_ROTORS) {
-        snprintf(why, sizeof why, "must be in 1..%d", FP_MAX_ROTORS);
-        fp_check_bad_int(c, "n_rotors", 0, (long)n, why);
-        return FP_ERROR; /* the per-rotor checks need a valid n */
+    int i, n = rs->n, errors = c->errors;
+    fp_need_int_param(c, "n_rotors", &rs->n, 1);
+    if (c->errors > errors) return FP_ERROR; /* the per-rotor checks need a valid n */
+    if (n < 1 || n > FP_MAX_ROTORS) { /* a table whose range exceeds the arrays: a bug */
+        fp_check_bad_int(c, "n_rotors", 0, (long)n, "exceeds the rotor slots");
+        return FP_ERROR;
     }
-    fp_need_positive(c, "mass", &mass, 1, 0);
+    fp_need_param(c, "mass", &mass, 1, NULL);
     check_inertia(c, inertia);
-    fp_need_finite(c, "g", &g, 1, 0);
-    fp_need_positive(c, "k_t", &rs->k_t, 1, 0);
-    fp_need_nonnegative(c, "k_d", &rs->k_d, 1, 0);
-    fp_need_finite(c, "rotor_pos", &rs->pos[0][0], 3 * n, 3);
-    for (i = 0; i < n; i++)
-        if (rs->dir[i] != 1 && rs->dir[i] != -1)
-            fp_check_bad(c, "rotor_dir", i + 1, 0, (double)rs->dir[i], "must be +1 or -1");
-    fp_need_finite(c, "rotor_gamma", rs->gamma, n, 1);
-    fp_need_finite(c, "alpha_min", rs->alpha_min, n, 1);
-    fp_need_finite(c, "alpha_max", rs->alpha_max, n, 1);
-    fp_need_finite(c, "beta_min", rs->beta_min, n, 1);
-    fp_need_finite(c, "beta_max", rs->beta_max, n, 1);
-    fp_need_range(c, "alpha_min", rs->alpha_min, n, 1, -PI / 2, PI / 2, within);
-    fp_need_range(c, "alpha_max", rs->alpha_max, n, 1, -PI / 2, PI / 2, within);
-    fp_need_range(c, "beta_min", rs->beta_min, n, 1, -PI / 2, PI / 2, within);
-    fp_need_range(c, "beta_max", rs->beta_max, n, 1, -PI / 2, PI / 2, within);
+    fp_need_param(c, "g", &g, 1, NULL);
+    fp_need_param(c, "k_t", &rs->k_t, 1, NULL);
+    fp_need_param(c, "k_d", &rs->k_d, 1, NULL);
+    fp_need_param(c, "rotor_pos", &rs->pos[0][0], 3 * n, NULL);
+    errors = c->errors;
+    fp_need_int_param(c, "rotor_dir", rs->dir, n);
+    if (c->errors == errors)
+        for (i = 0; i < n; i++)
+            if (rs->dir[i] != 1 && rs->dir[i] != -1)
+                fp_check_bad_int(c, "rotor_dir", i + 1, (long)rs->dir[i], "must be +1 or -1");
+    fp_need_param(c, "rotor_gamma", rs->gamma, n, NULL);
+    fp_need_param(c, "alpha_min", rs->alpha_min, n, NULL);
+    fp_need_param(c, "alpha_max", rs->alpha_max, n, NULL);
+    fp_need_param(c, "beta_min", rs->beta_min, n, NULL);
+    fp_need_param(c, "beta_max", rs->beta_max, n, NULL);
     fp_need_ordered(c, "alpha_min", rs->alpha_min, rs->alpha_max, n, 1,
                     "exceeds alpha_max (inverted limits)");
     fp_need_ordered(c, "beta_min", rs->beta_min, rs->beta_max, n, 1,
                     "exceeds beta_max (inverted limits)");
-    fp_need_nonnegative(c, "omega_min", &rs->omega_min, 1, 0);
-    fp_need_positive(c, "omega_max", &rs->omega_max, 1, 0);
+    fp_need_param(c, "omega_min", &rs->omega_min, 1, NULL);
+    fp_need_param(c, "omega_max", &rs->omega_max, 1, NULL);
     fp_need_ordered(c, "omega_min", &rs->omega_min, &rs->omega_max, 1, 0,
                     "exceeds omega_max (inverted limits)");
     return FP_OK;

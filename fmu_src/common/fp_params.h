@@ -3,9 +3,11 @@
  *
  * An FpCheck collects the errors of one validation: every bad value is logged through the
  * model's FpLogger as "parameter NAME[INDEX] = VALUE: REASON" and counted, so one
- * initialization reports every bad parameter, not just the first.  The element checks
- * (finite, positive, within a range, ordered) name each element as the FMU variable table
- * does: NAME for a scalar, NAME[i] for a vector element, NAME[i,j] for a matrix element.
+ * initialization reports every bad parameter, not just the first.  The element checks read
+ * the static bound of each parameter from its row in the model's variable table (the range
+ * that modelDescription.xml declares as min/max), so the check and the declaration cannot
+ * differ, and name each element as the table does: NAME for a scalar, NAME[i] for a vector
+ * element, NAME[i,j] for a matrix element.
  *
  * fp_check_airframe holds the one set of rules for the airframe parameters that both FMUs
  * carry under the same names, so the plant and the controller accept and refuse the same
@@ -21,10 +23,15 @@
 
 typedef struct {
     const FpLogger *logger;
-    int errors; /* errors logged so far */
+    const FpVar *vars; /* the model's variable table: the ranges the checks read */
+    size_t n_vars;
+    int errors;        /* errors logged so far */
 } FpCheck;
 
-void fp_check_init(FpCheck *c, const FpLogger *logger);
+void fp_check_init(FpCheck *c, const FpLogger *logger, const FpVar *vars, size_t n_vars);
+
+/* The table row of `name` (NULL, counted as an error, when the model has none: a bug). */
+const FpVar *fp_check_row(FpCheck *c, const char *name);
 
 /* Log "parameter LABEL = VALUE: WHY" and count an error.  LABEL is name, name[i] (j = 0)
  * or name[i,j]; i = 0 for a scalar.  Indices are 1-based. */
@@ -48,37 +55,36 @@ void fp_check_warning(FpCheck *c, const char *fmt, ...)
     ;
 
 /*
- * Element checks on n values v of a parameter shaped by cols: 0 a scalar (n = 1), 1 a
- * vector, > 1 a row-major matrix with cols columns.  Each bad element is reported.
- *   fp_need_finite       finite ("must be finite")
- *   fp_need_positive     finite and > 0 ("must be positive")
- *   fp_need_nonnegative  finite and >= 0 ("must not be negative")
- *   fp_need_range        finite elements within [lo, hi] (reported with why; a non-finite
- *                        element is left to fp_need_finite)
- *   fp_need_ordered      lo[k] <= hi[k], reported on lo with why (NaN is not compared)
+ * The first n elements of a parameter against its table row (fp_model.h FpRange), each bad
+ * element reported under the row's structured name (name, name[i], name[i,j]):
+ *   fp_need_param      Real: finite ("must be finite") and within the range ("must be
+ *                      positive", "must not be negative", "must be within [-pi/2, pi/2]",
+ *                      "must be inside (-1, 1)", "must be in (0, 1]"; note, when not
+ *                      NULL, is appended: "...: the block's pole ...")
+ *   fp_need_int_param  Integer: within the range ("must be in 1..8")
+ *   fp_need_ordered    lo[k] <= hi[k] (a bound that depends on another parameter), reported
+ *                      on lo with why (NaN is not compared); cols as the row's shape
+ * fp_range_why writes the reason a value outside r is given ("must be positive", ...).
  */
-void fp_need_finite(FpCheck *c, const char *name, const double *v, int n, int cols);
-void fp_need_positive(FpCheck *c, const char *name, const double *v, int n, int cols);
-void fp_need_nonnegative(FpCheck *c, const char *name, const double *v, int n, int cols);
-void fp_need_range(FpCheck *c, const char *name, const double *v, int n, int cols, double lo,
-                   double hi, const char *why);
+void fp_need_param(FpCheck *c, const char *name, const double *v, int n, const char *note);
+void fp_need_int_param(FpCheck *c, const char *name, const int32_t *v, int n);
 void fp_need_ordered(FpCheck *c, const char *name, const double *lo, const double *hi, int n,
                      int cols, const char *why);
+const char *fp_range_why(const FpRange *r, int integer, char *buf, size_t size);
 
 /*
  * The airframe rules of both FMUs, on their parameters of the same names (rs as
- * FP_MODEL_TO_ROTOR_SET fills it from the model, rs->n = n_rotors):
- *   n_rotors     in 1..FP_MAX_ROTORS (else nothing more is checked: FP_ERROR)
- *   mass         finite, > 0
+ * FP_MODEL_TO_ROTOR_SET fills it from the model, rs->n = n_rotors); the ranges are those of
+ * the rows in c's table (both tables give these rows the same ranges: FP_SERVO_LIMIT etc.):
+ *   n_rotors     within its range (1..FP_MAX_ROTORS; else nothing more is checked: FP_ERROR)
+ *   mass, g, k_t, k_d, omega_min, omega_max     finite, within their ranges
  *   inertia      (9, row-major) finite, symmetric (|I_ij - I_ji| <= 1e-12 max|I|),
  *                positive definite; a warning when a principal moment exceeds the sum
  *                of the other two
- *   g            finite
- *   k_t          finite, > 0;   k_d  finite, >= 0
  *   rotor_pos, rotor_gamma       finite (rotors 1..n_rotors)
- *   rotor_dir                    +1 or -1
- *   alpha_min/max, beta_min/max  finite, within [-pi/2, pi/2], min <= max
- *   omega_min    finite, >= 0;  omega_max  finite, > 0;  omega_min <= omega_max
+ *   rotor_dir                    within its range, and +1 or -1
+ *   alpha_min/max, beta_min/max  finite, within their ranges, min <= max
+ *   omega_min <= omega_max
  * Errors are logged and counted in c.  Returns FP_ERROR only for a bad n_rotors.
  */
 FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, double g,

@@ -25,6 +25,10 @@
 
 #define FP_MAX_ROTORS 8
 
+/* The servo limits alpha_min/max, beta_min/max of every airframe lie within +-pi/2: the
+ * range both FMUs' tables give those rows (and so the bound fp_check_airframe applies). */
+#define FP_SERVO_LIMIT 1.57079632679489661923
+
 /* Bit of rotor i (0-based) in both FMUs' sat_flags output: FP_SAT_<kind> + i.
  * (Python: controller.fmu_parameters.SAT_FLAG_SHIFT; a test compares them.) */
 enum { FP_SAT_MOTOR = 0, FP_SAT_ALPHA = 8, FP_SAT_BETA = 16 };

@@ -33,9 +33,10 @@
 #define ELEM_SIZE_REAL sizeof(double)
 #define ELEM_SIZE_INTEGER sizeof(int32_t)
 #define ELEM_SIZE_BOOLEAN sizeof(int32_t)
-#define CTRL_CHECK(name, vr, type, kind, rows, cols, unit, desc)                                  \
+#define CTRL_CHECK(name, vr, type, kind, rows, cols, dtype, range, desc)                         \
     FP_STATIC_ASSERT(sizeof(((ControllerModel *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type, \
-                     name##_size);
+                     name##_size);                                                               \
+    FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
 CONTROLLER_VARIABLES(CTRL_CHECK)
 FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS == 64, polytope_cap_matches_table);
 FP_STATIC_ASSERT(FP_FAIL_POLYTOPE_FACETS * FP_MAX_ROTORS == 256, fail_polytope_cap_matches_table);
@@ -43,9 +44,15 @@ FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS <= FP_WLS_MAX_CONS, polytope_fits_qp);
 FP_STATIC_ASSERT(3 * FP_MAX_ROTORS <= FP_WLS_MAX_VARS, allocation_fits_qp);
 FP_STATIC_ASSERT(6 + 3 * FP_MAX_ROTORS <= FP_WLS_MAX_ROWS, allocation_rows_fit_qp);
 
-#define CTRL_ROW(name, vr, type, kind, rows, cols, unit, desc) \
-    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(ControllerModel, name), unit, desc},
+#define CTRL_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                           \
+    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(ControllerModel, name), FP_T_##dtype,  \
+     range, desc},
 static const FpVar controller_vars[] = {CONTROLLER_VARIABLES(CTRL_ROW)};
+#define N_CTRL_VARS (sizeof controller_vars / sizeof controller_vars[0])
+
+/* Row indices (CV_pos, ...): the input checks read their plausible ranges from the rows. */
+#define CTRL_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc) CV_##name,
+enum { CONTROLLER_VARIABLES(CTRL_INDEX) CV_COUNT };
 
 /* ------------------------------------------------------------------------ */
 /* Defaults                                                                 */
@@ -199,7 +206,7 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     FpCheck c;
     double hover_fz = -m->mass * m->g;
     int i;
-    fp_check_init(&c, logger);
+    fp_check_init(&c, logger, controller_vars, N_CTRL_VARS);
     if (ctrl_force_set_prepare(&c, "poly_A, poly_b", (const double(*)[3])m->poly_A, m->poly_b,
                                m->poly_n, hover_fz, m->poly_margin, &m->guid, m->poly_d,
                                &m->fz_min, &m->fz_max, &m->hover_ok[0]) != FP_OK)
@@ -246,29 +253,23 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     ctrl_log_losses(&l, logger);
 }
 
-/* Every input finite and the rotor health within [0, 1]; else a warning naming it. */
-/* The plausible range of each measurement: beyond it a value is finite but absurd (a sensor
- * glitch, a unit error) and would poison the filters for seconds.  The vehicle's own range
- * matches the plant's (docs/robustness.md); the actuators' comes from the airframe. */
 /* The most control samples one doStep may run: 10^5 (200 s at Ts = 2 ms, about two seconds
- * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait. */
+ * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait.
+ * Tighter than the FMI layer's cap of 10^6 internal steps: a sample costs ~10x an RK4 step. */
 #define CTRL_MAX_SAMPLES 1e5
 
-#define CTRL_MAX_DISTANCE 1e7 /* m */
-#define CTRL_MAX_SPEED 1e3    /* m/s */
-#define CTRL_MAX_ACC 1e4      /* m/s^2 */
-#define CTRL_MAX_ANGLE 1e3    /* rad (Euler angles, also unwrapped) */
-#define CTRL_MAX_RATE 1e3     /* rad/s */
-#define CTRL_SERVO_MARGIN (CTRL_PI / 4.0) /* rad beyond the servo limits */
-
-/* 1 if every input is usable; else the first unusable one is described in why. */
+/* 1 if every input is usable: finite and within its plausible range, the range of its table
+ * row (a value beyond it is finite but absurd, a sensor glitch or a unit error, and would
+ * poison the filters for seconds; the vehicle's own range matches the plant's,
+ * docs/robustness.md).  The actuator measurements are also held to the airframe: omega to
+ * [-omega_max, 2 omega_max], alpha and beta to the servo limits +- CTRL_SERVO_MARGIN.
+ * Else the first unusable input is described in why. */
 static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
-    static const char *const names[] = {"pos_ref", "euler_ref", "vel_ref", "acc_ref",
-                                        "euler_rate_ref", "pos", "vel", "acc", "euler", "rate",
-                                        "omega", "alpha", "beta", "rotor_health"};
+    static const int rows[] = {CV_pos_ref, CV_euler_ref, CV_vel_ref, CV_acc_ref,
+                               CV_euler_rate_ref, CV_pos, CV_vel, CV_acc, CV_euler, CV_rate,
+                               CV_omega, CV_alpha, CV_beta, CV_rotor_health};
     const double *inputs[14];
     int counts[14] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0};
-    double lo[14], hi[14];
     int i, k, n = m->n_rotors;
     inputs[0] = m->pos_ref, inputs[1] = m->euler_ref, inputs[2] = m->vel_ref;
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
@@ -276,32 +277,33 @@ static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
     inputs[10] = m->omega, inputs[11] = m->alpha, inputs[12] = m->beta;
     inputs[13] = m->rotor_health;
     counts[10] = counts[11] = counts[12] = counts[13] = n;
-    /* the references and the measurements of the same quantities share one range */
-    hi[0] = hi[5] = CTRL_MAX_DISTANCE; /* pos_ref, pos */
-    hi[1] = hi[8] = CTRL_MAX_ANGLE;    /* euler_ref, euler */
-    hi[2] = hi[6] = CTRL_MAX_SPEED;    /* vel_ref, vel */
-    hi[3] = hi[7] = CTRL_MAX_ACC;      /* acc_ref, acc */
-    hi[4] = hi[9] = CTRL_MAX_RATE;     /* euler_rate_ref, rate */
-    for (k = 0; k < 10; k++) lo[k] = -hi[k];
-    lo[10] = -m->omega_max, hi[10] = 2.0 * m->omega_max;
-    lo[13] = 0.0, hi[13] = 1.0;
-    for (k = 0; k < 14; k++)
+    for (k = 0; k < 14; k++) {
+        const FpVar *row = &controller_vars[rows[k]];
         for (i = 0; i < counts[k]; i++) {
-            double v = inputs[k][i], a = lo[k], b = hi[k];
-            if (k == 11 || k == 12) { /* servo angles: the airframe's limits plus a margin */
-                a = (k == 11 ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
-                b = (k == 11 ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
+            double v = inputs[k][i], a = -HUGE_VAL, b = HUGE_VAL;
+            char range[96];
+            if (rows[k] == CV_omega) {
+                a = -m->omega_max, b = 2.0 * m->omega_max;
+            } else if (rows[k] == CV_alpha || rows[k] == CV_beta) {
+                a = (rows[k] == CV_alpha ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
+                b = (rows[k] == CV_alpha ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
             }
             if (!isfinite(v)) {
-                snprintf(why, size, "input %s[%d] = %g is not finite", names[k], i + 1, v);
+                snprintf(why, size, "input %s[%d] = %g is not finite", row->name, i + 1, v);
+                return 0;
+            }
+            if (!fp_range_contains(&row->range, v)) {
+                snprintf(why, size, "input %s[%d] = %g is outside its plausible range %s",
+                         row->name, i + 1, v, fp_range_text(&row->range, 0, range, sizeof range));
                 return 0;
             }
             if (v < a || v > b) {
                 snprintf(why, size, "input %s[%d] = %g is outside its plausible range [%g, %g]",
-                         names[k], i + 1, v, a, b);
+                         row->name, i + 1, v, a, b);
                 return 0;
             }
         }
+    }
     return 1;
 }
 
@@ -427,7 +429,6 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     CtrlFilterInputs fin;
     int i, n;
     char why[160];
-    (void)t0;
     if (ctrl_check_parameters(m, logger) != 0 || prepare_force_sets(m, logger) != FP_OK)
         return FP_ERROR;
     if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
@@ -435,6 +436,9 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
         return FP_ERROR;
     }
     m->holding = 0;
+    m->grid_t0 = t0;
+    m->samples_run = 0;
+    m->warned_coarse = 0;
     n = m->n_rotors;
     FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
     ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
@@ -480,13 +484,6 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->rotors_lost = 0;
     m->active_polytope = 0;
     m->hover_possible = m->hover_ok[0];
-    for (i = 0; i < n; i++)
-        if (!isfinite(m->rotor_health[i]) || m->rotor_health[i] < 0.0 ||
-            m->rotor_health[i] > 1.0) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-                   "input rotor_health[%d] = %g: must be in [0, 1]", i + 1, m->rotor_health[i]);
-            return FP_ERROR;
-        }
     update_rotor_losses(m, logger);
     return FP_OK;
 }
@@ -495,28 +492,45 @@ static FpStatus controller_tunables_changed(void *model, const FpLogger *logger)
     return ctrl_check_tunables((const ControllerModel *)model, logger) ? FP_ERROR : FP_OK;
 }
 
+/*
+ * The sampling semantics (docs/controller.md, "Communication steps"): the controller samples
+ * on its own grid t_k = t0 + k Ts (t0: the experiment's start time), whatever h is.  A doStep
+ * from t to t + h runs, in order, the samples of the grid instants in [t, t + h): an FMU's
+ * inputs hold from the communication point they were set at to the next, so the inputs set
+ * before the call are the values at those instants.  Each sample advances the filters and
+ * blocks by one Ts.  The outputs after the call are those of the last sample run, held
+ * until the next one; an instant at t + h (within the tolerance of fp_steps_to_cover, which
+ * covers importers that sum their steps) is the next call's, with the inputs set at t + h.
+ * With h = Ts that is one sample per step, from the inputs at t_k, as it always was.  The
+ * instants are counted (samples_run) against t0 + k Ts, never found by summing steps, so
+ * the grid cannot drift.
+ */
 static FpStatus controller_step(void *model, double t, double h, const FpLogger *logger) {
     ControllerModel *m = (ControllerModel *)model;
-    double ratio = h / m->Ts, samples = floor(ratio + 0.5);
+    double tol = FP_STEP_TOL * h + FP_TIME_TOL * (fabs(t) + fabs(m->grid_t0));
+    double due = fp_steps_to_cover(t + h - m->grid_t0, m->Ts, tol);
+    double samples = due - (double)m->samples_run;
     FpStatus status = FP_OK;
     long k, n;
-    (void)t;
-    if (!(samples >= 1.0) || !(fabs(ratio - samples) <= 1e-9 * samples)) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s is not a whole multiple of the sample time Ts = "
-               "%.12g s",
+    if (!(samples > 0.0)) samples = 0.0; /* no grid instant in [t, t + h): outputs held */
+    if (fp_check_step_work(h, samples, CTRL_MAX_SAMPLES, "control samples", logger) != FP_OK)
+        return FP_ERROR;
+    if (!m->warned_coarse && fp_steps_to_cover(h, m->Ts, FP_STEP_TOL * h) > 1.0) {
+        /* once per run: every such step degrades control the same way */
+        m->warned_coarse = 1;
+        status = FP_WARNING;
+        fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+               "communication step %.12g s is longer than the sample time Ts = %.12g s: the "
+               "samples within one step all use the inputs of its start, held, so control "
+               "degrades (docs/controller.md, \"Communication steps\"); use steps of at "
+               "most Ts (said once)",
                h, m->Ts);
-        return FP_ERROR;
-    }
-    if (samples > CTRL_MAX_SAMPLES) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s would take %.0f samples (limit %.0f)", h, samples,
-               CTRL_MAX_SAMPLES);
-        return FP_ERROR;
     }
     n = (long)samples;
-    for (k = 0; k < n; k++)
+    for (k = 0; k < n; k++) {
         if (control_sample(m, logger) != FP_OK) status = FP_WARNING;
+        m->samples_run++;
+    }
     return status;
 }
 
@@ -553,9 +567,11 @@ static FpStatus controller_check_restored(const void *model, int initialized,
     }
     if (!fp_all_finite(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
         !fp_all_finite(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
-        !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2)) {
+        !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||
+        !isfinite(m->grid_t0) || m->samples_run < 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "restored state: the filter or block states are not finite");
+               "restored state: the filter or block states are not finite, or the sample "
+               "grid is invalid");
         return FP_ERROR;
     }
     return FP_OK;
@@ -568,7 +584,7 @@ static const FpModelInfo controller_info = {
     "(Hachem et al., section III)",
     sizeof(ControllerModel),
     controller_vars,
-    sizeof controller_vars / sizeof controller_vars[0],
+    N_CTRL_VARS,
     0.002,
     10.0,
     controller_set_defaults,

@@ -64,6 +64,9 @@ typedef struct {
     int32_t hover_ok[FP_MAX_ROTORS + 1];   /* hover force inside: [0] nominal, [i] rotor i lost */
     int32_t lost_mask;                     /* rotors treated as lost (bit i-1: rotor i) */
     int32_t holding;                       /* samples held since an unusable input (0: none) */
+    double grid_t0;                        /* the sample grid: instants grid_t0 + k Ts */
+    int64_t samples_run;                   /* k of the next sample: the grid instants done */
+    int32_t warned_coarse;                 /* the h > Ts warning was given */
     FpWls guid, alloc;
 } ControllerModel;
 

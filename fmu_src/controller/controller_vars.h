@@ -4,110 +4,127 @@
  * the actuator commands the same names as the plant's inputs, so a master
  * connects the two FMUs by matching names.
  *
- * X(name, value reference, type, kind, rows, cols, unit, description)
+ * X(name, value reference, type, kind, rows, cols, declared type, range, description)
+ *
+ * The ranges of the inputs are their plausible ranges (docs/robustness.md): a sample whose
+ * inputs leave them is held (controller.c inputs_usable).  The measured actuator angles
+ * alpha, beta are checked against the airframe's servo limits +- CTRL_SERVO_MARGIN, which
+ * no static range can state: their range is the widest that check can allow (servo limits
+ * within +-pi/2); the measured rotor speeds omega, checked against [-omega_max,
+ * 2 omega_max] with omega_max unbounded, have none.
  */
 #ifndef CONTROLLER_VARS_H
 #define CONTROLLER_VARS_H
 
-#define CONTROLLER_VARIABLES(X)                                                                   \
-    /* parameters: sampling and airframe model (nominal) */                                       \
-    X(Ts, 1, REAL, PARAM_FIXED, 1, 1, "s", "Sample time; every communication step must be a multiple of it") \
-    X(n_rotors, 2, INTEGER, PARAM_FIXED, 1, 1, "", "Number of rotors in use (1..8)")            \
-    X(mass, 3, REAL, PARAM_FIXED, 1, 1, "kg", "Nominal mass used by the outer INDI")           \
-    X(inertia, 4, REAL, PARAM_FIXED, 3, 3, "kg.m2", "Nominal inertia used by the inner INDI")  \
-    X(g, 13, REAL, PARAM_FIXED, 1, 1, "m/s2", "Gravitational acceleration")                    \
-    X(k_t, 14, REAL, PARAM_FIXED, 1, 1, "N.s2/rad2", "Thrust coefficient")                      \
-    X(k_d, 15, REAL, PARAM_FIXED, 1, 1, "N.m.s2/rad2", "Drag-torque coefficient")               \
-    X(rotor_pos, 20, REAL, PARAM_FIXED, 8, 3, "m", "Rotor positions d_i, body FRD")             \
-    X(rotor_dir, 50, INTEGER, PARAM_FIXED, 8, 1, "", "Spin directions c_i (+-1)")               \
-    X(rotor_gamma, 60, REAL, PARAM_FIXED, 8, 1, "rad", "Fixed mounting angles gamma_i")         \
-    X(alpha_min, 70, REAL, PARAM_FIXED, 8, 1, "rad", "Lower servo limits alpha (equal limits: fixed)") \
-    X(alpha_max, 80, REAL, PARAM_FIXED, 8, 1, "rad", "Upper servo limits alpha")                \
-    X(beta_min, 90, REAL, PARAM_FIXED, 8, 1, "rad", "Lower servo limits beta (equal limits: fixed)") \
-    X(beta_max, 100, REAL, PARAM_FIXED, 8, 1, "rad", "Upper servo limits beta")                 \
-    X(omega_min, 110, REAL, PARAM_FIXED, 1, 1, "rad/s", "Lower rotor speed limit")             \
-    X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, "rad/s", "Upper rotor speed limit")             \
-    /* parameters: measurement filter H(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) */                 \
-    X(filt_wn, 120, REAL, PARAM_FIXED, 1, 1, "rad/s", "Natural frequency of H(s)")            \
-    X(filt_zeta, 121, REAL, PARAM_FIXED, 1, 1, "", "Damping ratio of H(s)")                    \
-    /* parameters: first-order blocks x+ = A x + B e, y = C x + D e (discrete, per axis) */      \
-    X(K_pos_A, 130, REAL, PARAM_TUNABLE, 3, 1, "", "Position block K_xi: A")                   \
-    X(K_pos_B, 133, REAL, PARAM_TUNABLE, 3, 1, "", "Position block K_xi: B")                   \
-    X(K_pos_C, 136, REAL, PARAM_TUNABLE, 3, 1, "", "Position block K_xi: C")                   \
-    X(K_pos_D, 139, REAL, PARAM_TUNABLE, 3, 1, "", "Position block K_xi: D (1/s)")             \
-    X(K_vel_A, 150, REAL, PARAM_TUNABLE, 3, 1, "", "Velocity block K_xidot: A")                \
-    X(K_vel_B, 153, REAL, PARAM_TUNABLE, 3, 1, "", "Velocity block K_xidot: B")                \
-    X(K_vel_C, 156, REAL, PARAM_TUNABLE, 3, 1, "", "Velocity block K_xidot: C")                \
-    X(K_vel_D, 159, REAL, PARAM_TUNABLE, 3, 1, "", "Velocity block K_xidot: D (1/s)")          \
-    X(K_att_A, 170, REAL, PARAM_TUNABLE, 3, 1, "", "Attitude block: A")                        \
-    X(K_att_B, 173, REAL, PARAM_TUNABLE, 3, 1, "", "Attitude block: B")                        \
-    X(K_att_C, 176, REAL, PARAM_TUNABLE, 3, 1, "", "Attitude block: C")                        \
-    X(K_att_D, 179, REAL, PARAM_TUNABLE, 3, 1, "", "Attitude block: D (1/s)")                  \
-    X(K_rate_A, 190, REAL, PARAM_TUNABLE, 3, 1, "", "Rate block: A")                           \
-    X(K_rate_B, 193, REAL, PARAM_TUNABLE, 3, 1, "", "Rate block: B")                           \
-    X(K_rate_C, 196, REAL, PARAM_TUNABLE, 3, 1, "", "Rate block: C")                           \
-    X(K_rate_D, 199, REAL, PARAM_TUNABLE, 3, 1, "", "Rate block: D (1/s)")                     \
-    /* parameters: guidance allocation (eq. 17-23) */                                             \
-    X(gamma_opt, 210, REAL, PARAM_TUNABLE, 1, 1, "", "Weight of the acceleration-tracking term") \
-    X(W_u, 211, REAL, PARAM_TUNABLE, 5, 1, "", "Diagonal of W_u for [dfx, dfy, dfz, dphi, dtheta]") \
-    X(W_v, 216, REAL, PARAM_TUNABLE, 3, 1, "", "Diagonal of W_v (world x, y, z)")               \
-    X(euler_min, 220, REAL, PARAM_TUNABLE, 2, 1, "rad", "Lower bounds of [phi_c, theta_c]")    \
-    X(euler_max, 222, REAL, PARAM_TUNABLE, 2, 1, "rad", "Upper bounds of [phi_c, theta_c]")    \
-    X(force_constraint, 224, INTEGER, PARAM_FIXED, 1, 1, "", "0: joint 3-D polytope S(0); 1: paper's slice P_xy at f_bz_ref plus f_bz bounds") \
-    X(poly_n, 230, INTEGER, PARAM_FIXED, 1, 1, "", "Number of facets of the feasible-force polytope (<= 64)") \
-    X(poly_A, 300, REAL, PARAM_FIXED, 64, 3, "", "Feasible-force polytope S(0): A f_b <= b, unit normals") \
-    X(poly_b, 500, REAL, PARAM_FIXED, 64, 1, "N", "Feasible-force polytope S(0): offsets b")   \
-    X(fail_poly_n, 570, INTEGER, PARAM_FIXED, 8, 1, "", "Facets of S(0) after losing rotor i (<= 32; 0: none given)") \
-    X(fail_poly_A, 3000, REAL, PARAM_FIXED, 256, 3, "", "S(0) after losing rotor i: rows 32 (i-1) + 1 .. 32 (i-1) + fail_poly_n[i], unit normals") \
-    X(fail_poly_b, 4000, REAL, PARAM_FIXED, 256, 1, "N", "S(0) after losing rotor i: offsets (rows as fail_poly_A)") \
-    X(poly_margin, 564, REAL, PARAM_FIXED, 1, 1, "", "Scale (0, 1] of S(0) about the hover force used by the guidance: reserve for attitude torques") \
-    /* parameters: inner allocation (eq. 12-13) */                                                \
-    X(W_nu, 600, REAL, PARAM_TUNABLE, 6, 1, "", "Row weights of [df_b; dtau_b] (torque priority)") \
-    X(yaw_rate_max, 610, REAL, PARAM_TUNABLE, 1, 1, "rad/s", "Limit of the commanded heading rate (yaw authority is the smallest)") \
-    X(w_pref, 606, REAL, PARAM_TUNABLE, 1, 1, "", "Weight of the preferred actuator configuration") \
-    X(pref_omega_scale, 607, REAL, PARAM_TUNABLE, 1, 1, "", "Scale of rotor speeds (in rad/s) in the preference term") \
-    X(qp_max_iter, 608, INTEGER, PARAM_TUNABLE, 1, 1, "", "Iteration cap of both allocation QPs") \
-    X(timing, 609, BOOLEAN, PARAM_FIXED, 1, 1, "", "Measure computation times (t_step, t_guid, t_alloc); off keeps runs bit-reproducible") \
-    /* inputs: references */                                                                      \
-    X(pos_ref, 1000, REAL, INPUT, 3, 1, "m", "Reference position xi_ref, world NED")            \
-    X(euler_ref, 1003, REAL, INPUT, 3, 1, "rad", "Reference attitude mu_ref")                   \
-    X(vel_ref, 1006, REAL, INPUT, 3, 1, "m/s", "Velocity feed-forward (derivative of pos_ref)") \
-    X(acc_ref, 1009, REAL, INPUT, 3, 1, "m/s2", "Acceleration feed-forward (second derivative of pos_ref)") \
-    X(euler_rate_ref, 1012, REAL, INPUT, 3, 1, "rad/s", "Euler-rate feed-forward (derivative of euler_ref)") \
-    /* inputs: measurements (plant outputs) */                                                   \
-    X(pos, 1100, REAL, INPUT, 3, 1, "m", "Measured position, world NED")                       \
-    X(vel, 1103, REAL, INPUT, 3, 1, "m/s", "Measured velocity, world NED")                     \
-    X(acc, 1106, REAL, INPUT, 3, 1, "m/s2", "Measured acceleration, world NED")                \
-    X(euler, 1109, REAL, INPUT, 3, 1, "rad", "Measured attitude [phi, theta, psi]")            \
-    X(rate, 1112, REAL, INPUT, 3, 1, "rad/s", "Measured body rates")                           \
-    X(omega, 1120, REAL, INPUT, 8, 1, "rad/s", "Measured rotor speeds")                        \
-    X(alpha, 1130, REAL, INPUT, 8, 1, "rad", "Measured servo angles alpha")                    \
-    X(beta, 1140, REAL, INPUT, 8, 1, "rad", "Measured servo angles beta")                      \
-    X(rotor_health, 1150, REAL, INPUT, 8, 1, "", "Known rotor efficiency 0..1 (below 0.5: lost; the allocations exclude it)") \
-    /* outputs: actuator commands (plant inputs) */                                               \
-    X(omega_cmd, 2000, REAL, OUTPUT, 8, 1, "rad/s", "Rotor speed commands")                    \
-    X(alpha_cmd, 2010, REAL, OUTPUT, 8, 1, "rad", "Servo commands alpha")                       \
-    X(beta_cmd, 2020, REAL, OUTPUT, 8, 1, "rad", "Servo commands beta")                         \
-    /* outputs: diagnostics */                                                                   \
-    X(mu_c, 2030, REAL, OUTPUT, 3, 1, "rad", "Commanded feasible attitude mu_c")               \
-    X(f_b_ref, 2033, REAL, OUTPUT, 3, 1, "N", "Body force required to follow xi_ref at the measured attitude (eq. 21)") \
-    X(f_b_c, 2036, REAL, OUTPUT, 3, 1, "N", "Commanded body force f_b_m + df_b_c")             \
-    X(feasible, 2039, BOOLEAN, OUTPUT, 1, 1, "", "The reference pose is feasible: R_ref^T f_w_ref lies in S(0) (eq. 7)") \
-    X(guid_status, 2040, INTEGER, OUTPUT, 1, 1, "", "Guidance QP status: 0 optimal, 1 iteration cap, 2 infeasible, 3 bad input") \
-    X(guid_iter, 2041, INTEGER, OUTPUT, 1, 1, "", "Guidance QP iterations")                    \
-    X(alloc_status, 2042, INTEGER, OUTPUT, 1, 1, "", "Inner allocation QP status (as guid_status)") \
-    X(alloc_iter, 2043, INTEGER, OUTPUT, 1, 1, "", "Inner allocation QP iterations")           \
-    X(sat_flags, 2044, INTEGER, OUTPUT, 1, 1, "", "Commands at a limit: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i") \
-    X(guid_flags, 2045, INTEGER, OUTPUT, 1, 1, "", "Active guidance constraints: bit 0 force set, bit 1 phi bound, bit 2 theta bound") \
-    X(acc_c, 2050, REAL, OUTPUT, 3, 1, "m/s2", "Commanded acceleration (outer blocks plus feed-forward)") \
-    X(rate_c, 2053, REAL, OUTPUT, 3, 1, "rad/s", "Commanded body rates")                      \
-    X(dnu_c, 2056, REAL, OUTPUT, 6, 1, "", "Virtual control increment [df_b (N); dtau_b (N.m)]") \
-    X(alloc_residual, 2062, REAL, OUTPUT, 6, 1, "", "Allocation residual B'' du - dnu_c [N; N.m]") \
-    X(rotors_lost, 2080, INTEGER, OUTPUT, 1, 1, "", "Number of rotors the controller treats as lost") \
-    X(hover_possible, 2081, BOOLEAN, OUTPUT, 1, 1, "", "The hover force lies in the feasible-force set in use (false: the vehicle cannot hold hover)") \
-    X(active_polytope, 2082, INTEGER, OUTPUT, 1, 1, "", "Feasible-force set in use: 0 nominal, i: after losing rotor i, -1: several rotors lost (nominal set, no guarantee)") \
-    X(t_step, 2070, REAL, OUTPUT, 1, 1, "s", "Computation time of the last controller sample (0 unless timing)") \
-    X(t_guid, 2071, REAL, OUTPUT, 1, 1, "s", "Computation time of the last guidance QP solve (0 unless timing)") \
-    X(t_alloc, 2072, REAL, OUTPUT, 1, 1, "s", "Computation time of the last inner allocation QP solve (0 unless timing)")
+/* The plausible ranges of the inputs (docs/robustness.md), shared by the references and the
+ * measurements of the same quantity. */
+#define CTRL_MAX_DISTANCE 1e7 /* m */
+#define CTRL_MAX_SPEED 1e3    /* m/s */
+#define CTRL_MAX_ACC 1e4      /* m/s^2 */
+#define CTRL_MAX_ANGLE 1e3    /* rad (Euler angles) */
+#define CTRL_MAX_RATE 1e3     /* rad/s */
+#define CTRL_SERVO_MARGIN 0.78539816339744830962 /* pi/4: rad beyond the servo limits */
+#define CTRL_MAX_SERVO (FP_SERVO_LIMIT + CTRL_SERVO_MARGIN) /* 3 pi/4 */
+
+#define CONTROLLER_VARIABLES(X)                                                                    \
+    /* parameters: sampling and airframe model (nominal) */                                        \
+    X(Ts, 1, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Sample time; samples run at t0 + k Ts for any communication step, outputs held between them") \
+    X(n_rotors, 2, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(1, FP_MAX_ROTORS), "Number of rotors in use (1..8)") \
+    X(mass, 3, REAL, PARAM_FIXED, 1, 1, MASS, FP_POSITIVE, "Nominal mass used by the outer INDI")  \
+    X(inertia, 4, REAL, PARAM_FIXED, 3, 3, INERTIA, FP_ANY, "Nominal inertia used by the inner INDI") \
+    X(g, 13, REAL, PARAM_FIXED, 1, 1, ACCELERATION, FP_ANY, "Gravitational acceleration")          \
+    X(k_t, 14, REAL, PARAM_FIXED, 1, 1, THRUST_COEFFICIENT, FP_POSITIVE, "Thrust coefficient")     \
+    X(k_d, 15, REAL, PARAM_FIXED, 1, 1, DRAG_COEFFICIENT, FP_NONNEGATIVE, "Drag-torque coefficient") \
+    X(rotor_pos, 20, REAL, PARAM_FIXED, 8, 3, LENGTH, FP_ANY, "Rotor positions d_i, body FRD")     \
+    X(rotor_dir, 50, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(-1, 1), "Spin directions c_i (+-1)")  \
+    X(rotor_gamma, 60, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_ANY, "Fixed mounting angles gamma_i")    \
+    X(alpha_min, 70, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower servo limits alpha (equal limits: fixed)") \
+    X(alpha_max, 80, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper servo limits alpha") \
+    X(beta_min, 90, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower servo limits beta (equal limits: fixed)") \
+    X(beta_max, 100, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper servo limits beta") \
+    X(omega_min, 110, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_NONNEGATIVE, "Lower rotor speed limit") \
+    X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Upper rotor speed limit") \
+    /* parameters: measurement filter H(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) */                  \
+    X(filt_wn, 120, REAL, PARAM_FIXED, 1, 1, ANGULAR_FREQUENCY, FP_POSITIVE, "Natural frequency of H(s)") \
+    X(filt_zeta, 121, REAL, PARAM_FIXED, 1, 1, RATIO, FP_POSITIVE, "Damping ratio of H(s)")        \
+    /* parameters: first-order blocks x+ = A x + B e, y = C x + D e (discrete, per axis) */        \
+    X(K_pos_A, 130, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_IN_OPEN(-1, 1), "Position block K_xi: A") \
+    X(K_pos_B, 133, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_ANY, "Position block K_xi: B")    \
+    X(K_pos_C, 136, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Position block K_xi: C")       \
+    X(K_pos_D, 139, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Position block K_xi: D (1/s)") \
+    X(K_vel_A, 150, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_IN_OPEN(-1, 1), "Velocity block K_xidot: A") \
+    X(K_vel_B, 153, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_ANY, "Velocity block K_xidot: B") \
+    X(K_vel_C, 156, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Velocity block K_xidot: C")    \
+    X(K_vel_D, 159, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Velocity block K_xidot: D (1/s)") \
+    X(K_att_A, 170, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_IN_OPEN(-1, 1), "Attitude block: A") \
+    X(K_att_B, 173, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_ANY, "Attitude block: B")         \
+    X(K_att_C, 176, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Attitude block: C")            \
+    X(K_att_D, 179, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Attitude block: D (1/s)")      \
+    X(K_rate_A, 190, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_IN_OPEN(-1, 1), "Rate block: A") \
+    X(K_rate_B, 193, REAL, PARAM_TUNABLE, 3, 1, DIMENSIONLESS, FP_ANY, "Rate block: B")            \
+    X(K_rate_C, 196, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Rate block: C")               \
+    X(K_rate_D, 199, REAL, PARAM_TUNABLE, 3, 1, BLOCK_GAIN, FP_ANY, "Rate block: D (1/s)")         \
+    /* parameters: guidance allocation (eq. 17-23) */                                              \
+    X(gamma_opt, 210, REAL, PARAM_TUNABLE, 1, 1, WEIGHT, FP_POSITIVE, "Weight of the acceleration-tracking term") \
+    X(W_u, 211, REAL, PARAM_TUNABLE, 5, 1, WEIGHT, FP_POSITIVE, "Diagonal of W_u for [dfx, dfy, dfz, dphi, dtheta]") \
+    X(W_v, 216, REAL, PARAM_TUNABLE, 3, 1, WEIGHT, FP_POSITIVE, "Diagonal of W_v (world x, y, z)") \
+    X(euler_min, 220, REAL, PARAM_TUNABLE, 2, 1, ANGLE, FP_IN_OPEN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower bounds of [phi_c, theta_c]") \
+    X(euler_max, 222, REAL, PARAM_TUNABLE, 2, 1, ANGLE, FP_IN_OPEN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper bounds of [phi_c, theta_c]") \
+    X(force_constraint, 224, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(0, 1), "0: joint 3-D polytope S(0); 1: paper's slice P_xy at f_bz_ref plus f_bz bounds") \
+    X(poly_n, 230, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(4, FP_POLYTOPE_MAX_FACETS), "Number of facets of the feasible-force polytope (<= 64)") \
+    X(poly_A, 300, REAL, PARAM_FIXED, 64, 3, DIMENSIONLESS, FP_ANY, "Feasible-force polytope S(0): A f_b <= b, unit normals") \
+    X(poly_b, 500, REAL, PARAM_FIXED, 64, 1, FORCE, FP_ANY, "Feasible-force polytope S(0): offsets b") \
+    X(fail_poly_n, 570, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(0, FP_FAIL_POLYTOPE_FACETS), "Facets of S(0) after losing rotor i (<= 32; 0: none given)") \
+    X(fail_poly_A, 3000, REAL, PARAM_FIXED, 256, 3, DIMENSIONLESS, FP_ANY, "S(0) after losing rotor i: rows 32 (i-1) + 1 .. 32 (i-1) + fail_poly_n[i], unit normals") \
+    X(fail_poly_b, 4000, REAL, PARAM_FIXED, 256, 1, FORCE, FP_ANY, "S(0) after losing rotor i: offsets (rows as fail_poly_A)") \
+    X(poly_margin, 564, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_LOPEN(0, 1), "Scale (0, 1] of S(0) about the hover force used by the guidance: reserve for attitude torques") \
+    /* parameters: inner allocation (eq. 12-13) */                                                 \
+    X(W_nu, 600, REAL, PARAM_TUNABLE, 6, 1, WEIGHT, FP_POSITIVE, "Row weights of [df_b; dtau_b] (torque priority)") \
+    X(yaw_rate_max, 610, REAL, PARAM_TUNABLE, 1, 1, ANGULAR_VELOCITY, FP_POSITIVE, "Limit of the commanded heading rate (yaw authority is the smallest)") \
+    X(w_pref, 606, REAL, PARAM_TUNABLE, 1, 1, WEIGHT, FP_POSITIVE, "Weight of the preferred actuator configuration") \
+    X(pref_omega_scale, 607, REAL, PARAM_TUNABLE, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Scale of rotor speeds (in rad/s) in the preference term") \
+    X(qp_max_iter, 608, INTEGER, PARAM_TUNABLE, 1, 1, NONE, FP_IN(1, 1000), "Iteration cap of both allocation QPs") \
+    X(timing, 609, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Measure computation times (t_step, t_guid, t_alloc); off keeps runs bit-reproducible") \
+    /* inputs: references */                                                                       \
+    X(pos_ref, 1000, REAL, INPUT, 3, 1, LENGTH, FP_IN(-CTRL_MAX_DISTANCE, CTRL_MAX_DISTANCE), "Reference position xi_ref, world NED") \
+    X(euler_ref, 1003, REAL, INPUT, 3, 1, ANGLE, FP_IN(-CTRL_MAX_ANGLE, CTRL_MAX_ANGLE), "Reference attitude mu_ref") \
+    X(vel_ref, 1006, REAL, INPUT, 3, 1, VELOCITY, FP_IN(-CTRL_MAX_SPEED, CTRL_MAX_SPEED), "Velocity feed-forward (derivative of pos_ref)") \
+    X(acc_ref, 1009, REAL, INPUT, 3, 1, ACCELERATION, FP_IN(-CTRL_MAX_ACC, CTRL_MAX_ACC), "Acceleration feed-forward (second derivative of pos_ref)") \
+    X(euler_rate_ref, 1012, REAL, INPUT, 3, 1, ANGULAR_VELOCITY, FP_IN(-CTRL_MAX_RATE, CTRL_MAX_RATE), "Euler-rate feed-forward (derivative of euler_ref)") \
+    /* inputs: measurements (plant outputs) */                                                     \
+    X(pos, 1100, REAL, INPUT, 3, 1, LENGTH, FP_IN(-CTRL_MAX_DISTANCE, CTRL_MAX_DISTANCE), "Measured position, world NED") \
+    X(vel, 1103, REAL, INPUT, 3, 1, VELOCITY, FP_IN(-CTRL_MAX_SPEED, CTRL_MAX_SPEED), "Measured velocity, world NED") \
+    X(acc, 1106, REAL, INPUT, 3, 1, ACCELERATION, FP_IN(-CTRL_MAX_ACC, CTRL_MAX_ACC), "Measured acceleration, world NED") \
+    X(euler, 1109, REAL, INPUT, 3, 1, ANGLE, FP_IN(-CTRL_MAX_ANGLE, CTRL_MAX_ANGLE), "Measured attitude [phi, theta, psi]") \
+    X(rate, 1112, REAL, INPUT, 3, 1, ANGULAR_VELOCITY, FP_IN(-CTRL_MAX_RATE, CTRL_MAX_RATE), "Measured body rates") \
+    X(omega, 1120, REAL, INPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Measured rotor speeds")                \
+    X(alpha, 1130, REAL, INPUT, 8, 1, ANGLE, FP_IN(-CTRL_MAX_SERVO, CTRL_MAX_SERVO), "Measured servo angles alpha") \
+    X(beta, 1140, REAL, INPUT, 8, 1, ANGLE, FP_IN(-CTRL_MAX_SERVO, CTRL_MAX_SERVO), "Measured servo angles beta") \
+    X(rotor_health, 1150, REAL, INPUT, 8, 1, RATIO, FP_IN(0, 1), "Known rotor efficiency 0..1 (below 0.5: lost; the allocations exclude it)") \
+    /* outputs: actuator commands (plant inputs) */                                                \
+    X(omega_cmd, 2000, REAL, OUTPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Rotor speed commands")            \
+    X(alpha_cmd, 2010, REAL, OUTPUT, 8, 1, ANGLE, FP_ANY, "Servo commands alpha")                  \
+    X(beta_cmd, 2020, REAL, OUTPUT, 8, 1, ANGLE, FP_ANY, "Servo commands beta")                    \
+    /* outputs: diagnostics */                                                                     \
+    X(mu_c, 2030, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "Commanded feasible attitude mu_c")           \
+    X(f_b_ref, 2033, REAL, OUTPUT, 3, 1, FORCE, FP_ANY, "Body force required to follow xi_ref at the measured attitude (eq. 21)") \
+    X(f_b_c, 2036, REAL, OUTPUT, 3, 1, FORCE, FP_ANY, "Commanded body force f_b_m + df_b_c")       \
+    X(feasible, 2039, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "The reference pose is feasible: R_ref^T f_w_ref lies in S(0) (eq. 7)") \
+    X(guid_status, 2040, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Guidance QP status: 0 optimal, 1 iteration cap, 2 infeasible, 3 bad input") \
+    X(guid_iter, 2041, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Guidance QP iterations")              \
+    X(alloc_status, 2042, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Inner allocation QP status (as guid_status)") \
+    X(alloc_iter, 2043, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Inner allocation QP iterations")     \
+    X(sat_flags, 2044, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Commands at a limit: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i") \
+    X(guid_flags, 2045, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Active guidance constraints: bit 0 force set, bit 1 phi bound, bit 2 theta bound") \
+    X(acc_c, 2050, REAL, OUTPUT, 3, 1, ACCELERATION, FP_ANY, "Commanded acceleration (outer blocks plus feed-forward)") \
+    X(rate_c, 2053, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Commanded body rates")          \
+    X(dnu_c, 2056, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "Virtual control increment [df_b (N); dtau_b (N.m)]") \
+    X(alloc_residual, 2062, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "Allocation residual B'' du - dnu_c [N; N.m]") \
+    X(rotors_lost, 2080, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Number of rotors the controller treats as lost") \
+    X(hover_possible, 2081, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "The hover force lies in the feasible-force set in use (false: the vehicle cannot hold hover)") \
+    X(active_polytope, 2082, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Feasible-force set in use: 0 nominal, i: after losing rotor i, -1: several rotors lost (nominal set, no guarantee)") \
+    X(t_step, 2070, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last controller sample (0 unless timing)") \
+    X(t_guid, 2071, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last guidance QP solve (0 unless timing)") \
+    X(t_alloc, 2072, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last inner allocation QP solve (0 unless timing)")
 
 #endif

@@ -15,14 +15,22 @@
 #define ELEM_SIZE_REAL sizeof(double)
 #define ELEM_SIZE_INTEGER sizeof(int32_t)
 #define ELEM_SIZE_BOOLEAN sizeof(int32_t)
-#define PLANT_CHECK(name, vr, type, kind, rows, cols, unit, desc)                                \
+/* ... and a declared type exactly when it is a Real. */
+#define PLANT_CHECK(name, vr, type, kind, rows, cols, dtype, range, desc)                        \
     FP_STATIC_ASSERT(sizeof(((PlantModel *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type,     \
-                     name##_size);
+                     name##_size);                                                              \
+    FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
 PLANT_VARIABLES(PLANT_CHECK)
 
-#define PLANT_ROW(name, vr, type, kind, rows, cols, unit, desc) \
-    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(PlantModel, name), unit, desc},
+#define PLANT_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                          \
+    {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(PlantModel, name), FP_T_##dtype, range, \
+     desc},
 static const FpVar plant_vars[] = {PLANT_VARIABLES(PLANT_ROW)};
+#define N_PLANT_VARS (sizeof plant_vars / sizeof plant_vars[0])
+
+/* Row indices (PV_mass, ...): the input checks read their ranges from the rows. */
+#define PLANT_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc) PV_##name,
+enum { PLANT_VARIABLES(PLANT_INDEX) PV_COUNT };
 
 /* State vector layout. */
 enum { X_POS = 0, X_VEL = 3, X_QUAT = 6, X_RATE = 10, X_OMEGA = 13 };
@@ -239,42 +247,49 @@ static int invert3(double a[3][3], double inv[3][3]) {
     return 0;
 }
 
+/* Each initial actuator state within its own range and, when the range is met, within the
+ * airframe's limits (which no static range can state). */
+static void check_initial_actuator(FpCheck *c, const char *name, const double *v, int n,
+                                   const double *lo, const double *hi, int per_rotor,
+                                   const char *why) {
+    const FpVar *row = fp_check_row(c, name);
+    int i;
+    fp_need_param(c, name, v, n, NULL);
+    for (i = 0; i < n && row != NULL; i++) {
+        double a = per_rotor ? lo[i] : lo[0], b = per_rotor ? hi[i] : hi[0];
+        if (!isfinite(v[i]) || !fp_range_contains(&row->range, v[i])) continue; /* reported */
+        if (v[i] < a || v[i] > b) fp_check_bad(c, name, i + 1, 0, v[i], why);
+    }
+}
+
 static int validate(const PlantModel *m, const FpLogger *logger) {
     FpCheck c;
     FpRotorSet rs;
-    int i, n = m->n_rotors;
-    fp_check_init(&c, logger);
+    int n = m->n_rotors;
+    fp_check_init(&c, logger, plant_vars, N_PLANT_VARS);
     FP_MODEL_TO_ROTOR_SET(m, &rs);
     if (fp_check_airframe(&c, m->mass, &m->inertia[0][0], m->g, &rs) != FP_OK) return c.errors;
-    fp_need_positive(&c, "tau_motor", &m->tau_motor, 1, 0);
-    fp_need_positive(&c, "tau_servo", &m->tau_servo, 1, 0);
-    fp_need_positive(&c, "h_internal", &m->h_internal, 1, 0);
-    fp_need_finite(&c, "pos0", m->pos0, 3, 1);
-    fp_need_finite(&c, "vel0", m->vel0, 3, 1);
-    fp_need_finite(&c, "euler0", m->euler0, 3, 1);
-    fp_need_finite(&c, "rate0", m->rate0, 3, 1);
-    if (!m->init_trim) {
-        fp_need_finite(&c, "omega0", m->omega0, n, 1);
-        fp_need_finite(&c, "alpha0", m->alpha0, n, 1);
-        fp_need_finite(&c, "beta0", m->beta0, n, 1);
-        for (i = 0; i < n; i++) {
-            if (m->omega0[i] < m->omega_min || m->omega0[i] > m->omega_max)
-                fp_check_bad(&c, "omega0", i + 1, 0, m->omega0[i],
-                             "outside [omega_min, omega_max]");
-            if (m->alpha0[i] < m->alpha_min[i] || m->alpha0[i] > m->alpha_max[i])
-                fp_check_bad(&c, "alpha0", i + 1, 0, m->alpha0[i],
-                             "outside [alpha_min, alpha_max]");
-            if (m->beta0[i] < m->beta_min[i] || m->beta0[i] > m->beta_max[i])
-                fp_check_bad(&c, "beta0", i + 1, 0, m->beta0[i],
-                             "outside [beta_min, beta_max]");
-        }
+    fp_need_param(&c, "tau_motor", &m->tau_motor, 1, NULL);
+    fp_need_param(&c, "tau_servo", &m->tau_servo, 1, NULL);
+    fp_need_param(&c, "h_internal", &m->h_internal, 1, NULL);
+    fp_need_param(&c, "pos0", m->pos0, 3, NULL);
+    fp_need_param(&c, "vel0", m->vel0, 3, NULL);
+    fp_need_param(&c, "euler0", m->euler0, 3, NULL);
+    fp_need_param(&c, "rate0", m->rate0, 3, NULL);
+    if (!m->init_trim) { /* ignored with init_trim, so not checked then */
+        check_initial_actuator(&c, "omega0", m->omega0, n, &m->omega_min, &m->omega_max, 0,
+                               "outside [omega_min, omega_max]");
+        check_initial_actuator(&c, "alpha0", m->alpha0, n, m->alpha_min, m->alpha_max, 1,
+                               "outside [alpha_min, alpha_max]");
+        check_initial_actuator(&c, "beta0", m->beta0, n, m->beta_min, m->beta_max, 1,
+                               "outside [beta_min, beta_max]");
     }
-    fp_need_nonnegative(&c, "noise_pos", &m->noise_pos, 1, 0);
-    fp_need_nonnegative(&c, "noise_vel", &m->noise_vel, 1, 0);
-    fp_need_nonnegative(&c, "noise_acc", &m->noise_acc, 1, 0);
-    fp_need_nonnegative(&c, "noise_att", &m->noise_att, 1, 0);
-    fp_need_nonnegative(&c, "noise_rate", &m->noise_rate, 1, 0);
-    fp_need_nonnegative(&c, "noise_ang_acc", &m->noise_ang_acc, 1, 0);
+    fp_need_param(&c, "noise_pos", &m->noise_pos, 1, NULL);
+    fp_need_param(&c, "noise_vel", &m->noise_vel, 1, NULL);
+    fp_need_param(&c, "noise_acc", &m->noise_acc, 1, NULL);
+    fp_need_param(&c, "noise_att", &m->noise_att, 1, NULL);
+    fp_need_param(&c, "noise_rate", &m->noise_rate, 1, NULL);
+    fp_need_param(&c, "noise_ang_acc", &m->noise_ang_acc, 1, NULL);
     if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->tau_motor, m->tau_servo))
         fp_check_warning(&c,
                          "parameter h_internal = %g s is coarse against the actuator time "
@@ -286,34 +301,31 @@ static int validate(const PlantModel *m, const FpLogger *logger) {
 /* ------------------------------------------------------------------------ */
 /* Model callbacks                                                          */
 
+/* Every input finite and within its table range; else an error naming the first bad one. */
 static int check_inputs(const PlantModel *m, const FpLogger *logger) {
-    static const char *const names[] = {"omega_cmd", "alpha_cmd", "beta_cmd", "efficiency"};
-    const double *vectors[4];
-    int i, k, n = m->n_rotors;
-    vectors[0] = m->omega_cmd;
-    vectors[1] = m->alpha_cmd;
-    vectors[2] = m->beta_cmd;
-    vectors[3] = m->efficiency;
-    for (k = 0; k < 4; k++)
-        for (i = 0; i < n; i++)
-            if (!isfinite(vectors[k][i])) {
-                fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] = %g is not finite", names[k],
-                       i + 1, vectors[k][i]);
+    static const int rows[] = {PV_omega_cmd, PV_alpha_cmd, PV_beta_cmd, PV_efficiency,
+                               PV_f_d,       PV_tau_d,     PV_a_d};
+    const double *values[7];
+    int counts[7] = {0, 0, 0, 0, 3, 3, 3};
+    int i, k;
+    values[0] = m->omega_cmd, values[1] = m->alpha_cmd, values[2] = m->beta_cmd;
+    values[3] = m->efficiency, values[4] = m->f_d, values[5] = m->tau_d, values[6] = m->a_d;
+    counts[0] = counts[1] = counts[2] = counts[3] = m->n_rotors; /* the others are ignored */
+    for (k = 0; k < 7; k++) {
+        const FpVar *v = &plant_vars[rows[k]];
+        for (i = 0; i < counts[k]; i++) {
+            double x = values[k][i];
+            char range[96];
+            if (!isfinite(x)) {
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] = %g is not finite",
+                       v->name, i + 1, x);
                 return 1;
             }
-    for (i = 0; i < n; i++)
-        if (m->efficiency[i] < 0.0 || m->efficiency[i] > 1.0) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input efficiency[%d] = %g is outside [0, 1]",
-                   i + 1, m->efficiency[i]);
-            return 1;
-        }
-    for (i = 0; i < 3; i++) {
-        const char *name = !isfinite(m->f_d[i]) ? "f_d" : !isfinite(m->tau_d[i]) ? "tau_d"
-                                                       : !isfinite(m->a_d[i])   ? "a_d"
-                                                                                : NULL;
-        if (name != NULL) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] is not finite", name, i + 1);
-            return 1;
+            if (!fp_range_contains(&v->range, x)) {
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR, "input %s[%d] = %g is outside %s",
+                       v->name, i + 1, x, fp_range_text(&v->range, 0, range, sizeof range));
+                return 1;
+            }
         }
     }
     return 0;
@@ -370,10 +382,6 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
 }
 
 
-/* The most RK4 steps one doStep may take: 10^6 (500 s at the default 0.5 ms, about a second
- * of CPU): a call that cannot be cancelled must stay short enough for an importer to wait. */
-#define MAX_SUBSTEPS 1000000.0
-
 /* The physically meaningful range of the vehicle state: beyond it the rigid-body and rotor
  * model mean nothing and RK4 soon overflows to NaN, so a step that leaves it is refused with
  * the state kept from before the step (docs/robustness.md). */
@@ -409,27 +417,22 @@ static int state_outside(const double *x, double t, const FpLogger *logger) {
     return 0;
 }
 
+/* Any h > 0: ceil(h / h_internal) equal RK4 steps (fp_steps_to_cover), so a step that is a
+ * multiple of h_internal takes exactly the steps of h_internal it always did, and any other
+ * step the fewest equal steps no longer than h_internal.  At most FP_MAX_INTERNAL_STEPS
+ * (10^6, 500 s at the default 0.5 ms, about a second of CPU): a call that cannot be cancelled
+ * must stay short enough for an importer to wait. */
 static FpStatus plant_step(void *model, double t, double h, const FpLogger *logger) {
     PlantModel *m = (PlantModel *)model;
     Commands u;
-    double ratio = h / m->h_internal, substeps = floor(ratio + 0.5), hi;
+    double substeps = fp_steps_to_cover(h, m->h_internal, FP_STEP_TOL * h), hi;
     double t_start = m->timing ? fp_clock_seconds() : 0.0;
     double x_before[PLANT_NX];
     int32_t flags_before = m->sat_flags;
     long k, n;
-    if (!(substeps >= 1.0) || !(fabs(ratio - substeps) <= 1e-9 * substeps)) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s is not a whole multiple of the internal RK4 step "
-               "h_internal = %.12g s; use a multiple or change h_internal",
-               h, m->h_internal);
+    if (fp_check_step_work(h, substeps, FP_MAX_INTERNAL_STEPS, "RK4 steps of h_internal",
+                           logger) != FP_OK)
         return FP_ERROR;
-    }
-    if (substeps > MAX_SUBSTEPS) {
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "communication step %.12g s would take %.0f internal steps (limit %.0f)", h,
-               substeps, MAX_SUBSTEPS);
-        return FP_ERROR;
-    }
     if (check_inputs(m, logger) != 0) return FP_ERROR;
     memcpy(x_before, m->x, sizeof x_before);
     saturate(m, &u, &m->sat_flags);
@@ -476,7 +479,7 @@ static const FpModelInfo plant_info = {
     "dynamics, hard limits, disturbances and optional sensor noise; fixed-step RK4",
     sizeof(PlantModel),
     plant_vars,
-    sizeof plant_vars / sizeof plant_vars[0],
+    N_PLANT_VARS,
     0.002,
     10.0,
     plant_set_defaults,

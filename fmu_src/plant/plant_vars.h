@@ -1,74 +1,87 @@
 /*
- * MultirotorPlant: THE variable table.  modelDescription.xml (tools/mdgen.c)
- * and the FMI get/set dispatch (common/fmi2_glue.c) are both generated from
- * it; a row's name is also the PlantModel member that holds the value.
+ * MultirotorPlant: THE variable table.  modelDescription.xml (tools/mdgen.c),
+ * the FMI get/set dispatch (common/fmi2_glue.c) and the model's own range
+ * checks are all generated from it; a row's name is also the PlantModel member
+ * that holds the value.
  *
- * X(name, value reference, type, kind, rows, cols, unit, description)
+ * X(name, value reference, type, kind, rows, cols, declared type, range, description)
+ *
+ * - declared type: the physical kind of a Real (FP_DECLARED_TYPES in
+ *   common/fp_model.h: its quantity, unit and nominal), NONE otherwise.
+ * - range: FP_ANY, FP_POSITIVE (> 0), FP_NONNEGATIVE (>= 0), FP_IN(a, b)
+ *   [a, b], FP_IN_OPEN(a, b) (a, b), FP_IN_LOPEN(a, b) (a, b].  It is the
+ *   declared min/max and the bound the model checks (plant.c validate and
+ *   check_inputs, common/fp_params.c), so a changed range changes both; an
+ *   open bound is declared at its value (FMI's min is inclusive) and the check
+ *   refuses the value itself.  Entries beyond n_rotors are ignored and not
+ *   checked.  Commands (omega_cmd, alpha_cmd, beta_cmd) have no range: beyond
+ *   the actuator limits they are saturated, which is the hardware's physics.
+ *
  * Value references are stable: append, never renumber.
  */
 #ifndef PLANT_VARS_H
 #define PLANT_VARS_H
 
-#define PLANT_VARIABLES(X)                                                                        \
-    /* parameters: vehicle */                                                                     \
-    X(n_rotors, 1, INTEGER, PARAM_FIXED, 1, 1, "", "Number of rotors in use (1..8); entries beyond it are ignored") \
-    X(mass, 2, REAL, PARAM_FIXED, 1, 1, "kg", "Vehicle mass m")                                  \
-    X(inertia, 3, REAL, PARAM_FIXED, 3, 3, "kg.m2", "Inertia matrix I_B about the centre of gravity, body FRD axes") \
-    X(g, 12, REAL, PARAM_FIXED, 1, 1, "m/s2", "Gravitational acceleration along world +z (down)") \
-    X(k_t, 13, REAL, PARAM_FIXED, 1, 1, "N.s2/rad2", "Thrust coefficient: f_m = k_t omega^2")   \
-    X(k_d, 14, REAL, PARAM_FIXED, 1, 1, "N.m.s2/rad2", "Drag-torque coefficient: tau_m = k_d omega^2") \
-    X(rotor_pos, 20, REAL, PARAM_FIXED, 8, 3, "m", "Rotor positions d_i in the body frame (row i = rotor i)") \
-    X(rotor_dir, 50, INTEGER, PARAM_FIXED, 8, 1, "", "Spin direction c_i (+1: reaction torque along the thrust, -1: against)") \
-    X(rotor_gamma, 60, REAL, PARAM_FIXED, 8, 1, "rad", "Fixed mounting angle gamma_i about body z (R_Mi^B = Rz(gamma) Rx(alpha) Ry(beta))") \
-    X(alpha_min, 70, REAL, PARAM_FIXED, 8, 1, "rad", "Lower limit of servo angle alpha_i (equal limits: fixed tilt)") \
-    X(alpha_max, 80, REAL, PARAM_FIXED, 8, 1, "rad", "Upper limit of servo angle alpha_i")      \
-    X(beta_min, 90, REAL, PARAM_FIXED, 8, 1, "rad", "Lower limit of servo angle beta_i (equal limits: fixed tilt)") \
-    X(beta_max, 100, REAL, PARAM_FIXED, 8, 1, "rad", "Upper limit of servo angle beta_i")       \
-    X(omega_min, 110, REAL, PARAM_FIXED, 1, 1, "rad/s", "Lower limit of rotor speed")           \
-    X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, "rad/s", "Upper limit of rotor speed")           \
-    X(tau_motor, 112, REAL, PARAM_FIXED, 1, 1, "s", "Time constant of the first-order motor model") \
-    X(tau_servo, 113, REAL, PARAM_FIXED, 1, 1, "s", "Time constant of the first-order servo model") \
-    X(h_internal, 114, REAL, PARAM_FIXED, 1, 1, "s", "Internal RK4 step; every communication step must be a multiple of it") \
-    /* parameters: initial state */                                                               \
-    X(pos0, 120, REAL, PARAM_FIXED, 3, 1, "m", "Initial position, world NED")                   \
-    X(vel0, 123, REAL, PARAM_FIXED, 3, 1, "m/s", "Initial velocity, world NED")                 \
-    X(euler0, 126, REAL, PARAM_FIXED, 3, 1, "rad", "Initial attitude [phi, theta, psi], R_B^W = Rz(psi) Ry(theta) Rx(phi)") \
-    X(rate0, 129, REAL, PARAM_FIXED, 3, 1, "rad/s", "Initial body rates [p, q, r]")             \
-    X(init_trim, 132, BOOLEAN, PARAM_FIXED, 1, 1, "", "Start the actuators at hover trim for euler0 (ignores omega0, alpha0, beta0)") \
-    X(omega0, 140, REAL, PARAM_FIXED, 8, 1, "rad/s", "Initial rotor speeds (when init_trim is false)") \
-    X(alpha0, 150, REAL, PARAM_FIXED, 8, 1, "rad", "Initial servo angles alpha (when init_trim is false)") \
-    X(beta0, 160, REAL, PARAM_FIXED, 8, 1, "rad", "Initial servo angles beta (when init_trim is false)") \
-    /* parameters: sensor noise (all zero: off) */                                                \
-    X(noise_seed, 170, INTEGER, PARAM_FIXED, 1, 1, "", "Seed of the sensor-noise generator")    \
-    X(noise_pos, 171, REAL, PARAM_FIXED, 1, 1, "m", "Standard deviation of position noise")     \
-    X(noise_vel, 172, REAL, PARAM_FIXED, 1, 1, "m/s", "Standard deviation of velocity noise")   \
-    X(noise_acc, 173, REAL, PARAM_FIXED, 1, 1, "m/s2", "Standard deviation of acceleration noise") \
-    X(noise_att, 174, REAL, PARAM_FIXED, 1, 1, "rad", "Standard deviation of Euler-angle noise") \
-    X(noise_rate, 175, REAL, PARAM_FIXED, 1, 1, "rad/s", "Standard deviation of body-rate noise") \
-    X(noise_ang_acc, 176, REAL, PARAM_FIXED, 1, 1, "rad/s2", "Standard deviation of angular-acceleration noise") \
-    X(timing, 177, BOOLEAN, PARAM_FIXED, 1, 1, "", "Measure the computation time of each step (t_step); off keeps runs bit-reproducible") \
-    /* inputs */                                                                                  \
-    X(omega_cmd, 200, REAL, INPUT, 8, 1, "rad/s", "Commanded rotor speeds (saturated at the limits, see sat_flags)") \
-    X(alpha_cmd, 210, REAL, INPUT, 8, 1, "rad", "Commanded servo angles alpha")                 \
-    X(beta_cmd, 220, REAL, INPUT, 8, 1, "rad", "Commanded servo angles beta")                   \
-    X(efficiency, 230, REAL, INPUT, 8, 1, "", "Rotor efficiency 0..1 scaling thrust and drag (1 healthy, 0 lost)") \
-    X(f_d, 240, REAL, INPUT, 3, 1, "N", "Disturbance force f_d, world NED")                     \
-    X(tau_d, 243, REAL, INPUT, 3, 1, "N.m", "Disturbance torque tau_d, body FRD")               \
-    X(a_d, 246, REAL, INPUT, 3, 1, "m/s2", "Disturbance acceleration, world NED")              \
-    /* outputs */                                                                                 \
-    X(pos, 300, REAL, OUTPUT, 3, 1, "m", "Position xi, world NED")                              \
-    X(vel, 303, REAL, OUTPUT, 3, 1, "m/s", "Velocity, world NED")                               \
-    X(acc, 306, REAL, OUTPUT, 3, 1, "m/s2", "Acceleration (second derivative of position), world NED") \
-    X(euler, 309, REAL, OUTPUT, 3, 1, "rad", "Attitude [phi, theta, psi]")                      \
-    X(quat, 312, REAL, OUTPUT, 4, 1, "", "Attitude quaternion [w, x, y, z] of R_B^W, w >= 0")  \
-    X(rate, 316, REAL, OUTPUT, 3, 1, "rad/s", "Body rates Omega = [p, q, r]")                   \
-    X(ang_acc, 319, REAL, OUTPUT, 3, 1, "rad/s2", "Angular acceleration dOmega/dt, body FRD")   \
-    X(omega, 330, REAL, OUTPUT, 8, 1, "rad/s", "Measured rotor speeds")                         \
-    X(alpha, 340, REAL, OUTPUT, 8, 1, "rad", "Measured servo angles alpha")                     \
-    X(beta, 350, REAL, OUTPUT, 8, 1, "rad", "Measured servo angles beta")                       \
-    X(f_b, 360, REAL, OUTPUT, 3, 1, "N", "Rotor force f_b in the body frame")                   \
-    X(tau_b, 363, REAL, OUTPUT, 3, 1, "N.m", "Rotor torque tau_b in the body frame")            \
-    X(sat_flags, 370, INTEGER, OUTPUT, 1, 1, "", "Commands beyond limits in the last step: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i") \
-    X(t_step, 371, REAL, OUTPUT, 1, 1, "s", "Computation time of the last doStep (0 unless timing)")
+#define PLANT_VARIABLES(X)                                                                         \
+    /* parameters: vehicle */                                                                      \
+    X(n_rotors, 1, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(1, FP_MAX_ROTORS), "Number of rotors in use (1..8); entries beyond it are ignored") \
+    X(mass, 2, REAL, PARAM_FIXED, 1, 1, MASS, FP_POSITIVE, "Vehicle mass m")                       \
+    X(inertia, 3, REAL, PARAM_FIXED, 3, 3, INERTIA, FP_ANY, "Inertia matrix I_B about the centre of gravity, body FRD axes") \
+    X(g, 12, REAL, PARAM_FIXED, 1, 1, ACCELERATION, FP_ANY, "Gravitational acceleration along world +z (down)") \
+    X(k_t, 13, REAL, PARAM_FIXED, 1, 1, THRUST_COEFFICIENT, FP_POSITIVE, "Thrust coefficient: f_m = k_t omega^2") \
+    X(k_d, 14, REAL, PARAM_FIXED, 1, 1, DRAG_COEFFICIENT, FP_NONNEGATIVE, "Drag-torque coefficient: tau_m = k_d omega^2") \
+    X(rotor_pos, 20, REAL, PARAM_FIXED, 8, 3, LENGTH, FP_ANY, "Rotor positions d_i in the body frame (row i = rotor i)") \
+    X(rotor_dir, 50, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(-1, 1), "Spin direction c_i (+1: reaction torque along the thrust, -1: against)") \
+    X(rotor_gamma, 60, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_ANY, "Fixed mounting angle gamma_i about body z (R_Mi^B = Rz(gamma) Rx(alpha) Ry(beta))") \
+    X(alpha_min, 70, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower limit of servo angle alpha_i (equal limits: fixed tilt)") \
+    X(alpha_max, 80, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper limit of servo angle alpha_i") \
+    X(beta_min, 90, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower limit of servo angle beta_i (equal limits: fixed tilt)") \
+    X(beta_max, 100, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper limit of servo angle beta_i") \
+    X(omega_min, 110, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_NONNEGATIVE, "Lower limit of rotor speed") \
+    X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Upper limit of rotor speed") \
+    X(tau_motor, 112, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time constant of the first-order motor model") \
+    X(tau_servo, 113, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time constant of the first-order servo model") \
+    X(h_internal, 114, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Internal RK4 step; a communication step h takes ceil(h / h_internal) equal RK4 steps") \
+    /* parameters: initial state */                                                                \
+    X(pos0, 120, REAL, PARAM_FIXED, 3, 1, LENGTH, FP_ANY, "Initial position, world NED")           \
+    X(vel0, 123, REAL, PARAM_FIXED, 3, 1, VELOCITY, FP_ANY, "Initial velocity, world NED")         \
+    X(euler0, 126, REAL, PARAM_FIXED, 3, 1, ANGLE, FP_ANY, "Initial attitude [phi, theta, psi], R_B^W = Rz(psi) Ry(theta) Rx(phi)") \
+    X(rate0, 129, REAL, PARAM_FIXED, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Initial body rates [p, q, r]") \
+    X(init_trim, 132, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Start the actuators at hover trim for euler0 (ignores omega0, alpha0, beta0)") \
+    X(omega0, 140, REAL, PARAM_FIXED, 8, 1, ROTOR_SPEED, FP_NONNEGATIVE, "Initial rotor speeds (when init_trim is false)") \
+    X(alpha0, 150, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Initial servo angles alpha (when init_trim is false)") \
+    X(beta0, 160, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Initial servo angles beta (when init_trim is false)") \
+    /* parameters: sensor noise (all zero: off) */                                                 \
+    X(noise_seed, 170, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Seed of the sensor-noise generator") \
+    X(noise_pos, 171, REAL, PARAM_FIXED, 1, 1, LENGTH, FP_NONNEGATIVE, "Standard deviation of position noise") \
+    X(noise_vel, 172, REAL, PARAM_FIXED, 1, 1, VELOCITY, FP_NONNEGATIVE, "Standard deviation of velocity noise") \
+    X(noise_acc, 173, REAL, PARAM_FIXED, 1, 1, ACCELERATION, FP_NONNEGATIVE, "Standard deviation of acceleration noise") \
+    X(noise_att, 174, REAL, PARAM_FIXED, 1, 1, ANGLE, FP_NONNEGATIVE, "Standard deviation of Euler-angle noise") \
+    X(noise_rate, 175, REAL, PARAM_FIXED, 1, 1, ANGULAR_VELOCITY, FP_NONNEGATIVE, "Standard deviation of body-rate noise") \
+    X(noise_ang_acc, 176, REAL, PARAM_FIXED, 1, 1, ANGULAR_ACCELERATION, FP_NONNEGATIVE, "Standard deviation of angular-acceleration noise") \
+    X(timing, 177, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Measure the computation time of each step (t_step); off keeps runs bit-reproducible") \
+    /* inputs */                                                                                   \
+    X(omega_cmd, 200, REAL, INPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Commanded rotor speeds (saturated at the limits, see sat_flags)") \
+    X(alpha_cmd, 210, REAL, INPUT, 8, 1, ANGLE, FP_ANY, "Commanded servo angles alpha")            \
+    X(beta_cmd, 220, REAL, INPUT, 8, 1, ANGLE, FP_ANY, "Commanded servo angles beta")              \
+    X(efficiency, 230, REAL, INPUT, 8, 1, RATIO, FP_IN(0, 1), "Rotor efficiency 0..1 scaling thrust and drag (1 healthy, 0 lost)") \
+    X(f_d, 240, REAL, INPUT, 3, 1, FORCE, FP_ANY, "Disturbance force f_d, world NED")              \
+    X(tau_d, 243, REAL, INPUT, 3, 1, TORQUE, FP_ANY, "Disturbance torque tau_d, body FRD")         \
+    X(a_d, 246, REAL, INPUT, 3, 1, ACCELERATION, FP_ANY, "Disturbance acceleration, world NED")    \
+    /* outputs */                                                                                  \
+    X(pos, 300, REAL, OUTPUT, 3, 1, LENGTH, FP_ANY, "Position xi, world NED")                      \
+    X(vel, 303, REAL, OUTPUT, 3, 1, VELOCITY, FP_ANY, "Velocity, world NED")                       \
+    X(acc, 306, REAL, OUTPUT, 3, 1, ACCELERATION, FP_ANY, "Acceleration (second derivative of position), world NED") \
+    X(euler, 309, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "Attitude [phi, theta, psi]")                 \
+    X(quat, 312, REAL, OUTPUT, 4, 1, DIMENSIONLESS, FP_ANY, "Attitude quaternion [w, x, y, z] of R_B^W, w >= 0") \
+    X(rate, 316, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Body rates Omega = [p, q, r]")     \
+    X(ang_acc, 319, REAL, OUTPUT, 3, 1, ANGULAR_ACCELERATION, FP_ANY, "Angular acceleration dOmega/dt, body FRD") \
+    X(omega, 330, REAL, OUTPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Measured rotor speeds")                \
+    X(alpha, 340, REAL, OUTPUT, 8, 1, ANGLE, FP_ANY, "Measured servo angles alpha")                \
+    X(beta, 350, REAL, OUTPUT, 8, 1, ANGLE, FP_ANY, "Measured servo angles beta")                  \
+    X(f_b, 360, REAL, OUTPUT, 3, 1, FORCE, FP_ANY, "Rotor force f_b in the body frame")            \
+    X(tau_b, 363, REAL, OUTPUT, 3, 1, TORQUE, FP_ANY, "Rotor torque tau_b in the body frame")      \
+    X(sat_flags, 370, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Commands beyond limits in the last step: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i") \
+    X(t_step, 371, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last doStep (0 unless timing)")
 
 #endif

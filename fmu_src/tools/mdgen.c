@@ -8,12 +8,25 @@
  * With --sources, the C files the FMU's binary is built from (the build's one list of them,
  * as laid out flat in the FMU's sources/ folder DIR) go into the FMI 2.0 <SourceFiles> of
  * <CoSimulation> and into DIR/buildDescription.xml (the FMI 2.0.4 / FMI 3.0 form).
+ *
+ * The output depends on nothing but the sources and VERSION, so builds are
+ * reproducible: generationDateAndTime is SOURCE_DATE_EPOCH when the builder
+ * sets it (reproducible-builds.org: the tool reads it itself), else the fixed
+ * date of the release (RELEASE_DATE), never the clock.
  */
+#include <errno.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <time.h>
 
 #include "fp_model.h"
+
+/* Who the FMUs are from and under which terms (pyproject.toml: license MIT; a test compares
+ * them).  RELEASE_DATE is the day of the release VERSION names: set it with the version. */
+#define AUTHOR "The fullpose authors"
+#define LICENSE "MIT"
+#define RELEASE_DATE "2026-12-02T00:00:00Z"
 
 typedef struct {
     const char *name;
@@ -38,6 +51,7 @@ static const Unit units[] = {
     {"N.m", 1, 2, -2, 0, {NULL, NULL}, {0, 0}},
     {"N.s2/rad2", 1, 1, 0, -2, {NULL, NULL}, {0, 0}},
     {"N.m.s2/rad2", 1, 2, 0, -2, {NULL, NULL}, {0, 0}},
+    {"1/s", 0, 0, -1, 0, {NULL, NULL}, {0, 0}},
 };
 #define N_UNITS (sizeof units / sizeof units[0])
 
@@ -60,14 +74,30 @@ static const Unit *find_unit(const char *name) {
     return NULL;
 }
 
+/* 1 if some element of the table has declared type t. */
+static int type_used(const FpModelInfo *info, FpTypeId t) {
+    size_t i;
+    uint32_t k;
+    for (i = 0; i < info->n_vars; i++)
+        for (k = 0; k < fp_var_count(&info->vars[i]); k++)
+            if (fp_var_element_type(&info->vars[i], k) == t) return 1;
+    return 0;
+}
+
+static int unit_used(const FpModelInfo *info, const char *unit) {
+    int t;
+    for (t = 0; t < FP_N_TYPES; t++)
+        if (strcmp(fp_declared_type((FpTypeId)t)->unit, unit) == 0 && type_used(info, (FpTypeId)t))
+            return 1;
+    return 0;
+}
+
 static void write_units(FILE *f, const FpModelInfo *info) {
     size_t i, j;
     fputs("  <UnitDefinitions>\n", f);
     for (i = 0; i < N_UNITS; i++) {
-        int used = 0;
         const Unit *u = &units[i];
-        for (j = 0; j < info->n_vars; j++) used |= strcmp(info->vars[j].unit, u->name) == 0;
-        if (!used) continue;
+        if (!unit_used(info, u->name)) continue;
         fprintf(f, "    <Unit name=\"%s\">\n      <BaseUnit", u->name);
         if (u->kg) fprintf(f, " kg=\"%d\"", u->kg);
         if (u->m) fprintf(f, " m=\"%d\"", u->m);
@@ -81,6 +111,35 @@ static void write_units(FILE *f, const FpModelInfo *info) {
         fputs("    </Unit>\n", f);
     }
     fputs("  </UnitDefinitions>\n", f);
+}
+
+/* One <SimpleType> per declared type in use: what a variable of that kind is. */
+static void write_types(FILE *f, const FpModelInfo *info) {
+    int t;
+    fputs("  <TypeDefinitions>\n", f);
+    for (t = 0; t < FP_N_TYPES; t++) {
+        const FpDeclaredType *d = fp_declared_type((FpTypeId)t);
+        if (d->name[0] == '\0' || !type_used(info, (FpTypeId)t)) continue;
+        fprintf(f, "    <SimpleType name=\"%s\">\n      <Real quantity=\"%s\" unit=\"%s\"", d->name,
+                d->quantity, d->unit);
+        if (d->nominal != 0.0) fprintf(f, " nominal=\"%.17g\"", d->nominal);
+        fputs("/>\n    </SimpleType>\n", f);
+    }
+    fputs("  </TypeDefinitions>\n", f);
+}
+
+/* min/max of a row (FMI's are inclusive; an open bound is declared at its value). */
+static void write_range(FILE *f, const FpVar *v) {
+    const char *format = v->type == FP_REAL ? "%s=\"%.17g\"" : "%s=\"%.0f\"";
+    if (v->type == FP_BOOLEAN) return;
+    if (v->range.flags & FP_RANGE_LO) {
+        fputc(' ', f);
+        fprintf(f, format, "min", v->range.lo);
+    }
+    if (v->range.flags & FP_RANGE_HI) {
+        fputc(' ', f);
+        fprintf(f, format, "max", v->range.hi);
+    }
 }
 
 static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model) {
@@ -99,8 +158,20 @@ static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model
     if (v->kind == FP_PARAM_FIXED || v->kind == FP_PARAM_TUNABLE) fputs(" initial=\"exact\"", f);
     fputs(" description=\"", f);
     xml_text(f, v->description);
+    if (v->range.flags & (FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN)) {
+        /* min/max cannot say that the bound itself is refused: the description does */
+        char range[96];
+        fputs("; range ", f);
+        xml_text(f, fp_range_text(&v->range, v->type != FP_REAL, range, sizeof range));
+    }
     fprintf(f, "\">\n      <%s", tag[v->type]);
-    if (v->type == FP_REAL && v->unit[0] != '\0') fprintf(f, " unit=\"%s\"", v->unit);
+    if (v->type == FP_REAL) {
+        /* the unit also on the variable: importers that do not resolve declared types (and
+         * fmpy's ScalarVariable.unit) still see it */
+        const FpDeclaredType *d = fp_declared_type(fp_var_element_type(v, k));
+        fprintf(f, " declaredType=\"%s\" unit=\"%s\"", d->name, d->unit);
+    }
+    write_range(f, v);
     if (v->kind != FP_OUTPUT) {
         if (v->type == FP_REAL) {
             fprintf(f, " start=\"%.17g\"", ((const double *)p)[k]);
@@ -114,16 +185,68 @@ static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model
     return 0;
 }
 
-static int check_table(const FpModelInfo *info) {
+/* The start value of element k as a double (Integer and Boolean converted exactly). */
+static double start_value(const FpVar *v, uint32_t k, const void *model) {
+    const char *p = (const char *)model + v->offset;
+    if (v->type == FP_REAL) return ((const double *)p)[k];
+    return (double)((const int32_t *)p)[k];
+}
+
+/* The generation date: SOURCE_DATE_EPOCH (seconds since 1970, UTC) or RELEASE_DATE. */
+static int generation_date(char buf[32]) {
+    const char *epoch = getenv("SOURCE_DATE_EPOCH");
+    char *end;
+    long long seconds;
+    time_t t;
+    struct tm *tm;
+    if (epoch == NULL || epoch[0] == '\0') {
+        strcpy(buf, RELEASE_DATE);
+        return 0;
+    }
+    errno = 0;
+    seconds = strtoll(epoch, &end, 10);
+    t = (time_t)seconds;
+    if (errno != 0 || *end != '\0' || seconds < 0 || (long long)t != seconds ||
+        (tm = gmtime(&t)) == NULL || strftime(buf, 32, "%Y-%m-%dT%H:%M:%SZ", tm) == 0) {
+        fprintf(stderr, "mdgen: SOURCE_DATE_EPOCH='%s' is not a time in seconds since 1970\n",
+                epoch);
+        return -1;
+    }
+    return 0;
+}
+
+/* The table as FMI needs it: every Real of a declared type with a defined unit, ranges
+ * that are intervals, every start value inside its range (strictly for an open bound: the
+ * model would refuse its own default), no overlapping value references or names. */
+static int check_table(const FpModelInfo *info, const void *model) {
     size_t i, j;
+    uint32_t k;
     for (i = 0; i < info->n_vars; i++) {
         const FpVar *a = &info->vars[i];
-        if (a->type == FP_REAL && find_unit(a->unit) == NULL && a->unit[0] != '\0') {
-            fprintf(stderr, "mdgen: variable %s uses undefined unit '%s'\n", a->name, a->unit);
+        const FpRange *r = &a->range;
+        for (k = 0; k < fp_var_count(a); k++) {
+            const FpDeclaredType *d = fp_declared_type(fp_var_element_type(a, k));
+            if (a->type == FP_REAL && (d->name[0] == '\0' || find_unit(d->unit) == NULL)) {
+                fprintf(stderr, "mdgen: Real variable %s has no declared type with a unit\n",
+                        a->name);
+                return -1;
+            }
+            if (a->kind != FP_OUTPUT && !fp_range_contains(r, start_value(a, k, model))) {
+                fprintf(stderr, "mdgen: the start value %.17g of %s (element %u) is outside its "
+                        "range\n", start_value(a, k, model), a->name, (unsigned)(k + 1));
+                return -1;
+            }
+        }
+        if (a->type != FP_REAL && a->dtype != FP_T_NONE) {
+            fprintf(stderr, "mdgen: non-Real variable %s has a declared type\n", a->name);
             return -1;
         }
-        if (a->type != FP_REAL && a->unit[0] != '\0') {
-            fprintf(stderr, "mdgen: non-Real variable %s has a unit\n", a->name);
+        if ((r->flags & FP_RANGE_LO) && (r->flags & FP_RANGE_HI) && !(r->lo <= r->hi)) {
+            fprintf(stderr, "mdgen: the range of %s is empty\n", a->name);
+            return -1;
+        }
+        if (a->type == FP_BOOLEAN && r->flags != 0) {
+            fprintf(stderr, "mdgen: Boolean variable %s has a range\n", a->name);
             return -1;
         }
         for (j = i + 1; j < info->n_vars; j++) {
@@ -195,7 +318,7 @@ static int write_build_description(const FpModelInfo *info, const SourceList *sr
 
 int main(int argc, char **argv) {
     const FpModelInfo *info = fp_model_info();
-    char guid[40];
+    char guid[40], date[32];
     void *model;
     FILE *f;
     size_t i;
@@ -212,10 +335,14 @@ int main(int argc, char **argv) {
         src.n = argc - 5;
         if (write_build_description(info, &src) != 0) return 1;
     }
-    if (check_table(info) != 0) return 1;
+    if (generation_date(date) != 0) return 1;
     model = calloc(1, info->model_size);
     if (model == NULL) return 1;
     info->set_defaults(model);
+    if (check_table(info, model) != 0) {
+        free(model);
+        return 1;
+    }
     fp_model_guid(info, guid);
     f = fopen(argv[1], "w");
     if (f == NULL) {
@@ -229,10 +356,14 @@ int main(int argc, char **argv) {
             "  description=\"",
             info->model_name, guid);
     xml_text(f, info->description);
+    fprintf(f, "\"\n  author=\"%s\" version=\"", AUTHOR);
+    xml_text(f, argv[2]);
+    /* the copyright year is the generation date's, so it too is reproducible */
     fprintf(f,
-            "\"\n  version=\"%s\" generationTool=\"fullpose mdgen\""
-            " variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">\n",
-            argv[2]);
+            "\"\n  copyright=\"Copyright (c) %.4s %s\" license=\"%s\"\n"
+            "  generationTool=\"fullpose mdgen\" generationDateAndTime=\"%s\"\n"
+            "  variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">\n",
+            date, AUTHOR, LICENSE, date);
     fprintf(f,
             "  <CoSimulation modelIdentifier=\"%s\" canHandleVariableCommunicationStepSize=\"true\""
             " canInterpolateInputs=\"false\" maxOutputDerivativeOrder=\"0\""
@@ -245,6 +376,7 @@ int main(int argc, char **argv) {
         fputs("  </CoSimulation>\n", f);
     }
     write_units(f, info);
+    write_types(f, info);
     fputs("  <LogCategories>\n", f);
     for (c = 0; c < FP_LOG_N_CATEGORIES; c++)
         fprintf(f, "    <Category name=\"%s\" description=\"%s\"/>\n", fp_log_category_name(c),
