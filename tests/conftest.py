@@ -35,6 +35,21 @@ def plant_unzip_dir(plant_fmu: Path) -> Iterator[str]:
     shutil.rmtree(root, ignore_errors=True)
 
 
+@pytest.fixture(scope="session")
+def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """Both FMUs built for every platform (``fullpose build-fmus --platforms all``), once per
+    session: about 35 s with Zig's cache warm."""
+    pytest.importorskip("ziglang", reason="the Zig cross compiler (pip install -e '.[test]')")
+    from orchestrator.fmu_build import build_fmus
+    from orchestrator.platforms import PLATFORMS
+
+    folder = tmp_path_factory.mktemp("dist")
+    report = build_fmus(PLATFORMS, folder)
+    for name, seconds in report.seconds.items():
+        print(f"{name}: {seconds:.1f} s")
+    return folder
+
+
 MakePlant = Callable[..., FmuInstance]
 
 

@@ -63,19 +63,15 @@ def test_fmpy_validator_finds_no_problem(model):
     assert validate_fmu(str(installed_fmu(model))) == []
 
 
-@pytest.mark.parametrize("model", MODELS)
-@pytest.mark.parametrize("step", [None, 0.002, 0.0007])
-def test_compliance_checker_reports_nothing(model, step, tmp_path):
-    """The checker loads, instantiates, initializes and steps the FMU to its default stop time
-    with the communication step it derives (stop / 500 = 20 ms), the FMUs' own 2 ms, or a
-    step that divides neither FMU's internal step."""
+def check(fmu: Path, model: str, step: float | None, tmp_path: Path) -> None:
+    """The checker loads, instantiates, initializes and steps ``fmu`` to its default stop
+    time: 0 warnings and errors of its own, and no FMU message but the explained ones."""
     checker = tool("fmuCheck.linux64")
     out = tmp_path / "out.csv"
     cmd = [str(checker), "-l", "3", "-t", str(tmp_path), "-o", str(out)]
     if step is not None:
         cmd += ["-h", str(step)]
-    run = subprocess.run([*cmd, str(installed_fmu(model))], capture_output=True, text=True,
-                         timeout=300)
+    run = subprocess.run([*cmd, str(fmu)], capture_output=True, text=True, timeout=300)
     text = run.stdout + run.stderr
     print(text[-1500:])
     assert run.returncode == 0, text[-2000:]
@@ -89,6 +85,31 @@ def test_compliance_checker_reports_nothing(model, step, tmp_path):
     assert len(rows) > 100  # it really stepped and recorded outputs
     values = np.array(rows[1:], dtype=float)
     assert np.isfinite(values).all()
+
+
+@pytest.mark.parametrize("model", MODELS)
+@pytest.mark.parametrize("step", [None, 0.002, 0.0007])
+def test_compliance_checker_reports_nothing(model, step, tmp_path):
+    """The installed FMUs with the communication step the checker derives (stop / 500 =
+    20 ms), the FMUs' own 2 ms, or a step that divides neither FMU's internal step."""
+    check(installed_fmu(model), model, step, tmp_path)
+
+
+@pytest.mark.parametrize("model", MODELS)
+def test_the_multi_platform_archives_pass_the_checker_and_fmusim(model, dist, tmp_path):
+    """``fullpose build-fmus --platforms all``: the same checks on the archives that carry
+    every platform's binary (the checker and fmusim run the linux64 one)."""
+    fmu = dist / f"{model}.fmu"
+    check(fmu, model, 0.002, tmp_path)
+    text = fmusim("validate", str(fmu))
+    assert "Validating build description" in text
+    out = tmp_path / "sim.csv"
+    text = fmusim("simulate", "--interface-type", "cs", "--stop-time", "2",
+                  "--output-interval", "0.002", "--output-file", str(out), "--logging-on",
+                  str(fmu))
+    assert [w for w in warnings_logged(text) if not KNOWN_WARNING.search(w)] == []
+    _, values = read_csv(out)
+    assert len(values) == 1001 and np.isfinite(values).all()
 
 
 def fmusim(*args: str) -> str:

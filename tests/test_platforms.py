@@ -32,7 +32,6 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from orchestrator.fmu_build import build_fmus
 from orchestrator.master import run
 from orchestrator.platforms import PLATFORMS, platform_named
 from orchestrator.runner import prepare
@@ -81,16 +80,6 @@ def fmi2_cs_functions():
 
 
 FMI2_CS = fmi2_cs_functions()
-
-
-@pytest.fixture(scope="module")
-def dist(tmp_path_factory):
-    """The folder of both FMUs built for every platform."""
-    folder = tmp_path_factory.mktemp("dist")
-    report = build_fmus(PLATFORMS, folder)
-    for name, seconds in report.seconds.items():
-        print(f"{name}: {seconds:.1f} s")
-    return folder
 
 
 @pytest.fixture(scope="module")
