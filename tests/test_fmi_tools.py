@@ -103,13 +103,7 @@ def test_the_multi_platform_archives_pass_the_checker_and_fmusim(model, dist, tm
     check(fmu, model, 0.002, tmp_path)
     text = fmusim("validate", str(fmu))
     assert "Validating build description" in text
-    out = tmp_path / "sim.csv"
-    text = fmusim("simulate", "--interface-type", "cs", "--stop-time", "2",
-                  "--output-interval", "0.002", "--output-file", str(out), "--logging-on",
-                  str(fmu))
-    assert [w for w in warnings_logged(text) if not KNOWN_WARNING.search(w)] == []
-    _, values = read_csv(out)
-    assert len(values) == 1001 and np.isfinite(values).all()
+    simulate(fmu, 2.0, tmp_path / "sim.csv")
 
 
 def fmusim(*args: str) -> str:
@@ -134,6 +128,20 @@ def warnings_logged(text: str) -> list[str]:
             if line.startswith(("[WARNING]", "[ERROR]", "[FATAL]"))]
 
 
+def simulate(fmu: Path, stop_time: float, out: Path) -> tuple[dict[str, int], np.ndarray]:
+    """``fmusim simulate`` at a 2 ms step with the FMU's logging on: its columns and rows,
+    after checking that nothing but the explained warning was logged and every value is
+    finite."""
+    text = fmusim("simulate", "--interface-type", "cs", "--stop-time", str(stop_time),
+                  "--output-interval", "0.002", "--output-file", str(out), "--logging-on",
+                  str(fmu))
+    assert [w for w in warnings_logged(text) if not KNOWN_WARNING.search(w)] == []
+    col, values = read_csv(out)
+    assert len(values) == round(stop_time / 0.002) + 1 and np.isfinite(values).all()
+    assert values[-1, col["time"]] == pytest.approx(stop_time)
+    return col, values
+
+
 @pytest.mark.parametrize("model", MODELS)
 def test_fmusim_validates_the_archive(model):
     text = fmusim("validate", str(installed_fmu(model)))
@@ -145,15 +153,7 @@ def test_fmusim_flies_the_plant_at_hover(tmp_path):
     """fmusim runs the plant alone for 10 s with its default inputs (rotors at hover trim,
     init_trim = true, at the origin): the vehicle holds its start point, as physics says for
     trim without disturbance (free fall would drop it 490 m)."""
-    out = tmp_path / "plant.csv"
-    text = fmusim("simulate", "--interface-type", "cs", "--stop-time", "10",
-                  "--output-interval", "0.002", "--output-file", str(out), "--logging-on",
-                  str(installed_fmu("MultirotorPlant")))
-    assert [w for w in warnings_logged(text) if not KNOWN_WARNING.search(w)] == []
-    col, values = read_csv(out)
-    assert values[-1, col["time"]] == pytest.approx(10.0)
-    assert len(values) == 5001
-    assert np.isfinite(values).all()
+    col, values = simulate(installed_fmu("MultirotorPlant"), 10.0, tmp_path / "plant.csv")
     pos = values[:, [col[f"pos[{i}]"] for i in (1, 2, 3)]]
     # trim holds to rounding: open loop, an unstable hover would leave it within seconds
     assert np.abs(pos - pos[0]).max() < 1e-6
@@ -163,12 +163,7 @@ def test_fmusim_steps_the_controller_alone(tmp_path):
     """The controller with its default inputs (the paper's hexacopter at hover trim at the
     origin, reference the same point) commands the trim it is given: rotor speed commands
     stay at the measured trim speed."""
-    out = tmp_path / "controller.csv"
-    text = fmusim("simulate", "--interface-type", "cs", "--stop-time", "2",
-                  "--output-interval", "0.002", "--output-file", str(out), "--logging-on",
-                  str(installed_fmu("FullPoseController")))
-    assert [w for w in warnings_logged(text) if not KNOWN_WARNING.search(w)] == []
-    col, values = read_csv(out)
-    assert len(values) == 1001 and np.isfinite(values).all()
+    col, values = simulate(installed_fmu("FullPoseController"), 2.0,
+                           tmp_path / "controller.csv")
     omega = values[:, [col[f"omega_cmd[{i}]"] for i in range(1, 7)]]
     assert np.ptp(omega, axis=0).max() < 1e-6 * omega.max()
