@@ -22,7 +22,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from mavlink_bridge import px4, telemetry
+from mavlink_bridge import modes, protocols, px4, telemetry
 from mavlink_bridge.links import Endpoint, Signing
 from mavlink_bridge.params import ParameterTable
 from mavlink_bridge.setpoints import (
@@ -45,6 +45,17 @@ COMPONENT_ID = 1
 RX_BATCH = 8  # datagrams handled between clock checks
 RX_BUDGET_LATE = 32  # datagrams handled per chunk while behind wall time
 STATUSTEXT_PER_S = 5  # rejection/refusal messages per wall second, the rest are counted
+UNSUPPORTED_TEXT_PERIOD = 10.0  # wall s between "not supported" texts to one sender
+#: the params (1-based) each implemented command uses; NaN/inf there is DENIED.  Others
+#: are ignored, as common.xml marks them reserved or lets NaN mean "no change".
+COMMAND_PARAMS: dict[int, tuple[int, ...]] = {
+    mav.MAV_CMD_COMPONENT_ARM_DISARM: (1,),
+    mav.MAV_CMD_DO_SET_MODE: (1, 2, 3),
+    mav.MAV_CMD_REQUEST_MESSAGE: (1,),
+    mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: (1,),
+    mav.MAV_CMD_SET_MESSAGE_INTERVAL: (1, 2),
+    mav.MAV_CMD_GET_MESSAGE_INTERVAL: (1,),
+}
 
 
 @dataclass
@@ -145,6 +156,7 @@ class Bridge:
         self._rx_window: tuple[float, int] = (0.0, 0)
         self._busy = 0.0
         self.events: list[str] = []  # STATUSTEXTs sent, for logs and tests
+        self._told_unsupported: dict[tuple[str, int, int], float] = {}  # -> wall time
         self.on_chunk: Callable[[Bridge], None] | None = None
 
     # -- setup -----------------------------------------------------------------
@@ -440,7 +452,20 @@ class Bridge:
     def _on_command(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
         cmd = int(msg.command)
         p = [float(msg.param1), float(msg.param2), float(msg.param3), float(msg.param4)]
-        result = self._command(ep, cmd, p)
+        if msg.get_type() == "COMMAND_LONG":
+            p += [float(msg.param5), float(msg.param6), float(msg.param7)]
+        else:  # COMMAND_INT: x, y are integers, z a float
+            p += [float(msg.x), float(msg.y), float(msg.z)]
+        bad = next((i for i in COMMAND_PARAMS.get(cmd, ()) if not math.isfinite(p[i - 1])),
+                   None)
+        if cmd not in COMMAND_PARAMS:
+            result = mav.MAV_RESULT_UNSUPPORTED
+        elif bad is not None:
+            result = mav.MAV_RESULT_DENIED
+            self.statustext(mav.MAV_SEVERITY_WARNING,
+                            f"command {cmd} denied: param{bad} is {p[bad - 1]}", limited=True)
+        else:
+            result = self._command(ep, cmd, p, src)
         self._ack(ep, cmd, result, src)
         if result == mav.MAV_RESULT_ACCEPTED and cmd in (
                 mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
@@ -455,7 +480,7 @@ class Bridge:
             us = int(interval * 1e6) if interval > 0 else -1
             ep.send(mav.MAVLink_message_interval_message(msg_id, us))
 
-    def _command(self, ep: Endpoint, cmd: int, p: list[float]) -> int:
+    def _command(self, ep: Endpoint, cmd: int, p: list[float], src: tuple[int, int]) -> int:
         if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] not in (0.0, 1.0):
                 return mav.MAV_RESULT_DENIED
@@ -470,14 +495,7 @@ class Bridge:
                 self._heartbeat_now()
             return mav.MAV_RESULT_ACCEPTED
         if cmd == mav.MAV_CMD_DO_SET_MODE:
-            if not int(p[0]) & mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED:
-                return mav.MAV_RESULT_DENIED
-            mode = px4.mode_from_main_sub(int(p[1]), int(p[2]))
-            if mode is None:
-                self.statustext(mav.MAV_SEVERITY_WARNING,
-                                f"mode {int(p[1])}/{int(p[2])} not available here")
-                return mav.MAV_RESULT_DENIED
-            return self._request_mode(mode)
+            return self.request_mode(int(p[0]), int(p[1]), int(p[2]))
         if cmd == mav.MAV_CMD_REQUEST_MESSAGE:
             known = int(p[0]) in telemetry.DEFAULT_RATES or int(p[0]) in telemetry.ON_REQUEST
             return mav.MAV_RESULT_ACCEPTED if known else mav.MAV_RESULT_DENIED
@@ -498,19 +516,71 @@ class Bridge:
             return mav.MAV_RESULT_ACCEPTED
         return mav.MAV_RESULT_UNSUPPORTED
 
-    def _request_mode(self, mode: str) -> int:
-        if mode == "OFFBOARD":
+    def request_mode(self, base_mode: int, main: int, sub: int) -> int:
+        """The one road for SET_MODE and DO_SET_MODE (PX4 turns the message into the
+        command): the MAV_RESULT; a refusal is told by STATUSTEXT, an acceptance by an
+        immediate HEARTBEAT."""
+        r = modes.resolve(base_mode, main, sub)
+        if r.mode is None:
+            self.statustext(mav.MAV_SEVERITY_WARNING, f"{r.name} refused: {r.reason}",
+                            limited=True)
+            return mav.MAV_RESULT_DENIED
+        if r.mode == "OFFBOARD":
             if self.session.time - self.last_setpoint > self.timeout:
                 self.statustext(mav.MAV_SEVERITY_WARNING,
                                 "offboard refused: no recent setpoint")
                 return mav.MAV_RESULT_TEMPORARILY_REJECTED
             if self.mode != "OFFBOARD":
                 self._enter_offboard()
-            return mav.MAV_RESULT_ACCEPTED
-        if self.mode != mode:
+        elif self.mode != r.mode:
             self._hold()
-            self._set_mode(mode)
+            self._set_mode(r.mode)
+        self._heartbeat_now()
         return mav.MAV_RESULT_ACCEPTED
+
+    def _on_set_mode(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        main, sub = modes.from_custom_mode(int(msg.custom_mode))
+        result = self.request_mode(int(msg.base_mode), main, sub)
+        self._ack(ep, mav.MAV_CMD_DO_SET_MODE, result, src)  # as PX4's commander does
+
+    # small protocols: FTP, PING, mission/fence/rally (mavlink_bridge.protocols)
+
+    def _reply(self, ep: Endpoint, messages: list[Any]) -> None:
+        for m in messages:
+            ep.send(m)
+
+    def _on_ftp(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        self._reply(ep, protocols.ftp_reply(msg, src))
+
+    def _on_ping(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        self._reply(ep, protocols.ping_reply(msg, src))
+
+    def _on_mission_request_list(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        self._reply(ep, protocols.mission_request_list(msg, src))
+
+    def _on_mission_request(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        self._reply(ep, protocols.mission_request_item(msg, src))
+
+    def _on_mission_count(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        replies, why = protocols.mission_count(msg, src)
+        if why is not None:
+            self.statustext(mav.MAV_SEVERITY_WARNING, why, limited=True)
+        self._reply(ep, replies)
+
+    def _on_mission_clear(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        self._reply(ep, protocols.mission_clear_all(msg, src))
+
+    def _on_mission_ack(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        pass  # the end of a download of an empty plan: nothing to do
+
+    def _on_unsupported(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        """Say once per sender and UNSUPPORTED_TEXT_PERIOD that a message is not flown."""
+        key = (msg.get_type(), src[0], src[1])
+        now = time.monotonic()
+        if now - self._told_unsupported.get(key, -math.inf) < UNSUPPORTED_TEXT_PERIOD:
+            return
+        self._told_unsupported[key] = now
+        self.statustext(mav.MAV_SEVERITY_WARNING, f"{key[0][:32]} not supported", limited=True)
 
     # parameters
 
@@ -529,10 +599,23 @@ class Bridge:
         if index < 0:
             found = self.params.index(_param_id(msg.param_id))
             if found is None:
+                self._unknown_param(ep, msg, src, _param_id(msg.param_id), index)
                 return
             index = found
         if 0 <= index < len(self.params):
             ep.send(self._param_value(index))
+        else:
+            self._unknown_param(ep, msg, src, "", index)
+
+    def _unknown_param(self, ep: Endpoint, msg: Any, src: tuple[int, int], name: str,
+                       index: int) -> None:
+        """As PX4: a STATUSTEXT naming it (and no PARAM_VALUE); plus PARAM_ERROR, which
+        newer MAVLink defines for this."""
+        self.statustext(mav.MAV_SEVERITY_INFO, f"unknown param: {name or index}"[:50],
+                        limited=True)
+        raw = _param_id(msg.param_id).encode("ascii", "replace")[:16]
+        ep.send(mav.MAVLink_param_error_message(src[0], src[1], raw, index,
+                                                mav.MAV_PARAM_ERROR_DOES_NOT_EXIST))
 
     def _on_param_set(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
         name = _param_id(msg.param_id)
@@ -579,6 +662,16 @@ class Bridge:
         "PARAM_SET": _on_param_set,
         "TIMESYNC": _on_timesync,
         "SETUP_SIGNING": _on_setup_signing,
+        "SET_MODE": _on_set_mode,
+        "FILE_TRANSFER_PROTOCOL": _on_ftp,
+        "PING": _on_ping,
+        "MISSION_REQUEST_LIST": _on_mission_request_list,
+        "MISSION_REQUEST_INT": _on_mission_request,
+        "MISSION_REQUEST": _on_mission_request,
+        "MISSION_COUNT": _on_mission_count,
+        "MISSION_CLEAR_ALL": _on_mission_clear,
+        "MISSION_ACK": _on_mission_ack,
+        "SET_ACTUATOR_CONTROL_TARGET": _on_unsupported,
     }
 
     def close(self) -> None:

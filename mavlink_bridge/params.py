@@ -29,6 +29,8 @@ import re
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
+from mavlink_bridge.identity import PX4_PARAMETERS
+
 _BLOCK = re.compile(r"^K_(pos|vel|att|rate)_([ABCD])\[(\d+)\]$")
 _VECTOR = {"W_u": "FP_W_U", "W_v": "FP_W_V", "W_nu": "FP_W_NU", "euler_min": "FP_EUL_MIN",
            "euler_max": "FP_EUL_MAX"}
@@ -44,6 +46,7 @@ BRIDGE_PARAMETERS: dict[str, tuple[float, float, float, str]] = {
     "FPB_SP_ACC_MAX": (20.0, 0.0, 100.0, "largest accepted acceleration component (m/s^2)"),
     "FPB_SP_RATE_MAX": (6.0, 0.0, 50.0, "largest accepted body/yaw rate (rad/s)"),
     "FPB_SP_TILT_MAX": (1.4, 0.0, 1.5, "largest accepted |roll|, |pitch| of a setpoint (rad)"),
+    **PX4_PARAMETERS,  # the identity's read-only PX4 parameters (mavlink_bridge.identity)
 }
 
 

@@ -14,6 +14,7 @@ MAIN_AUTO = 4
 MAIN_ACRO = 5
 MAIN_OFFBOARD = 6
 MAIN_STABILIZED = 7
+MAIN_RATTITUDE = 8
 
 SUB_AUTO_READY = 1
 SUB_AUTO_TAKEOFF = 2
@@ -21,6 +22,9 @@ SUB_AUTO_LOITER = 3
 SUB_AUTO_MISSION = 4
 SUB_AUTO_RTL = 5
 SUB_AUTO_LAND = 6
+SUB_AUTO_RTGS = 7
+SUB_AUTO_FOLLOW_TARGET = 8
+SUB_AUTO_PRECLAND = 9
 
 #: The modes the bridge flies, by name -> (main mode, sub mode).
 MODES: dict[str, tuple[int, int]] = {
@@ -34,13 +38,3 @@ def custom_mode(mode: str) -> int:
     main, sub = MODES[mode]
     return (main << 16) | (sub << 24)
 
-
-def mode_from_main_sub(main: int, sub: int) -> str | None:
-    """The bridge mode a DO_SET_MODE asks for, or None if not flown here."""
-    if main == MAIN_OFFBOARD:
-        return "OFFBOARD"
-    if main == MAIN_POSCTL:
-        return "POSCTL"
-    if main == MAIN_AUTO and sub == SUB_AUTO_LOITER:
-        return "HOLD"
-    return None

@@ -14,6 +14,7 @@ import numpy as np
 from pymavlink.dialects.v20 import common as mav
 
 from mavlink_bridge.geometry import euler_to_quat, rotation
+from mavlink_bridge.identity import FLIGHT_SW_VERSION
 
 #: message id -> default rate (Hz, simulated time)
 DEFAULT_RATES: dict[int, float] = {
@@ -183,9 +184,12 @@ def autopilot_version(s: Snapshot) -> Any:
     caps = (mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT |
             mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT |
             mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET |
-            mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED)
-    version = (0 << 24) | (1 << 16) | (0 << 8) | 0  # fullpose 0.1.0
-    return mav.MAVLink_autopilot_version_message(caps, version, 0, 0, 0, [0] * 8, [0] * 8,
+            mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED |
+            # the (empty) plans are served by mavlink_bridge.protocols
+            mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE |
+            mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY)
+    return mav.MAVLink_autopilot_version_message(caps, FLIGHT_SW_VERSION, 0, 0, 0,
+                                                 [0] * 8, [0] * 8,
                                                  [0] * 8, 0, 0, 1, [0] * 18)
 
 

@@ -1,0 +1,79 @@
+"""Flight modes as PX4 encodes them, and which of them the simulated vehicle flies.
+
+A mode request arrives as SET_MODE (message 11: base_mode, custom_mode) or as
+MAV_CMD_DO_SET_MODE (176: param1 base_mode, param2 main mode, param3 sub mode).  PX4's
+MavlinkReceiver turns the message into the command (main = bits 16..23 of custom_mode,
+sub = bits 24..31), so both roads end in :func:`resolve`, and the bridge answers both
+the same way: COMMAND_ACK for command 176 to the sender and, on a change, an immediate
+HEARTBEAT; a refusal carries a STATUSTEXT naming the reason (docs/mavlink.md, "Modes").
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+from mavlink_bridge import px4
+
+CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
+SUB_POSCTL_ORBIT = 1  # PX4_CUSTOM_SUB_MODE_POSCTL_ORBIT (POSCTL_POSCTL = 0)
+
+_STICKS = "needs sticks, not simulated"
+_NO_GROUND = "no ground here; use HOLD"
+
+#: PX4 (main, sub) -> (mode name as MAVROS spells it, bridge mode flown or None, reason)
+_TABLE: dict[tuple[int, int], tuple[str, str | None, str]] = {
+    (px4.MAIN_MANUAL, 0): ("MANUAL", None, _STICKS),
+    (px4.MAIN_ALTCTL, 0): ("ALTCTL", None, _STICKS),
+    (px4.MAIN_POSCTL, 0): ("POSCTL", "POSCTL", ""),
+    (px4.MAIN_ACRO, 0): ("ACRO", None, _STICKS),
+    (px4.MAIN_OFFBOARD, 0): ("OFFBOARD", "OFFBOARD", ""),
+    (px4.MAIN_STABILIZED, 0): ("STABILIZED", None, _STICKS),
+    (px4.MAIN_RATTITUDE, 0): ("RATTITUDE", None, _STICKS),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_READY): ("AUTO.READY", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_TAKEOFF): ("AUTO.TAKEOFF", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER): ("AUTO.LOITER", "HOLD", ""),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_MISSION): ("AUTO.MISSION", None,
+                                            "no mission uploaded"),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_RTL): ("AUTO.RTL", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_LAND): ("AUTO.LAND", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_RTGS): ("AUTO.RTGS", None, "not simulated"),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_FOLLOW_TARGET): ("AUTO.FOLLOW_TARGET", None,
+                                                  "not simulated"),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_PRECLAND): ("AUTO.PRECLAND", None, _NO_GROUND),
+}
+
+
+@dataclass(frozen=True)
+class Resolved:
+    """What a mode request means here: a bridge mode to fly, or why not (the reason
+    fits a STATUSTEXT after "NAME refused: ")."""
+
+    name: str  # PX4's name (MAVROS spelling), or main/sub numbers when unknown
+    mode: str | None  # the bridge mode, None: refused
+    reason: str = ""
+
+
+def from_custom_mode(custom_mode: int) -> tuple[int, int]:
+    """PX4's (main, sub) from a 32-bit custom_mode (px4_custom_mode.h)."""
+    return (custom_mode >> 16) & 0xFF, (custom_mode >> 24) & 0xFF
+
+
+def resolve(base_mode: int, main: int, sub: int) -> Resolved:
+    """The bridge mode a request with PX4's encoding asks for."""
+    if not base_mode & CUSTOM_MODE_ENABLED:
+        return Resolved(f"base_mode {base_mode}", None,
+                        "no CUSTOM_MODE flag")
+    if main == px4.MAIN_POSCTL and sub == SUB_POSCTL_ORBIT:
+        return Resolved("POSCTL.ORBIT", None, "not simulated")
+    if main != px4.MAIN_AUTO:
+        sub = 0  # only AUTO (and POSCTL's orbit) use the sub mode
+    entry = _TABLE.get((main, sub))
+    if entry is None:
+        return Resolved(f"mode {main}/{sub}", None, "unknown PX4 mode")
+    name, mode, reason = entry
+    return Resolved(name, mode, reason)
+
+
+def names() -> dict[str, tuple[int, int]]:
+    """PX4 mode name -> (main, sub), every mode PX4 defines (for tests and docs)."""
+    return {name: key for key, (name, _, _) in _TABLE.items()}
