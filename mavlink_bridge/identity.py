@@ -9,13 +9,16 @@ value is refused and answered with the value in force).
 
 from __future__ import annotations
 
-FIRMWARE_VERSION_TYPE_OFFICIAL = 255
+FIRMWARE_VERSION_TYPE_DEV = 0  # common.xml FIRMWARE_VERSION_TYPE
 
 #: AUTOPILOT_VERSION.flight_sw_version: major << 24 | minor << 16 | patch << 8 | type.
-#: PX4 1.15.0 official: QGroundControl's PX4FirmwarePlugin::_handleAutopilotVersion
-#: warns below 1.4.1 (and for 0); 1.15 is the PX4 release whose MAVLink behaviour
-#: (offboard, SET_MODE via DO_SET_MODE, setpoint-loss timeout) the bridge follows.
-FLIGHT_SW_VERSION = (1 << 24) | (15 << 16) | (0 << 8) | FIRMWARE_VERSION_TYPE_OFFICIAL
+#: PX4 1.15.0, type DEV.  1.15 passes QGroundControl's PX4 check (PX4FirmwarePlugin::
+#: _handleAutopilotVersion warns below 1.4.1 and for 0) and is the PX4 release whose
+#: MAVLink behaviour the bridge follows.  DEV, not OFFICIAL: QGroundControl's
+#: FirmwarePlugin::_versionFileDownloadFinished compares an OFFICIAL version with the
+#: latest PX4 release on GitHub and tells the user to upgrade when it is older, which
+#: any fixed number here becomes; this is not PX4 firmware, so it claims no release.
+FLIGHT_SW_VERSION = (1 << 24) | (15 << 16) | (0 << 8) | FIRMWARE_VERSION_TYPE_DEV
 
 #: PX4 parameters QGroundControl's PX4 plugin reads without first checking they exist
 #: (a missing one raises "Parameters are missing from firmware"), or reads to decide
