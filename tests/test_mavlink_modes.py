@@ -7,6 +7,7 @@ time and no bound depends on a fast machine (replies are immediate in the protoc
 
 import math
 import os
+import re
 import socket
 import struct
 import subprocess
@@ -361,13 +362,15 @@ def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
          "--speed", "2", "--duration", "60"], cwd=ROOT, stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
     proxy = subprocess.Popen(
-        [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait", "--default-modules=",
-         "--state-basedir", str(tmp_path)], cwd=tmp_path, stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+        [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait",
+         "--default-modules=ftp,param,cmdlong", "--state-basedir", str(tmp_path)],
+        cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
+        text=True)
     try:
+        proxy.stdin.write("ftp set debug 1\n")  # print the FTP outcome
+        proxy.stdin.flush()
         time.sleep(6.0)
-        for command in ("module load cmdlong", "long DO_SET_MODE 1 3 0",
-                        "long DO_SET_MODE 1 1 0"):
+        for command in ("long DO_SET_MODE 1 3 0", "long DO_SET_MODE 1 1 0"):
             proxy.stdin.write(command + "\n")
             proxy.stdin.flush()
             time.sleep(2.0)
@@ -377,6 +380,12 @@ def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
         fly.kill()
         fly.communicate(timeout=10)
     assert "Detected vehicle 1:1" in out, out
+    # the param module's FTP download of @PARAM/param.pck is NAKed at once: no retry, no
+    # timeout, and the parameters come by PARAM_REQUEST_LIST instead
+    assert "ftp open failed" in out, out
+    assert "FTP: retry" not in out and "timed out" not in out, out
+    received = re.search(r"Received (\d+) parameters", out)
+    assert received and int(received.group(1)) > 0, out
     assert "Mode POSCTL" in out, out  # PX4 POSCTL, named by pymavlink's PX4 mode map
     assert "MANUAL refused: needs sticks" in out, out
     assert "DO_SET_MODE" in out and "DENIED" in out, out
