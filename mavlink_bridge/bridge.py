@@ -467,7 +467,12 @@ class Bridge:
         else:
             result = self._command(ep, cmd, p, src)
         self._ack(ep, cmd, result, src)
-        if result == mav.MAV_RESULT_ACCEPTED and cmd in (
+        if (result == mav.MAV_RESULT_ACCEPTED and cmd == mav.MAV_CMD_REQUEST_MESSAGE and
+                int(p[0]) in modes.REQUESTABLE):
+            index = int(p[1]) if math.isfinite(p[1]) else 0
+            self._reply(ep, modes.requested(int(p[0]), index, self.mode,
+                                            px4.custom_mode(self.mode)))
+        elif result == mav.MAV_RESULT_ACCEPTED and cmd in (
                 mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             msg_id = (int(p[0]) if cmd == mav.MAV_CMD_REQUEST_MESSAGE
                       else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
@@ -497,7 +502,10 @@ class Bridge:
         if cmd == mav.MAV_CMD_DO_SET_MODE:
             return self.request_mode(int(p[0]), int(p[1]), int(p[2]))
         if cmd == mav.MAV_CMD_REQUEST_MESSAGE:
-            known = int(p[0]) in telemetry.DEFAULT_RATES or int(p[0]) in telemetry.ON_REQUEST
+            known = (int(p[0]) in telemetry.DEFAULT_RATES or int(p[0]) in telemetry.ON_REQUEST
+                     or int(p[0]) in modes.REQUESTABLE)
+            if int(p[0]) == modes.MSG_AVAILABLE_MODES and math.isfinite(p[1]):
+                known = 0 <= p[1] <= modes.AVAILABLE_COUNT  # param2: mode index, 0 = all
             return mav.MAV_RESULT_ACCEPTED if known else mav.MAV_RESULT_DENIED
         if cmd == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
             return mav.MAV_RESULT_ACCEPTED

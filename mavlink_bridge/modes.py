@@ -10,7 +10,9 @@ HEARTBEAT; a refusal carries a STATUSTEXT naming the reason (docs/mavlink.md, "M
 
 from __future__ import annotations
 
+import importlib
 from dataclasses import dataclass
+from typing import Any
 
 from mavlink_bridge import px4
 
@@ -77,3 +79,34 @@ def resolve(base_mode: int, main: int, sub: int) -> Resolved:
 def names() -> dict[str, tuple[int, int]]:
     """PX4 mode name -> (main, sub), every mode PX4 defines (for tests and docs)."""
     return {name: key for key, (name, _, _) in _TABLE.items()}
+
+
+# AVAILABLE_MODES (435) / CURRENT_MODE (436): MAVLink's standard-modes messages, in the
+# development dialect of the installed pymavlink (not yet in its common.xml).  Only the
+# modes flown here are listed, in QGroundControl's spelling; HOLD and OFFBOARD are not
+# standard modes, POSCTL is PX4's POSITION_HOLD.
+_dev: Any = importlib.import_module("pymavlink.dialects.v20.development")
+MSG_AVAILABLE_MODES = 435
+MSG_CURRENT_MODE = 436
+REQUESTABLE = (MSG_AVAILABLE_MODES, MSG_CURRENT_MODE)
+_AVAILABLE: tuple[tuple[str, str, int], ...] = (
+    ("HOLD", "Hold", 0),  # MAV_STANDARD_MODE_NON_STANDARD
+    ("POSCTL", "Position", 1),  # MAV_STANDARD_MODE_POSITION_HOLD
+    ("OFFBOARD", "Offboard", 0),
+)
+AVAILABLE_COUNT = len(_AVAILABLE)
+
+
+def requested(msg_id: int, index: int, mode: str, custom_mode: int) -> list[Any]:
+    """The answer to REQUEST_MESSAGE for AVAILABLE_MODES (param2: mode index, 0 = all)
+    or CURRENT_MODE; ``mode``/``custom_mode``: the mode flown now."""
+    if msg_id == MSG_CURRENT_MODE:
+        standard = next((s for m, _, s in _AVAILABLE if m == mode), 0)
+        return [_dev.MAVLink_current_mode_message(standard, custom_mode, custom_mode)]
+    n = len(_AVAILABLE)
+    out = []
+    for i, (m, label, standard) in enumerate(_AVAILABLE, start=1):
+        if index in (0, i):
+            out.append(_dev.MAVLink_available_modes_message(
+                n, i, standard, px4.custom_mode(m), 0, label.encode("ascii")))
+    return out

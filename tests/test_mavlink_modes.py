@@ -46,11 +46,11 @@ def free_port():
 class Ground:
     """A bridge in a thread and one pymavlink client (system/component as given)."""
 
-    def __init__(self, system=255, component=190, speed=4.0):
+    def __init__(self, system=255, component=190, speed=4.0, dialect="common"):
         self.port = free_port()
         self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
                                               source_system=system,
-                                              source_component=component, dialect="common")
+                                              source_component=component, dialect=dialect)
         self.src = (system, component)
         self.bridge = Bridge(BridgeConfig(urls=[f"udpout:127.0.0.1:{self.port}"], speed=speed,
                                           duration=120.0))
@@ -270,12 +270,20 @@ def test_actuator_control_target_is_told_unsupported_once(ground):
     assert len(told) == 1, g.texts
 
 
-def test_qgroundcontrol_connect_sequence_replayed(ground):
+def test_qgroundcontrol_connect_sequence_replayed():
     """InitialConnectStateMachine (src/Vehicle/InitialConnectStateMachine.cc): AUTOPILOT_
     VERSION, component metadata, standard modes, parameters, mission, fence, rally; then
     the flight-mode menu and the Hold / RTL / Land buttons (PX4FirmwarePlugin::
-    setFlightMode, guidedModeRTL, guidedModeLand: SET_MODE)."""
-    g = ground
+    setFlightMode, guidedModeRTL, guidedModeLand: SET_MODE).  The development dialect:
+    AVAILABLE_MODES and CURRENT_MODE are not in the installed common.xml yet."""
+    g = Ground(dialect="development")
+    try:
+        qgc_sequence(g)
+    finally:
+        g.close()
+
+
+def qgc_sequence(g):
     g.gcs.mav.heartbeat_send(mav.MAV_TYPE_GCS, mav.MAV_AUTOPILOT_INVALID, 0, 0, 0)
     g.command(512, mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION, expect=0)
     ver = g.wait("AUTOPILOT_VERSION", 5.0)
@@ -287,8 +295,19 @@ def test_qgroundcontrol_connect_sequence_replayed(ground):
                 mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY, mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT):
         assert ver.capabilities & bit
     assert not ver.capabilities & mav.MAV_PROTOCOL_CAPABILITY_FTP
-    for msg_id in (397, 395, 435):  # COMPONENT_METADATA, COMPONENT_INFORMATION, AVAILABLE_MODES
+    for msg_id in (397, 395):  # COMPONENT_METADATA, COMPONENT_INFORMATION
         assert g.command(512, msg_id).result != mav.MAV_RESULT_ACCEPTED  # answered: not here
+    # StandardModes::request: AVAILABLE_MODES, all of them (param2 0), one per mode
+    g.command(512, 435, 0, expect=0)
+    listed = {}
+    while len(listed) < 3:
+        m = g.wait("AVAILABLE_MODES", 5.0)
+        assert m.number_modes == 3
+        listed[m.mode_name] = m.custom_mode
+    assert listed == {"Hold": HOLD, "Position": 3 << 16, "Offboard": OFFBOARD}
+    g.command(512, 435, 4, expect=mav.MAV_RESULT_DENIED)  # no 4th mode
+    g.command(512, 436, expect=0)
+    assert g.wait("CURRENT_MODE", 5.0).custom_mode == HOLD
     g.gcs.mav.param_request_list_send(1, 1)
     names = {}
     deadline = time.monotonic() + 20.0
