@@ -470,8 +470,7 @@ class Bridge:
         if (result == mav.MAV_RESULT_ACCEPTED and cmd == mav.MAV_CMD_REQUEST_MESSAGE and
                 int(p[0]) in modes.REQUESTABLE):
             index = int(p[1]) if math.isfinite(p[1]) else 0
-            self._reply(ep, modes.requested(int(p[0]), index, self.mode,
-                                            px4.custom_mode(self.mode)))
+            self._reply(ep, modes.requested(int(p[0]), index, px4.custom_mode(self.mode)))
         elif result == mav.MAV_RESULT_ACCEPTED and cmd in (
                 mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
             msg_id = (int(p[0]) if cmd == mav.MAV_CMD_REQUEST_MESSAGE

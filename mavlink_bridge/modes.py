@@ -82,31 +82,37 @@ def names() -> dict[str, tuple[int, int]]:
 
 
 # AVAILABLE_MODES (435) / CURRENT_MODE (436): MAVLink's standard-modes messages, in the
-# development dialect of the installed pymavlink (not yet in its common.xml).  Only the
-# modes flown here are listed, in QGroundControl's spelling; HOLD and OFFBOARD are not
-# standard modes, POSCTL is PX4's POSITION_HOLD.
+# development dialect of the installed pymavlink (not yet in its common.xml).  Every PX4
+# mode is listed, the ones not flown here as NOT_USER_SELECTABLE: QGroundControl then
+# leaves them out of its mode menu but can still send them (its RTL and Land buttons),
+# and the refusal tells the user why.
 _dev: Any = importlib.import_module("pymavlink.dialects.v20.development")
 MSG_AVAILABLE_MODES = 435
 MSG_CURRENT_MODE = 436
 REQUESTABLE = (MSG_AVAILABLE_MODES, MSG_CURRENT_MODE)
-_AVAILABLE: tuple[tuple[str, str, int], ...] = (
-    ("HOLD", "Hold", 0),  # MAV_STANDARD_MODE_NON_STANDARD
-    ("POSCTL", "Position", 1),  # MAV_STANDARD_MODE_POSITION_HOLD
-    ("OFFBOARD", "Offboard", 0),
-)
-AVAILABLE_COUNT = len(_AVAILABLE)
+NOT_USER_SELECTABLE = 2  # MAV_MODE_PROPERTY_NOT_USER_SELECTABLE
+#: PX4 (main, sub) -> the MAV_STANDARD_MODE of the same meaning (0: NON_STANDARD)
+_STANDARD = {(px4.MAIN_POSCTL, 0): 1, (px4.MAIN_ALTCTL, 0): 4,
+             (px4.MAIN_AUTO, px4.SUB_AUTO_RTL): 5, (px4.MAIN_AUTO, px4.SUB_AUTO_MISSION): 6,
+             (px4.MAIN_AUTO, px4.SUB_AUTO_LAND): 7, (px4.MAIN_AUTO, px4.SUB_AUTO_TAKEOFF): 8}
+_MODE_LIST = tuple(_TABLE.items())
+AVAILABLE_COUNT = len(_MODE_LIST)
 
 
-def requested(msg_id: int, index: int, mode: str, custom_mode: int) -> list[Any]:
+def _custom(main: int, sub: int) -> int:
+    return (main << 16) | (sub << 24)
+
+
+def requested(msg_id: int, index: int, custom_mode: int) -> list[Any]:
     """The answer to REQUEST_MESSAGE for AVAILABLE_MODES (param2: mode index, 0 = all)
-    or CURRENT_MODE; ``mode``/``custom_mode``: the mode flown now."""
+    or CURRENT_MODE; ``custom_mode``: the mode flown now."""
     if msg_id == MSG_CURRENT_MODE:
-        standard = next((s for m, _, s in _AVAILABLE if m == mode), 0)
+        standard = _STANDARD.get(from_custom_mode(custom_mode), 0)
         return [_dev.MAVLink_current_mode_message(standard, custom_mode, custom_mode)]
-    n = len(_AVAILABLE)
     out = []
-    for i, (m, label, standard) in enumerate(_AVAILABLE, start=1):
+    for i, (key, (name, mode, _)) in enumerate(_MODE_LIST, start=1):
         if index in (0, i):
             out.append(_dev.MAVLink_available_modes_message(
-                n, i, standard, px4.custom_mode(m), 0, label.encode("ascii")))
+                AVAILABLE_COUNT, i, _STANDARD.get(key, 0), _custom(*key),
+                0 if mode is not None else NOT_USER_SELECTABLE, name.encode("ascii")))
     return out

@@ -299,13 +299,16 @@ def qgc_sequence(g):
         assert g.command(512, msg_id).result != mav.MAV_RESULT_ACCEPTED  # answered: not here
     # StandardModes::request: AVAILABLE_MODES, all of them (param2 0), one per mode
     g.command(512, 435, 0, expect=0)
-    listed = {}
-    while len(listed) < 3:
+    listed, total = {}, 1
+    while len(listed) < total:
         m = g.wait("AVAILABLE_MODES", 5.0)
-        assert m.number_modes == 3
-        listed[m.mode_name] = m.custom_mode
-    assert listed == {"Hold": HOLD, "Position": 3 << 16, "Offboard": OFFBOARD}
-    g.command(512, 435, 4, expect=mav.MAV_RESULT_DENIED)  # no 4th mode
+        total = m.number_modes
+        listed[m.mode_index] = m
+    assert sorted(listed) == list(range(1, total + 1))  # done at mode_index == number_modes
+    selectable = {m.custom_mode for m in listed.values() if not m.properties & 2}
+    assert selectable == {HOLD, 3 << 16, OFFBOARD}  # the modes flown here
+    assert {MANUAL, RTL, LAND} <= {m.custom_mode for m in listed.values()}  # not selectable
+    g.command(512, 435, total + 1, expect=mav.MAV_RESULT_DENIED)
     g.command(512, 436, expect=0)
     assert g.wait("CURRENT_MODE", 5.0).custom_mode == HOLD
     g.gcs.mav.param_request_list_send(1, 1)
