@@ -465,7 +465,7 @@ class Bridge:
             self.statustext(mav.MAV_SEVERITY_WARNING,
                             f"command {cmd} denied: param{bad} is {p[bad - 1]}", limited=True)
         else:
-            result = self._command(ep, cmd, p, src)
+            result = self._command(ep, cmd, p)
         self._ack(ep, cmd, result, src)
         if (result == mav.MAV_RESULT_ACCEPTED and cmd == mav.MAV_CMD_REQUEST_MESSAGE and
                 int(p[0]) in modes.REQUESTABLE):
@@ -484,7 +484,7 @@ class Bridge:
             us = int(interval * 1e6) if interval > 0 else -1
             ep.send(mav.MAVLink_message_interval_message(msg_id, us))
 
-    def _command(self, ep: Endpoint, cmd: int, p: list[float], src: tuple[int, int]) -> int:
+    def _command(self, ep: Endpoint, cmd: int, p: list[float]) -> int:
         if cmd == mav.MAV_CMD_COMPONENT_ARM_DISARM:
             if p[0] not in (0.0, 1.0):
                 return mav.MAV_RESULT_DENIED
@@ -528,6 +528,7 @@ class Bridge:
         command): the MAV_RESULT; a refusal is told by STATUSTEXT, an acceptance by an
         immediate HEARTBEAT."""
         r = modes.resolve(base_mode, main, sub)
+        before = self.mode
         if r.mode is None:
             self.statustext(mav.MAV_SEVERITY_WARNING, f"{r.name} refused: {r.reason}",
                             limited=True)
@@ -542,7 +543,8 @@ class Bridge:
         elif self.mode != r.mode:
             self._hold()
             self._set_mode(r.mode)
-        self._heartbeat_now()
+        if self.mode == before:
+            self._heartbeat_now()  # a change sent one already; the requester hears either way
         return mav.MAV_RESULT_ACCEPTED
 
     def _on_set_mode(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
