@@ -460,6 +460,9 @@ class Bridge:
                    None)
         if cmd not in COMMAND_PARAMS:
             result = mav.MAV_RESULT_UNSUPPORTED
+            if cmd in modes.COMMAND_REASONS:
+                self.statustext(mav.MAV_SEVERITY_WARNING, modes.COMMAND_REASONS[cmd],
+                                limited=True)
         elif bad is not None:
             result = mav.MAV_RESULT_DENIED
             self.statustext(mav.MAV_SEVERITY_WARNING,

@@ -45,6 +45,15 @@ _TABLE: dict[tuple[int, int], tuple[str, str | None, str]] = {
 }
 
 
+#: commands that are the same requests as refused modes (QGroundControl's Takeoff button,
+#: MAVSDK's land / return_to_launch): UNSUPPORTED, with the mode's reason
+COMMAND_REASONS: dict[int, str] = {
+    20: "return to launch: " + _NO_GROUND,  # MAV_CMD_NAV_RETURN_TO_LAUNCH
+    21: "land: " + _NO_GROUND,  # MAV_CMD_NAV_LAND
+    22: "takeoff: " + _NO_GROUND,  # MAV_CMD_NAV_TAKEOFF
+}
+
+
 @dataclass(frozen=True)
 class Resolved:
     """What a mode request means here: a bridge mode to fly, or why not (the reason

@@ -332,6 +332,10 @@ def qgc_sequence(g):
         ack, _ = g.set_mode(custom)
         assert ack.result == mav.MAV_RESULT_DENIED
         g.text(text)
+    # the Takeoff button (PX4FirmwarePlugin::guidedModeTakeoff): NAV_TAKEOFF, NaN yaw/lat/lon
+    nan = math.nan
+    g.command(22, -1, 0, 0, nan, nan, nan, 500.0, expect=mav.MAV_RESULT_UNSUPPORTED)
+    g.text("takeoff: no ground here")
     assert g.thread.is_alive() and g.bridge.stats.ignored == 0
 
 
@@ -413,27 +417,38 @@ def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
     assert "DO_SET_MODE" in out and "DENIED" in out, out
 
 
-def test_mavsdk_downloads_empty_mission_fence_and_rally():
+def test_mavsdk_downloads_empty_plans_and_changes_mode():
     from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
+    from mavsdk.plugins.action import Action, ActionError
     from mavsdk.plugins.mission_raw import MissionRaw
+    from mavsdk.plugins.telemetry import FlightMode, Telemetry
 
     port = free_port()
     bridge = Bridge(BridgeConfig(urls=[f"udpout:127.0.0.1:{port}"], speed=2.0, duration=120.0))
     thread = threading.Thread(target=bridge.run, daemon=True)
     thread.start()
     sdk = Mavsdk(Configuration.create_with_component_type(ComponentType.GROUND_STATION))
-    mission = None
+    mission = action = telemetry = None
     try:
         assert sdk.add_any_connection(f"udpin://127.0.0.1:{port}") == ConnectionResult.SUCCESS
         system = sdk.first_autopilot(10.0)
         assert system is not None, "no autopilot discovered"
-        mission = MissionRaw(system)
+        mission, action, telemetry = MissionRaw(system), Action(system), Telemetry(system)
         assert list(mission.download_mission()) == []
         assert list(mission.download_geofence()) == []
         assert list(mission.download_rallypoints()) == []
+        action.hold()  # DO_SET_MODE AUTO.LOITER: accepted
+        deadline = time.monotonic() + 10.0
+        while telemetry.flight_mode() != FlightMode.HOLD and time.monotonic() < deadline:
+            time.sleep(0.05)
+        assert telemetry.flight_mode() == FlightMode.HOLD
+        with pytest.raises(ActionError):  # MAVSDK sends DO_SET_MODE AUTO.RTL: refused
+            action.return_to_launch()
+        assert any("AUTO.RTL refused: no ground" in t for t in bridge.events), bridge.events
     finally:
-        if mission is not None:
-            mission.destroy()
+        for plugin in (mission, action, telemetry):
+            if plugin is not None:
+                plugin.destroy()
         sdk.destroy()
         bridge.stop()
         thread.join(timeout=10)
