@@ -218,15 +218,16 @@ def global_position_int(s: Snapshot) -> Any:
 
 
 def gps_raw_int(s: Snapshot) -> Any:
-    # as PX4 SITL's simulated GPS: 3-D fix, 10 satellites, eph/epv 0.9/1.0 m (HDOP/VDOP
-    # in cm in MAVLink's encoding)
+    # as PX4 SITL's simulated GPS (PX4-Autopilot src/modules/simulation/sensor_gps_sim/
+    # SensorGpsSim.cpp, SensorGpsSim::Run): 3-D fix, 10 satellites (SIM_GPS_USED), HDOP 0.7,
+    # VDOP 1.1 (eph/epv carry the DOPs x 100), accuracies 0.9 m / 1.78 m / 0.4 m/s
     lat, lon, alt, _ = _global(s)
     v = s.plant["vel"]
     vel = round(100 * math.hypot(float(v[0]), float(v[1])))
     cog = round(math.degrees(math.atan2(float(v[1]), float(v[0]))) * 100) % 36000 \
         if vel > 0 else 65535
     return mav.MAVLink_gps_raw_int_message(_us(s), mav.GPS_FIX_TYPE_3D_FIX, lat, lon, alt,
-                                           90, 100, vel, cog, 10)
+                                           70, 110, vel, cog, 10, alt, 900, 1780, 400, 0, 0)
 
 
 def _home_fields(s: Snapshot) -> tuple[int, int, int]:

@@ -200,7 +200,7 @@ def test_global_telemetry_home_battery_and_sensor_bits(flight):
     assert g.hdg < 36000 and abs(g.vz) < 10
     gps = f.wait("GPS_RAW_INT")
     assert gps.fix_type == mavutil.mavlink.GPS_FIX_TYPE_3D_FIX and gps.satellites_visible >= 6
-    assert gps.eph < 200 and gps.epv < 200
+    assert (gps.eph, gps.epv, gps.h_acc, gps.v_acc) == (70, 110, 900, 1780)  # PX4 SITL's
     f.command(512, mavutil.mavlink.MAVLINK_MSG_ID_HOME_POSITION)  # REQUEST_MESSAGE
     home = f.wait("HOME_POSITION", 3.0)
     assert (home.latitude, home.longitude, home.altitude) == (
@@ -343,3 +343,40 @@ def test_mavsdk_position_home_health_battery_and_set_position_global():
         bridge.stop()
         thread.join(timeout=10)
         bridge.close()
+
+
+# -- MAVProxy ------------------------------------------------------------------------------
+
+def test_mavproxy_sees_the_global_position_and_no_fence_breach(tmp_path):
+    import sysconfig
+
+    exe = Path(sysconfig.get_path("scripts")) / "mavproxy.py"
+    if not exe.is_file():
+        pytest.fail(f"{exe} missing: MAVProxy is a test dependency: pip install '.[test]'")
+    port = free_port()
+    fly = subprocess.Popen(
+        [sys.executable, "-m", "orchestrator.cli", "fly", "--gcs", f"udpout:127.0.0.1:{port}",
+         "--speed", "2", "--duration", "40", "--origin", "46.518,6.566,400"], cwd=ROOT,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    # no GUI modules; the fence module is the one that printed "fence breach"
+    proxy = subprocess.Popen(
+        [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait", "--default-modules=fence",
+         "--state-basedir", str(tmp_path)], cwd=tmp_path, stdin=subprocess.PIPE,
+        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
+    try:
+        time.sleep(8.0)
+        for command in ("status GLOBAL_POSITION_INT", "status HOME_POSITION"):
+            proxy.stdin.write(command + "\n")
+            proxy.stdin.flush()
+            time.sleep(1.0)
+        out, _ = proxy.communicate(timeout=30)
+    finally:
+        proxy.kill()
+        fly.kill()
+        fly_out, _ = fly.communicate(timeout=10)
+    assert "origin              46.5180000, 6.5660000, 400.00 m AMSL" in fly_out, fly_out
+    assert "Detected vehicle 1:1" in out, out
+    assert "GLOBAL_POSITION_INT {" in out and "lat : 465180000" in out, out
+    assert "relative_alt : 3000" in out or "relative_alt : 2999" in out, out
+    assert "HOME_POSITION {" in out and "latitude : 465180000" in out, out
+    assert "fence breach" not in out, out
