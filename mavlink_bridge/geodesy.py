@@ -13,7 +13,8 @@ from dataclasses import dataclass
 
 import pymap3d
 
-#: PX4 SITL's default home (Zurich Irchel park), see docs/mavlink.md for the sources
+#: PX4 SITL's default home (Zurich Irchel park: PX4-SITL_gazebo-classic include/common.h,
+#: kDefaultHome*; PX4-Autopilot simulator_sih SIH_LOC_LAT0/LON0), see docs/mavlink.md
 PX4_SITL_HOME = (47.397742, 8.545594, 488.0)
 
 

@@ -299,9 +299,12 @@ def test_mavsdk_position_home_health_battery_and_set_position_global():
         telemetry.subscribe_health_all_ok(lambda ok, _: seen.update(ok=ok))
         telemetry.subscribe_battery(lambda b, _: seen.update(battery=b))
         telemetry.subscribe_heading(lambda h, _: seen.update(heading=h))
+        telemetry.subscribe_velocity_ned(lambda v, _: seen.update(velocity=v))
         deadline = time.monotonic() + 20.0
         while time.monotonic() < deadline and not (
-                seen.get("ok") and {"position", "home", "battery", "heading"} <= seen.keys()):
+                seen.get("ok") and {"position", "home", "battery", "heading",
+                                     "velocity"} <= seen.keys()
+                and math.isfinite(seen["battery"].current_battery_a)):  # BATTERY_STATUS
             time.sleep(0.1)
         assert seen.get("ok") is True, f"health_all_ok never true: {telemetry.health()}"
         p, h, b = seen["position"], seen["home"], seen["battery"]
@@ -309,6 +312,8 @@ def test_mavsdk_position_home_health_battery_and_set_position_global():
         assert abs(p.absolute_altitude_m - 403.0) < 0.05 and abs(p.relative_altitude_m - 3) < 0.05
         assert abs(h.latitude_deg - origin.lat) < 1e-7 and abs(h.absolute_altitude_m - 400) < 1e-3
         assert 16.0 < b.voltage_v <= 16.8 and 90 <= b.remaining_percent <= 100, b
+        assert 0 < b.current_battery_a < 60 and b.capacity_consumed_ah >= 0, b
+        assert abs(seen["velocity"].down_m_s) < 0.1 and seen["heading"].heading_deg < 1.0
         print("MAVSDK:", p, h, b, telemetry.health(), sep="\n  ")
         action.arm()
         m, n = radii(origin.lat)
