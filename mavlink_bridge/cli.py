@@ -26,7 +26,8 @@ def register(sub: Any) -> None:
                      help="MAVLink 2 signing key: 32 bytes, 64 hex digits or a passphrase")
     fly.add_argument("--origin", default=None, metavar="LAT,LON,ALT",
                      help="WGS84 point of the local NED origin (deg, deg, m AMSL; default: "
-                          "PX4 SITL's home 47.397742,8.545594,488)")
+                          "PX4 SITL's home 47.397742,8.545594,488; a negative LAT: "
+                          "--origin=-33.9,151.2,40)")
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
     fly.set_defaults(func=_fly)

@@ -88,6 +88,17 @@ def test_origin_option_and_scenario_field_reject_bad_values(tmp_path):
                      (["x", 1, 2], "numbers"), ([1.0, 2.0, 20000.0], "altitude")):
         with pytest.raises(ScenarioError, match=why):
             parse_scenario({**BASE, "origin": bad})
+    # the CLI takes the scenario's origin; --origin wins over it
+    sc_file = tmp_path / "here.toml"
+    sc_file.write_text('name = "here"\nairframe = "paper_hexacopter"\nduration = 1.0\n'
+                       'origin = [46.5, 7.5, 1500.0]\n')
+    gcs = f"udpout:127.0.0.1:{free_port()}"
+    for extra, want in (([], "46.5000000, 7.5000000, 1500.00 m AMSL"),
+                        (["--origin=-33.9,151.2,40"], "-33.9000000, 151.2000000, 40.00 m")):
+        r = subprocess.run([sys.executable, "-m", "orchestrator.cli", "fly", str(sc_file),
+                            "--gcs", gcs, "--duration", "0.05", *extra], cwd=ROOT,
+                           capture_output=True, text=True, timeout=120)
+        assert r.returncode == 0 and want in r.stdout, r
     # the CLI: a bad --origin is an error message and exit status, not a traceback
     r = subprocess.run([sys.executable, "-m", "orchestrator.cli", "fly", "--origin", "95,8,4",
                         "--duration", "0.1"], cwd=ROOT, capture_output=True, text=True,
