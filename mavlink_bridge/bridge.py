@@ -23,6 +23,7 @@ from typing import Any, ClassVar
 import numpy as np
 
 from mavlink_bridge import modes, protocols, px4, telemetry
+from mavlink_bridge.geodesy import Origin
 from mavlink_bridge.links import Endpoint, Signing
 from mavlink_bridge.params import ParameterTable
 from mavlink_bridge.setpoints import (
@@ -33,6 +34,7 @@ from mavlink_bridge.setpoints import (
     Rejected,
     VehicleState,
     decode_attitude,
+    decode_global,
     decode_position,
 )
 from mavlink_bridge.telemetry import Snapshot, mav
@@ -108,6 +110,7 @@ class BridgeConfig:
     duration: float | None = None  # simulated s; None: until stop()
     chunk: int = 5
     limits: Limits = field(default_factory=Limits)
+    origin: Origin = field(default_factory=Origin)  # WGS84 point of local NED (0, 0, 0)
 
 
 class Bridge:
@@ -141,6 +144,8 @@ class Bridge:
         self.limits = config.limits
         self._sync_limits()
         self.stats = PacingStats(speed=config.speed)
+        self.origin = config.origin
+        self.battery = telemetry.Battery()
         self.mode = "HOLD"
         self.armed = False
         self.ref = Reference.hold(np.array(config.pos0, float), np.array(config.euler0, float))
@@ -228,6 +233,7 @@ class Bridge:
         s.set_reference(**self.ref.as_inputs())
         s.advance()
         self._state = s.state()
+        self.battery.update(self._thrust_fraction(), s.step_size * s.chunk)
         self._snapshot = None
         self._watch()
         self._publish()
@@ -279,6 +285,11 @@ class Bridge:
             self.ref.apply_attitude(self.att_sp)
         self._set_mode("OFFBOARD")
 
+    def _thrust_fraction(self) -> float:
+        af = self.airframe
+        f_max = af.n_rotors * af.k_t * af.omega_max ** 2
+        return float(np.linalg.norm(self._state["ctrl"]["f_b_c"])) / f_max if f_max > 0 else 0.0
+
     # -- output ----------------------------------------------------------------------
 
     def snapshot(self) -> Snapshot:
@@ -292,7 +303,8 @@ class Bridge:
                 armed=self.armed, n_rotors=n, omega_max=af.omega_max,
                 tilt_limits=np.abs(np.column_stack([af.alpha_limits[:, 1],
                                                     af.beta_limits[:, 1]])),
-                thrust_max=n * af.k_t * af.omega_max ** 2, load=self._busy / wall)
+                thrust_max=n * af.k_t * af.omega_max ** 2, load=self._busy / wall,
+                origin=self.origin, battery=self.battery, unix_us=int(time.time() * 1e6))
         return self._snapshot
 
     def _publish(self, force_heartbeat: bool = False) -> None:
@@ -422,7 +434,10 @@ class Bridge:
 
     def _on_position(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
         try:
-            sp = decode_position(msg, self.vehicle(), self.limits)
+            if msg.get_type() == "SET_POSITION_TARGET_GLOBAL_INT":
+                sp = decode_global(msg, self.vehicle(), self.limits, self.origin)
+            else:
+                sp = decode_position(msg, self.vehicle(), self.limits)
         except Rejected as e:
             self.statustext(mav.MAV_SEVERITY_WARNING, f"POSITION_TARGET rejected: {e}",
                             limited=True)
@@ -666,6 +681,7 @@ class Bridge:
     _HANDLERS: ClassVar[dict[str, Callable[[Bridge, Endpoint, Any, tuple[int, int]], None]]] = {
         "HEARTBEAT": _on_heartbeat,
         "SET_POSITION_TARGET_LOCAL_NED": _on_position,
+        "SET_POSITION_TARGET_GLOBAL_INT": _on_position,
         "SET_ATTITUDE_TARGET": _on_attitude,
         "COMMAND_LONG": _on_command,
         "COMMAND_INT": _on_command,

@@ -24,6 +24,10 @@ def register(sub: Any) -> None:
                      help="simulated seconds per wall second, or 'max' (default: 1)")
     fly.add_argument("--signing-key", default=None, metavar="FILE",
                      help="MAVLink 2 signing key: 32 bytes, 64 hex digits or a passphrase")
+    fly.add_argument("--origin", default=None, metavar="LAT,LON,ALT",
+                     help="WGS84 point of the local NED origin (deg, deg, m AMSL; default: "
+                          "PX4 SITL's home 47.397742,8.545594,488; a negative LAT: "
+                          "--origin=-33.9,151.2,40)")
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
     fly.set_defaults(func=_fly)
@@ -51,8 +55,16 @@ def _fly(args: argparse.Namespace) -> int:
         config.plant_parameters = sc.plant_parameters
         config.controller_parameters = sc.controller_parameters
         config.coupling = sc.coupling
+        if sc.origin is not None:
+            from mavlink_bridge.geodesy import Origin
+
+            config.origin = Origin(*sc.origin)
     elif args.airframe is not None:
         config.airframe = args.airframe
+    if args.origin is not None:
+        from mavlink_bridge.geodesy import parse_origin
+
+        config.origin = parse_origin(args.origin)
     if args.signing_key is not None:
         try:
             config.signing_key = load_key(args.signing_key)
@@ -62,6 +74,8 @@ def _fly(args: argparse.Namespace) -> int:
         af = bridge.airframe
         print(f"flying {af.name} from {tuple(float(x) for x in config.pos0)} "
               f"(speed {args.speed}, signing {'on' if config.signing_key else 'off'})")
+        o = config.origin
+        print(f"origin              {o.lat:.7f}, {o.lon:.7f}, {o.alt:.2f} m AMSL (local NED 0)")
         for ep in bridge.endpoints:
             print(f"mavlink endpoint    {ep.url} (local {ep.sock.getsockname()[0]}:"
                   f"{ep.sock.getsockname()[1]})")

@@ -13,6 +13,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from mavlink_bridge.geodesy import Origin
 from mavlink_bridge.geometry import body_rates_to_euler_rates, quat_to_euler, rotation, wrap_pi
 
 # POSITION_TARGET_TYPEMASK
@@ -25,6 +26,9 @@ ROLL_RATE_IGNORE, PITCH_RATE_IGNORE, YAW_RATE_IGNORE_ATT = 1, 2, 4
 THRUST_BODY_SET, THROTTLE_IGNORE, ATTITUDE_IGNORE = 32, 64, 128
 
 MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED = 1, 7, 8
+MAV_FRAME_BODY_OFFSET_NED = 9
+MAV_FRAME_GLOBAL_INT, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 5, 6
+MAV_FRAME_GLOBAL_TERRAIN_ALT_INT = 11
 
 
 class Rejected(ValueError):
@@ -75,7 +79,8 @@ def _fields(msg: object, names: tuple[str, ...], mask: int, bits: tuple[int, int
 def decode_position(msg: object, state: VehicleState, limits: Limits) -> PositionSetpoint:
     mask = int(msg.type_mask)  # type: ignore[attr-defined]
     frame = int(msg.coordinate_frame)  # type: ignore[attr-defined]
-    if frame not in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED):
+    if frame not in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED,
+                     MAV_FRAME_BODY_OFFSET_NED):
         raise Rejected(f"coordinate frame {frame} unsupported")
     if mask & FORCE_SET:
         raise Rejected("force setpoints unsupported")
@@ -95,10 +100,16 @@ def decode_position(msg: object, state: VehicleState, limits: Limits) -> Positio
     acc = _fields(msg, used[2][0], mask, used[2][1])
     if frame == MAV_FRAME_LOCAL_OFFSET_NED:
         pos = state.pos + pos  # NaN stays NaN where ignored
-    elif frame == MAV_FRAME_BODY_NED:
-        # as PX4: velocity and acceleration rotated from body to NED, position unused
+    elif frame in (MAV_FRAME_BODY_NED, MAV_FRAME_BODY_OFFSET_NED):
+        # as PX4 for BODY_NED: velocity and acceleration rotated from body to NED (ignored
+        # components count as 0), position unused.  BODY_OFFSET_NED (MAVLink: the same as
+        # BODY_FRD, origin travelling with the vehicle): the position is an offset in the
+        # body frame, rotated the same way and added to the current position
         r = rotation(*state.euler)
-        pos = np.full(3, math.nan)
+        if frame == MAV_FRAME_BODY_OFFSET_NED and not np.all(np.isnan(pos)):
+            pos = state.pos + r @ np.nan_to_num(pos)
+        else:
+            pos = np.full(3, math.nan)
         if not np.all(np.isnan(vel)):
             vel = r @ np.nan_to_num(vel)
         if not np.all(np.isnan(acc)):
@@ -111,6 +122,57 @@ def decode_position(msg: object, state: VehicleState, limits: Limits) -> Positio
             and math.isnan(yaw) and math.isnan(yaw_rate):
         raise Rejected("every field ignored")
     return sp
+
+
+@dataclass
+class _LocalView:
+    """A SET_POSITION_TARGET_GLOBAL_INT seen as a local-NED one (same type_mask)."""
+
+    type_mask: int
+    x: float
+    y: float
+    z: float
+    vx: float
+    vy: float
+    vz: float
+    afx: float
+    afy: float
+    afz: float
+    yaw: float
+    yaw_rate: float
+    coordinate_frame: int = MAV_FRAME_LOCAL_NED
+
+
+def decode_global(msg: object, state: VehicleState, limits: Limits, origin: Origin
+                  ) -> PositionSetpoint:
+    """SET_POSITION_TARGET_GLOBAL_INT -> the local setpoint.  GLOBAL_INT: alt in m AMSL;
+    GLOBAL_RELATIVE_ALT_INT: alt in m above home (the origin).  A field the type_mask
+    ignores takes the vehicle's own value for the conversion and stays ignored."""
+    mask = int(msg.type_mask)  # type: ignore[attr-defined]
+    frame = int(msg.coordinate_frame)  # type: ignore[attr-defined]
+    if frame == MAV_FRAME_GLOBAL_TERRAIN_ALT_INT:
+        raise Rejected("terrain altitude unsupported: no terrain model")
+    if frame not in (MAV_FRAME_GLOBAL_INT, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT):
+        raise Rejected(f"coordinate frame {frame} unsupported")
+    here = origin.to_geodetic(*(float(v) for v in state.pos))
+    lat_i, lon_i = int(msg.lat_int), int(msg.lon_int)  # type: ignore[attr-defined]
+    alt = float(msg.alt)  # type: ignore[attr-defined]
+    lat = here[0] if mask & X_IGNORE else lat_i * 1e-7
+    lon = here[1] if mask & Y_IGNORE else lon_i * 1e-7
+    if not mask & Z_IGNORE:
+        if not math.isfinite(alt):
+            raise Rejected("alt not finite")
+        if frame == MAV_FRAME_GLOBAL_RELATIVE_ALT_INT:
+            alt += origin.alt
+    else:
+        alt = here[2]
+    if abs(lat) > 90.0 or abs(lon) > 180.0:
+        raise Rejected("latitude/longitude out of range")
+    n, e, d = origin.to_ned(lat, lon, alt)
+    v = [float(getattr(msg, k)) for k in ("vx", "vy", "vz", "afx", "afy", "afz", "yaw",
+                                          "yaw_rate")]
+    view = _LocalView(mask, n, e, d, v[0], v[1], v[2], v[3], v[4], v[5], v[6], v[7])
+    return decode_position(view, state, limits)
 
 
 def _limit(sp: PositionSetpoint, lim: Limits) -> None:

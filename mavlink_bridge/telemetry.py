@@ -7,12 +7,13 @@ lockstep SITL); SET_MESSAGE_INTERVAL changes them for the endpoint it came from.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
 from pymavlink.dialects.v20 import common as mav
 
+from mavlink_bridge.geodesy import Origin
 from mavlink_bridge.geometry import euler_to_quat, rotation
 from mavlink_bridge.identity import FLIGHT_SW_VERSION
 
@@ -29,6 +30,16 @@ DEFAULT_RATES: dict[int, float] = {
     mav.MAVLINK_MSG_ID_ATTITUDE_TARGET: 10.0,
     mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: 10.0,
     mav.MAVLINK_MSG_ID_SERVO_OUTPUT_RAW: 10.0,
+    # the global-position group at the rates PX4 streams to a GCS (MAVLINK_MODE_NORMAL in
+    # PX4-Autopilot src/modules/mavlink/mavlink_main.cpp, Mavlink::configure_streams_to_default)
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: 5.0,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: 1.0,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: 0.5,
+    mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: 0.1,
+    mav.MAVLINK_MSG_ID_VFR_HUD: 4.0,
+    mav.MAVLINK_MSG_ID_ALTITUDE: 1.0,
+    mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
 }
 #: messages REQUEST_MESSAGE can produce besides the streamed ones
 ON_REQUEST = (mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,)
@@ -49,6 +60,34 @@ class Snapshot:
     tilt_limits: np.ndarray  # (n, 2) max |alpha|, |beta|
     thrust_max: float  # N, all rotors at omega_max
     load: float  # share of wall time spent computing (0..1)
+    origin: Origin = field(default_factory=Origin)
+    battery: Battery = field(default_factory=lambda: Battery())
+    unix_us: int = 0  # wall clock (SYSTEM_TIME), 0: unknown
+
+
+@dataclass
+class Battery:
+    """A simple battery: 4S LiPo, 5000 mAh; current proportional to the commanded thrust
+    (60 A at full thrust), open-circuit cell voltage linear in the charge (4.2 V full,
+    3.5 V empty).  Reported only: the plant's thrust does not depend on it."""
+
+    cells: int = 4
+    capacity_mah: float = 5000.0
+    current_full_a: float = 60.0
+    consumed_mah: float = 0.0
+    current_a: float = 0.0
+
+    def update(self, thrust_fraction: float, dt: float) -> None:
+        self.current_a = self.current_full_a * min(1.0, max(0.0, thrust_fraction))
+        self.consumed_mah += self.current_a * dt / 3.6
+
+    @property
+    def remaining(self) -> float:
+        return max(0.0, 1.0 - self.consumed_mah / self.capacity_mah)
+
+    @property
+    def cell_v(self) -> float:
+        return 3.5 + 0.7 * self.remaining
 
 
 BASE_MODE_CUSTOM = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
@@ -128,16 +167,106 @@ def attitude_target(s: Snapshot) -> Any:
                                                *_f(s.ctrl["rate_c"]), thrust)
 
 
+#: what the simulated vehicle has, as PX4 SITL reports it (all present, enabled, healthy)
+SENSORS = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL |
+           mav.MAV_SYS_STATUS_SENSOR_3D_MAG | mav.MAV_SYS_STATUS_SENSOR_ABSOLUTE_PRESSURE |
+           mav.MAV_SYS_STATUS_SENSOR_GPS | mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL |
+           mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION |
+           mav.MAV_SYS_STATUS_SENSOR_YAW_POSITION |
+           mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL |
+           mav.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL |
+           mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS | mav.MAV_SYS_STATUS_AHRS |
+           mav.MAV_SYS_STATUS_SENSOR_BATTERY | mav.MAV_SYS_STATUS_PREARM_CHECK)
+#: no geofence is simulated: not present, not enabled, and healthy (= not breached), which is
+#: what MAVProxy's fence module reads; a clear health bit is its "fence breach"
+HEALTH_ONLY = mav.MAV_SYS_STATUS_GEOFENCE
+
+
 def sys_status(s: Snapshot) -> Any:
-    sensors = (mav.MAV_SYS_STATUS_SENSOR_3D_GYRO | mav.MAV_SYS_STATUS_SENSOR_3D_ACCEL |
-               mav.MAV_SYS_STATUS_SENSOR_ANGULAR_RATE_CONTROL |
-               mav.MAV_SYS_STATUS_SENSOR_ATTITUDE_STABILIZATION |
-               mav.MAV_SYS_STATUS_SENSOR_XY_POSITION_CONTROL |
-               mav.MAV_SYS_STATUS_SENSOR_Z_ALTITUDE_CONTROL |
-               mav.MAV_SYS_STATUS_SENSOR_MOTOR_OUTPUTS)
     load = int(min(1000, max(0, round(s.load * 1000))))
-    return mav.MAVLink_sys_status_message(sensors, sensors, sensors, load, 65535, -1, -1,
-                                          0, 0, 0, 0, 0, 0)
+    b = s.battery
+    return mav.MAVLink_sys_status_message(
+        SENSORS, SENSORS, SENSORS | HEALTH_ONLY, load, round(b.cells * b.cell_v * 1000),
+        round(b.current_a * 100), round(b.remaining * 100), 0, 0, 0, 0, 0, 0)
+
+
+def battery_status(s: Snapshot) -> Any:
+    b = s.battery
+    cells = [round(b.cell_v * 1000)] * b.cells + [65535] * (10 - b.cells)
+    return mav.MAVLink_battery_status_message(
+        0, mav.MAV_BATTERY_FUNCTION_ALL, mav.MAV_BATTERY_TYPE_LIPO, 32767, cells,
+        round(b.current_a * 100), round(b.consumed_mah), -1, round(b.remaining * 100))
+
+
+def _global(s: Snapshot) -> tuple[int, int, int, int]:
+    """(lat 1e7 deg, lon 1e7 deg, alt mm AMSL, relative alt mm above home)."""
+    n, e, d = _f(s.plant["pos"])
+    lat, lon, alt = s.origin.to_geodetic(n, e, d)
+    home_alt = s.origin.alt  # home is the origin (local NED 0, 0, 0)
+    return (round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
+            round((alt - home_alt) * 1000))
+
+
+def _hdg_cdeg(s: Snapshot) -> int:
+    return round(math.degrees(float(s.plant["euler"][2])) * 100) % 36000
+
+
+def global_position_int(s: Snapshot) -> Any:
+    lat, lon, alt, rel = _global(s)
+    v = [round(100 * x) for x in _f(s.plant["vel"])]
+    return mav.MAVLink_global_position_int_message(_ms(s), lat, lon, alt, rel, *v,
+                                                   _hdg_cdeg(s))
+
+
+def gps_raw_int(s: Snapshot) -> Any:
+    # as PX4 SITL's simulated GPS (PX4-Autopilot src/modules/simulation/sensor_gps_sim/
+    # SensorGpsSim.cpp, SensorGpsSim::Run): 3-D fix, 10 satellites (SIM_GPS_USED), HDOP 0.7,
+    # VDOP 1.1 (eph/epv carry the DOPs x 100), accuracies 0.9 m / 1.78 m / 0.4 m/s
+    lat, lon, alt, _ = _global(s)
+    v = s.plant["vel"]
+    vel = round(100 * math.hypot(float(v[0]), float(v[1])))
+    cog = round(math.degrees(math.atan2(float(v[1]), float(v[0]))) * 100) % 36000 \
+        if vel > 0 else 65535
+    return mav.MAVLink_gps_raw_int_message(_us(s), mav.GPS_FIX_TYPE_3D_FIX, lat, lon, alt,
+                                           70, 110, vel, cog, 10, alt, 900, 1780, 400, 0, 0)
+
+
+def _home_fields(s: Snapshot) -> tuple[int, int, int]:
+    o = s.origin
+    return round(o.lat * 1e7), round(o.lon * 1e7), round(o.alt * 1000)
+
+
+def home_position(s: Snapshot) -> Any:
+    lat, lon, alt = _home_fields(s)
+    return mav.MAVLink_home_position_message(lat, lon, alt, 0.0, 0.0, 0.0,
+                                             [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, _us(s))
+
+
+def gps_global_origin(s: Snapshot) -> Any:
+    lat, lon, alt = _home_fields(s)
+    return mav.MAVLink_gps_global_origin_message(lat, lon, alt, _us(s))
+
+
+def vfr_hud(s: Snapshot) -> Any:
+    v = s.plant["vel"]
+    ground = math.hypot(float(v[0]), float(v[1]))
+    f = float(np.linalg.norm(s.ctrl["f_b_c"]))
+    throttle = round(100 * min(1.0, f / s.thrust_max)) if s.thrust_max > 0 else 0
+    _, _, alt, _ = _global(s)
+    return mav.MAVLink_vfr_hud_message(ground, ground, _hdg_cdeg(s) // 100, throttle,
+                                       alt / 1000, -float(v[2]))
+
+
+def altitude(s: Snapshot) -> Any:
+    _, _, alt, rel = _global(s)
+    amsl = alt / 1000
+    local = -float(s.plant["pos"][2])
+    return mav.MAVLink_altitude_message(_us(s), amsl, amsl, local, rel / 1000, math.nan,
+                                        math.nan)
+
+
+def system_time(s: Snapshot) -> Any:
+    return mav.MAVLink_system_time_message(s.unix_us, _ms(s))
 
 
 def extended_sys_state(s: Snapshot) -> Any:
@@ -205,6 +334,14 @@ _BUILDERS = {
     mav.MAVLINK_MSG_ID_ATTITUDE_TARGET: attitude_target,
     mav.MAVLINK_MSG_ID_ACTUATOR_OUTPUT_STATUS: actuator_output_status,
     mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION: autopilot_version,
+    mav.MAVLINK_MSG_ID_GLOBAL_POSITION_INT: global_position_int,
+    mav.MAVLINK_MSG_ID_GPS_RAW_INT: gps_raw_int,
+    mav.MAVLINK_MSG_ID_HOME_POSITION: home_position,
+    mav.MAVLINK_MSG_ID_GPS_GLOBAL_ORIGIN: gps_global_origin,
+    mav.MAVLINK_MSG_ID_VFR_HUD: vfr_hud,
+    mav.MAVLINK_MSG_ID_ALTITUDE: altitude,
+    mav.MAVLINK_MSG_ID_SYSTEM_TIME: system_time,
+    mav.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
 }
 
 

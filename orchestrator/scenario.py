@@ -131,7 +131,7 @@ ATTITUDE_AXES = ("roll", "pitch", "yaw")
 DISTURBANCES = {"force": "f_d", "torque": "tau_d", "acceleration": "a_d"}
 _REL_TOL = 1e-9
 _TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "reference",
-             "disturbance", "fault", "fault_detection", "lost", "plant", "controller")
+             "disturbance", "fault", "fault_detection", "lost", "plant", "controller", "origin")
 
 ParamValue = float | int | bool
 Vec3 = tuple[Signal, Signal, Signal]
@@ -169,6 +169,9 @@ class Scenario:
     controller_parameters: dict[str, ParamValue] = field(default_factory=dict)
     warnings: tuple[str, ...] = ()  # plausibility warnings (file: field '...': reason)
     lost: LostCriteria = field(default_factory=LostCriteria)  # when a run is lost and stops
+    # WGS84 point of the local NED origin (lat deg, lon deg, alt m AMSL), for `fullpose fly`;
+    # None: the flier's default
+    origin: tuple[float, float, float] | None = None
 
     @property
     def n_steps(self) -> int:
@@ -741,6 +744,23 @@ def _faults(top: FieldReader, n_rotors: int) -> tuple[Fault, ...]:
     return tuple(faults)
 
 
+def _origin(top: FieldReader) -> tuple[float, float, float] | None:
+    """``origin = [lat_deg, lon_deg, alt_m_amsl]``: where local NED (0, 0, 0) is on Earth."""
+    if not top.has("origin"):
+        return None
+    expect = " (expected [latitude deg, longitude deg, altitude m AMSL])"
+    value = top.data["origin"]
+    if not isinstance(value, list) or len(value) != 3:
+        raise top.fail("origin", f"expected 3 numbers, got {value!r}{expect}")
+    lat, lon, alt = top.numbers("origin")
+    for what, v, bound in (("latitude", lat, 89.0), ("longitude", lon, 180.0)):
+        if abs(v) > bound:
+            raise top.fail("origin", f"{what} {v:g} outside [-{bound:g}, {bound:g}] deg{expect}")
+    if not -500.0 <= alt <= 10000.0:
+        raise top.fail("origin", f"altitude {alt:g} m outside [-500, 10000] m AMSL{expect}")
+    return (lat, lon, alt)
+
+
 def _lost(top: FieldReader) -> LostCriteria:
     """``[lost]``: ``position_error`` (m, > 0) and ``tilt_deg`` (0 < tilt <= 180)."""
     table = top.table("lost")
@@ -804,6 +824,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
                 dist[key] = axes
         disturbance.reject_unknown(lambda _k: " (expected force, torque or acceleration)")
 
+    origin = _origin(top)
     faults = _faults(top, airframe.n_rotors)
     detection = _fault_detection(top)
     lost = _lost(top)
@@ -824,6 +845,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         faults=faults,
         fault_detection=detection,
         lost=lost,
+        origin=origin,
         plant_parameters=plant_p,
         controller_parameters=ctrl_p,
         force=dist.get("force", Scenario.force),
