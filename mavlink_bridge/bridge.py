@@ -57,7 +57,13 @@ COMMAND_PARAMS: dict[int, tuple[int, ...]] = {
     mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: (1,),
     mav.MAV_CMD_SET_MESSAGE_INTERVAL: (1, 2),
     mav.MAV_CMD_GET_MESSAGE_INTERVAL: (1,),
+    mav.MAV_CMD_GET_HOME_POSITION: (),
 }
+# Commands answered, after their ACK, by one message: REQUEST_MESSAGE names it in param1;
+# these two are the older, dedicated requests (MAVSDK and QGroundControl still send them).
+_REQUESTS = {mav.MAV_CMD_REQUEST_MESSAGE: 0,
+             mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES: mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,
+             mav.MAV_CMD_GET_HOME_POSITION: mav.MAVLINK_MSG_ID_HOME_POSITION}
 
 
 @dataclass
@@ -489,10 +495,8 @@ class Bridge:
                 int(p[0]) in modes.REQUESTABLE):
             index = int(p[1]) if math.isfinite(p[1]) else 0
             self._reply(ep, modes.requested(int(p[0]), index, px4.custom_mode(self.mode)))
-        elif result == mav.MAV_RESULT_ACCEPTED and cmd in (
-                mav.MAV_CMD_REQUEST_MESSAGE, mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES):
-            msg_id = (int(p[0]) if cmd == mav.MAV_CMD_REQUEST_MESSAGE
-                      else mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION)
+        elif result == mav.MAV_RESULT_ACCEPTED and cmd in _REQUESTS:
+            msg_id = (int(p[0]) if cmd == mav.MAV_CMD_REQUEST_MESSAGE else _REQUESTS[cmd])
             self._snapshot = None
             for m in telemetry.build_all(msg_id, self.snapshot()):
                 ep.send(m)
@@ -524,7 +528,7 @@ class Bridge:
             if int(p[0]) == modes.MSG_AVAILABLE_MODES and math.isfinite(p[1]):
                 known = 0 <= p[1] <= modes.AVAILABLE_COUNT  # param2: mode index, 0 = all
             return mav.MAV_RESULT_ACCEPTED if known else mav.MAV_RESULT_DENIED
-        if cmd == mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES:
+        if cmd in (mav.MAV_CMD_REQUEST_AUTOPILOT_CAPABILITIES, mav.MAV_CMD_GET_HOME_POSITION):
             return mav.MAV_RESULT_ACCEPTED
         if cmd in (mav.MAV_CMD_SET_MESSAGE_INTERVAL, mav.MAV_CMD_GET_MESSAGE_INTERVAL):
             msg_id = int(p[0])

@@ -216,6 +216,11 @@ def test_global_telemetry_home_battery_and_sensor_bits(flight):
     home = f.wait("HOME_POSITION", 3.0)
     assert (home.latitude, home.longitude, home.altitude) == (
         round(lat0 * 1e7), round(lon0 * 1e7), round(alt0 * 1000))
+    # the older dedicated request (QGroundControl and MAVSDK send it): the same message
+    f.command(mavutil.mavlink.MAV_CMD_GET_HOME_POSITION)
+    again = f.wait("HOME_POSITION", 3.0)
+    assert (again.latitude, again.longitude, again.altitude) == (
+        home.latitude, home.longitude, home.altitude)
     origin = f.wait("GPS_GLOBAL_ORIGIN", 15.0)  # 0.1 Hz simulated, as PX4
     assert origin.latitude == home.latitude and origin.altitude == home.altitude
     hud = f.wait("VFR_HUD")
