@@ -24,6 +24,10 @@ def register(sub: Any) -> None:
                      help="simulated seconds per wall second, or 'max' (default: 1)")
     fly.add_argument("--signing-key", default=None, metavar="FILE",
                      help="MAVLink 2 signing key: 32 bytes, 64 hex digits or a passphrase")
+    fly.add_argument("--signing-setup-from", action="append", default=[], metavar="URL",
+                     help="accept SETUP_SIGNING (while disarmed, without --signing-key) only "
+                          "from this endpoint (udpin:HOST:PORT or udpout:HOST:PORT; added to "
+                          "the endpoints if not a --gcs one; default: SETUP_SIGNING refused)")
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
     fly.set_defaults(func=_fly)
@@ -40,8 +44,10 @@ def _fly(args: argparse.Namespace) -> int:
         raise ValueError("--speed must be positive or 'max'")
     if args.duration is not None and not args.duration > 0:
         raise ValueError("--duration must be positive")
-    config = BridgeConfig(urls=args.gcs or list(DEFAULT_URLS), speed=speed,
-                          duration=args.duration)
+    urls = list(args.gcs or DEFAULT_URLS)
+    urls += [u for u in args.signing_setup_from if u not in urls]
+    config = BridgeConfig(urls=urls, speed=speed, duration=args.duration,
+                          signing_setup_from=tuple(args.signing_setup_from))
     if args.scenario is not None:
         from orchestrator.scenario import load_scenario
 

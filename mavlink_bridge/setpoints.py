@@ -26,6 +26,11 @@ THRUST_BODY_SET, THROTTLE_IGNORE, ATTITUDE_IGNORE = 32, 64, 128
 
 MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED = 1, 7, 8
 
+#: largest accepted |yaw| of a position setpoint (rad): one turn covers both conventions
+#: clients use, [-pi, pi] and [0, 2 pi); anything larger can only be a unit error (degrees
+#: sent as radians) or garbage, and wrapping it would fly an arbitrary heading
+YAW_MAX = 2 * math.pi
+
 
 class Rejected(ValueError):
     """A setpoint refused, with the reason told to the ground station."""
@@ -90,6 +95,8 @@ def decode_position(msg: object, state: VehicleState, limits: Limits) -> Positio
     for n, b in (("yaw", YAW_IGNORE), ("yaw_rate", YAW_RATE_IGNORE)):
         if not mask & b and not math.isfinite(float(getattr(msg, n))):
             raise Rejected(f"{n} not finite")
+    if not mask & YAW_IGNORE and abs(float(msg.yaw)) > YAW_MAX:  # type: ignore[attr-defined]
+        raise Rejected("|yaw| above 2 pi rad")
     pos = _fields(msg, used[0][0], mask, used[0][1])
     vel = _fields(msg, used[1][0], mask, used[1][1])
     acc = _fields(msg, used[2][0], mask, used[2][1])
