@@ -24,6 +24,7 @@ import random
 import socket
 import threading
 import time
+from typing import Any
 
 os.environ["MAVLINK20"] = "1"
 
@@ -76,7 +77,7 @@ def _fuzz(port: int, rate: float, stop: mp.synchronize.Event) -> None:
         sent += 1
 
 
-def run_case(duration: float, busy: int, rate: float, budget: bool) -> dict[str, float]:
+def run_case(duration: float, busy: int, rate: float, budget: bool) -> dict[str, Any]:
     saved = bridge_mod.RX_TIME_LATE, bridge_mod.RX_TIME_SHARE
     if not budget:
         bridge_mod.RX_TIME_LATE = bridge_mod.RX_TIME_SHARE = math.inf
@@ -134,18 +135,28 @@ def main() -> None:
     parser.add_argument("--duration", type=float, default=10.0, help="simulated s per case")
     parser.add_argument("--busy", type=int, default=2, help="busy-loop processes")
     parser.add_argument("--rate", type=float, default=2500.0, help="fuzz datagrams/s")
+    parser.add_argument("--repeat", type=int, default=3, help="runs of each case, interleaved")
     args = parser.parse_args()
     print(f"host: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.2f} at start; "
           f"{args.busy} busy processes; {args.duration:g} s per case")
     print(f"{'input budget':13s} {'fuzzer':>8s} {'max lag ms':>11s} {'late chunks':>14s} "
           f"{'datagrams':>10s} {'speed':>6s}  mode at end (offboard losses)")
-    for rate in (0.0, args.rate):
-        for budget in (False, True):
-            r = run_case(args.duration, args.busy, rate, budget)
-            print(f"{'time+count' if budget else 'count only':13s} {rate:8.0f} "
-                  f"{r['max_lag_ms']:11.1f} {r['late']:6d}/{r['chunks']:<7d} "
-                  f"{r['datagrams']:10d} {r['speed']:6.3f}  {r['mode']} ({r['lost']})",
-                  flush=True)
+    lags: dict[tuple[float, bool], list[float]] = {}
+    for _ in range(args.repeat):
+        for rate in (0.0, args.rate):
+            for budget in (False, True):
+                r = run_case(args.duration, args.busy, rate, budget)
+                lags.setdefault((rate, budget), []).append(r["max_lag_ms"])
+                print(f"{'time+count' if budget else 'count only':13s} {rate:8.0f} "
+                      f"{r['max_lag_ms']:11.1f} {r['late']:6d}/{r['chunks']:<7d} "
+                      f"{r['datagrams']:10d} {r['speed']:6.3f}  {r['mode']} ({r['lost']})",
+                      flush=True)
+    print(f"\nworst lag over {args.repeat} runs (median), ms; load average at end "
+          f"{os.getloadavg()[0]:.2f}")
+    for (rate, budget), v in lags.items():
+        v = sorted(v)
+        print(f"{'time+count' if budget else 'count only':13s} fuzzer {rate:6.0f}/s: "
+              f"worst {v[-1]:7.1f}  median {v[len(v) // 2]:7.1f}")
 
 
 if __name__ == "__main__":
