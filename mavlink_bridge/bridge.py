@@ -234,10 +234,7 @@ class Bridge:
             if s.time - self.last_setpoint <= self.stale:
                 self.ref.integrate(self.pos_sp, self.att_sp, s.step_size * s.chunk)
             elif not self._frozen:
-                # setpoints stale: hold the pose reached, never fly the last velocity on
-                self._frozen = True
-                v = self.vehicle()
-                self.ref = Reference.hold(v.pos, v.euler)
+                self._freeze()
         s.set_reference(**self.ref.as_inputs())
         s.advance()
         self._state = s.state()
@@ -290,6 +287,22 @@ class Bridge:
     def vehicle(self) -> VehicleState:
         p = self._state["plant"]
         return VehicleState(p["pos"].copy(), p["euler"].copy())
+
+    def _freeze(self) -> None:
+        """Setpoints stale (older than FPB_SP_STALE): hold the pose reached, never fly the
+        last velocity, acceleration or rate on.  An absolute position or attitude target is
+        a place, not a motion: it is kept (clients streaming slowly still get there)."""
+        self._frozen = True
+        v = self.vehicle()
+        ref = Reference.hold(v.pos, v.euler)
+        if self.pos_sp is not None:
+            have = ~np.isnan(self.pos_sp.pos)
+            ref.pos[have] = self.pos_sp.pos[have]
+            if not math.isnan(self.pos_sp.yaw):
+                ref.euler[2] = self.pos_sp.yaw
+        if self.att_sp is not None and self.att_sp.euler is not None:
+            ref.euler = self.att_sp.euler.copy()
+        self.ref = ref
 
     def _hold(self) -> None:
         self._frozen = False

@@ -409,3 +409,19 @@ def test_infeasible_attitude_reported_once_naming_the_attitude_held(flight):
     stream(f, 1.0, lambda: (f.position(0.3, 0.0, -3.0), f.attitude(0.0, 0.0, 0.0)))
     text_seen(f, "attitude reference feasible again")
     still_flying(f)
+
+
+def test_stale_position_target_is_still_reached(flight):
+    """A position target is a place, not a motion: a client streaming at 2 Hz (stale
+    between setpoints, within the loss timeout) still gets there."""
+    f = flight
+    f.command(400, 1, expect=0)
+    f.position(1.0, 0.0, -3.0)
+    f.offboard(expect=0)
+    for _ in range(6):  # 2 Hz simulated = every 0.125 s wall at 4x
+        f.position(1.0, 0.0, -3.0)
+        stream(f, 0.125, lambda: None)
+    assert f.bridge.mode == "OFFBOARD"
+    assert f.bridge.ref.pos[0] == pytest.approx(1.0)
+    lp = f.wait("LOCAL_POSITION_NED", 3.0, lambda m: abs(m.x - 1.0) < 0.1)
+    assert f.thread.is_alive() and lp is not None
