@@ -425,3 +425,17 @@ def test_stale_position_target_is_still_reached(flight):
     assert f.bridge.ref.pos[0] == pytest.approx(1.0)
     lp = f.wait("LOCAL_POSITION_NED", 3.0, lambda m: abs(m.x - 1.0) < 0.1)
     assert f.thread.is_alive() and lp is not None
+
+
+def test_cli_signing_setup_from_adds_the_named_endpoint():
+    import subprocess
+    import sys
+
+    gcs, setup = free_port(), free_port()
+    out = subprocess.run(
+        [sys.executable, "-m", "orchestrator.cli", "fly", "--speed", "max", "--duration",
+         "0.05", "--gcs", f"udpout:127.0.0.1:{gcs}", "--signing-setup-from",
+         f"udpin:127.0.0.1:{setup}"], capture_output=True, text=True, timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert f"udpout:127.0.0.1:{gcs}" in out.stdout
+    assert f"udpin:127.0.0.1:{setup}" in out.stdout
