@@ -22,6 +22,7 @@ import multiprocessing as mp
 import os
 import random
 import socket
+import statistics
 import threading
 import time
 from typing import Any
@@ -156,7 +157,7 @@ def main() -> None:
     for (rate, budget), v in lags.items():
         v = sorted(v)
         print(f"{'time+count' if budget else 'count only':13s} fuzzer {rate:6.0f}/s: "
-              f"worst {v[-1]:7.1f}  median {v[len(v) // 2]:7.1f}")
+              f"worst {v[-1]:7.1f}  median {statistics.median(v):7.1f}")
 
 
 if __name__ == "__main__":
