@@ -16,16 +16,18 @@ from __future__ import annotations
 import math
 import select
 import time
+from collections import deque
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from typing import Any, ClassVar
 
 import numpy as np
 
-from mavlink_bridge import modes, protocols, px4, telemetry
+from mavlink_bridge import modes, protocols, px4, stability, telemetry
+from mavlink_bridge import params as mparams
 from mavlink_bridge.geodesy import Origin
 from mavlink_bridge.links import Endpoint, Signing
-from mavlink_bridge.params import ParameterTable
+from mavlink_bridge.params import ParameterTable, Range, fmu_range
 from mavlink_bridge.setpoints import (
     AttitudeSetpoint,
     Limits,
@@ -46,6 +48,13 @@ SYSTEM_ID = 1
 COMPONENT_ID = 1
 RX_BATCH = 8  # datagrams handled between clock checks
 RX_BUDGET_LATE = 32  # datagrams handled per chunk while behind wall time
+RX_TIME_LATE = 0.0005  # wall s of input handling per chunk while behind wall time
+RX_TIME_SHARE = 0.5  # ... and at most this share of a chunk period while waiting for it
+INFEASIBLE_REPORT_S = 0.5  # infeasible this long (simulated s) before it is reported
+FEASIBLE_CLEAR_S = 1.0  # feasible this long before the report is cleared
+MU_SETTLED = 1.0  # deg: mu_c (the feasible attitude) is held once it stays this close ...
+MU_WINDOW = 0.5  # ... over this window (simulated s)
+MU_REPORT_LATEST = 3.0  # reported by then in any case (simulated s of infeasibility)
 STATUSTEXT_PER_S = 5  # rejection/refusal messages per wall second, the rest are counted
 UNSUPPORTED_TEXT_PERIOD = 10.0  # wall s between "not supported" texts to one sender
 #: the params (1-based) each implemented command uses; NaN/inf there is DENIED.  Others
@@ -113,6 +122,9 @@ class BridgeConfig:
     urls: Sequence[str] = DEFAULT_URLS
     speed: float = 1.0  # math.inf: as fast as possible
     signing_key: bytes | None = None
+    # endpoints (their URLs, as in ``urls``) SETUP_SIGNING is accepted from (while disarmed
+    # and without ``signing_key``); empty: SETUP_SIGNING is always refused
+    signing_setup_from: Sequence[str] = ()
     duration: float | None = None  # simulated s; None: until stop()
     chunk: int = 5
     limits: Limits = field(default_factory=Limits)
@@ -146,7 +158,8 @@ class Bridge:
             self.set_signing(config.signing_key)
         af = self.session.airframe
         self.airframe = af
-        self.params = ParameterTable(self._tunables(), self.session.set_controller_parameter)
+        self.params = ParameterTable(self._tunables(), self.session.set_controller_parameter,
+                                     guard=stability.guard)
         self.limits = config.limits
         self._sync_limits()
         self.stats = PacingStats(speed=config.speed)
@@ -158,7 +171,11 @@ class Bridge:
         self.pos_sp: PositionSetpoint | None = None
         self.att_sp: AttitudeSetpoint | None = None
         self.last_setpoint: float = -math.inf  # simulated time of the last accepted one
-        self.feasible = True
+        self._frozen = False  # OFFBOARD with stale setpoints: holding the pose
+        self.feasible = True  # as reported (with hysteresis)
+        self._feasible_since = 0.0  # simulated time the FMU's flag last changed
+        self._feasible_raw = True
+        self._mu_c_window: deque[tuple[float, np.ndarray]] = deque()
         self._stop = False
         self._state = self.session.state()
         self._snapshot: Snapshot | None = None
@@ -172,17 +189,19 @@ class Bridge:
 
     # -- setup -----------------------------------------------------------------
 
-    def _tunables(self) -> list[tuple[str, float]]:
+    def _tunables(self) -> list[tuple[str, float, Range]]:
+        """(name, value in force, range the FMU's modelDescription declares)."""
         inst = self.session.ctrl_inst
         out = []
         for name, var in inst.variables.items():
             if var.causality == "parameter" and var.variability == "tunable":
-                out.append((name, float(inst.get(name))))
+                out.append((name, float(inst.get(name)), fmu_range(var)))
         return out
 
     def _sync_limits(self) -> None:
         g = self.params.get
         self.timeout = g("FPB_SP_TIMEOUT")
+        self.stale = g("FPB_SP_STALE")
         self.limits.xy, self.limits.z = g("FPB_SP_XY_MAX"), g("FPB_SP_Z_MAX")
         self.limits.vel, self.limits.acc = g("FPB_SP_VEL_MAX"), g("FPB_SP_ACC_MAX")
         self.limits.rate, self.limits.tilt = g("FPB_SP_RATE_MAX"), g("FPB_SP_TILT_MAX")
@@ -212,7 +231,7 @@ class Bridge:
                 if self._stop:
                     break
             else:
-                self._receive_budget(RX_BUDGET_LATE)
+                self._receive_budget(RX_BUDGET_LATE, time.perf_counter() + RX_TIME_LATE)
             busy0 = time.perf_counter()
             self._step()
             now = time.perf_counter()
@@ -235,7 +254,10 @@ class Bridge:
     def _step(self) -> None:
         s = self.session
         if self.control_active:
-            self.ref.integrate(self.pos_sp, self.att_sp, s.step_size * s.chunk)
+            if s.time - self.last_setpoint <= self.stale:
+                self.ref.integrate(self.pos_sp, self.att_sp, s.step_size * s.chunk)
+            elif not self._frozen:
+                self._freeze()
         s.set_reference(**self.ref.as_inputs())
         s.advance()
         self._state = s.state()
@@ -255,15 +277,34 @@ class Bridge:
             self._set_mode("HOLD")
             self.statustext(mav.MAV_SEVERITY_WARNING,
                             f"offboard lost: no setpoint for {self.timeout:g} s, holding")
-        feasible = bool(self._state["ctrl"]["feasible"][0] > 0.5)
-        if feasible != self.feasible:
-            self.feasible = feasible
-            if feasible:
-                self.statustext(mav.MAV_SEVERITY_INFO, "attitude reference feasible again")
-            else:
-                mu = np.degrees(self._state["ctrl"]["mu_c"])
-                self.statustext(mav.MAV_SEVERITY_WARNING,
-                                f"attitude infeasible: flying r{mu[0]:.0f} p{mu[1]:.0f} deg")
+        # infeasible attitude: reported once it lasted INFEASIBLE_REPORT_S, naming the
+        # feasible attitude mu_c the controller holds; cleared after FEASIBLE_CLEAR_S
+        # (and once mu_c has settled: within MU_SETTLED deg over the last MU_WINDOW s, else
+        # at MU_REPORT_LATEST s)
+        raw = bool(self._state["ctrl"]["feasible"][0] > 0.5)
+        mu_c = np.degrees(self._state["ctrl"]["mu_c"][:2])
+        self._mu_c_window.append((t, mu_c))
+        while self._mu_c_window and self._mu_c_window[0][0] < t - MU_WINDOW - 1e-9:
+            self._mu_c_window.popleft()
+        if raw != self._feasible_raw:
+            self._feasible_raw, self._feasible_since = raw, t
+        lasted = t - self._feasible_since
+        if self.feasible and not raw and lasted >= INFEASIBLE_REPORT_S - 1e-9 and (
+                lasted >= MU_REPORT_LATEST or self._mu_c_settled(t)):
+            self.feasible = False
+            mu = np.degrees(self._state["ctrl"]["mu_c"])
+            self.statustext(mav.MAV_SEVERITY_WARNING,
+                            f"attitude infeasible: holding r{mu[0]:.1f} p{mu[1]:.1f} deg")
+        elif not self.feasible and raw and lasted >= FEASIBLE_CLEAR_S - 1e-9:
+            self.feasible = True
+            self.statustext(mav.MAV_SEVERITY_INFO, "attitude reference feasible again")
+
+    def _mu_c_settled(self, t: float) -> bool:
+        w = self._mu_c_window
+        if not w or w[0][0] > t - MU_WINDOW + 0.02:
+            return False
+        mus = np.array([m for _, m in w])
+        return bool(np.max(mus.max(axis=0) - mus.min(axis=0)) < MU_SETTLED)
 
     # -- vehicle state -------------------------------------------------------------
 
@@ -271,7 +312,24 @@ class Bridge:
         p = self._state["plant"]
         return VehicleState(p["pos"].copy(), p["euler"].copy())
 
+    def _freeze(self) -> None:
+        """Setpoints stale (older than FPB_SP_STALE): hold the pose reached, never fly the
+        last velocity, acceleration or rate on.  An absolute position or attitude target is
+        a place, not a motion: it is kept (clients streaming slowly still get there)."""
+        self._frozen = True
+        v = self.vehicle()
+        ref = Reference.hold(v.pos, v.euler)
+        if self.pos_sp is not None:
+            have = ~np.isnan(self.pos_sp.pos)
+            ref.pos[have] = self.pos_sp.pos[have]
+            if not math.isnan(self.pos_sp.yaw):
+                ref.euler[2] = self.pos_sp.yaw
+        if self.att_sp is not None and self.att_sp.euler is not None:
+            ref.euler = self.att_sp.euler.copy()
+        self.ref = ref
+
     def _hold(self) -> None:
+        self._frozen = False
         v = self.vehicle()
         self.ref = Reference.hold(v.pos, v.euler)
         self.pos_sp = None
@@ -283,6 +341,7 @@ class Bridge:
             self._heartbeat_now()
 
     def _enter_offboard(self) -> None:
+        self._frozen = False
         v = self.vehicle()
         self.ref = Reference.hold(v.pos, v.euler)
         if self.pos_sp is not None:
@@ -365,10 +424,19 @@ class Bridge:
     # -- input -------------------------------------------------------------------------
 
     def _receive_until(self, due: float) -> None:
+        """Handle input until ``due``; input may use at most RX_TIME_SHARE of the chunk
+        period (then the rest is left in the socket buffers for later chunks)."""
         socks = {ep.sock.fileno(): ep for ep in self.endpoints}
+        start = time.perf_counter()
+        period = (self.session.step_size * self.session.chunk) / self.config.speed
+        budget_end = start + (RX_TIME_SHARE * period if math.isfinite(period) else 0.0)
         while not self._stop:
-            remaining = due - time.perf_counter()
+            now = time.perf_counter()
+            remaining = due - now
             if remaining <= 0:
+                return
+            if now >= budget_end:
+                time.sleep(remaining)  # input budget used up: the socket buffers wait
                 return
             try:
                 ready, _, _ = select.select(list(socks), [], [], remaining)
@@ -376,15 +444,17 @@ class Bridge:
                 time.sleep(max(0.0, remaining))
                 return
             for fd in ready:
-                self._drain(socks[fd], RX_BATCH)
+                self._drain(socks[fd], RX_BATCH, min(due, budget_end))
 
-    def _receive_budget(self, budget: int) -> None:
+    def _receive_budget(self, budget: int, deadline: float) -> None:
         for ep in self.endpoints:
-            self._drain(ep, budget)
+            self._drain(ep, budget, deadline)
 
-    def _drain(self, ep: Endpoint, budget: int) -> None:
+    def _drain(self, ep: Endpoint, budget: int, deadline: float = math.inf) -> None:
+        """Up to ``budget`` datagrams, stopping at the first datagram boundary after
+        ``deadline`` (perf_counter time)."""
         last = None
-        for data, msg in ep.receive(budget):
+        for data, msg in ep.receive(budget, deadline):
             if data is not last:
                 last = data
                 self._count_datagram()
@@ -450,6 +520,7 @@ class Bridge:
             return
         self.pos_sp = sp
         self.last_setpoint = self.session.time
+        self._frozen = False
         if self.control_active:
             self.ref.apply_position(sp)
 
@@ -462,6 +533,7 @@ class Bridge:
             return
         self.att_sp = sp
         self.last_setpoint = self.session.time
+        self._frozen = False
         if self.control_active:
             self.ref.apply_attitude(sp)
 
@@ -617,9 +689,9 @@ class Bridge:
 
     def _param_value(self, index: int) -> Any:
         p = self.params.items[index]
-        return mav.MAVLink_param_value_message(p.name.encode("ascii"), p.value,
-                                               mav.MAV_PARAM_TYPE_REAL32, len(self.params),
-                                               index)
+        value, kind = mparams.encode(p.value, p.integer)  # INT32 byte-wise, as PX4
+        return mav.MAVLink_param_value_message(p.name.encode("ascii"), value, kind,
+                                               len(self.params), index)
 
     def _on_param_list(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
         for i in range(len(self.params)):
@@ -655,7 +727,12 @@ class Bridge:
             self.statustext(mav.MAV_SEVERITY_WARNING, f"unknown parameter {name[:30]}",
                             limited=True)
             return
-        reason = self.params.set(name, float(msg.param_value))
+        kind = int(msg.param_type)
+        value = mparams.decode(float(msg.param_value), kind)
+        if value is None:
+            reason: str | None = f"{name} refused: param_type {kind} unsupported"
+        else:
+            reason = self.params.set(name, value, kind)
         if reason is not None:
             self.statustext(mav.MAV_SEVERITY_WARNING, reason, limited=True)
         elif name.startswith("FPB_"):
@@ -672,6 +749,19 @@ class Bridge:
             ep.send(mav.MAVLink_timesync_message(now_ns, int(msg.ts1)))
 
     def _on_setup_signing(self, ep: Endpoint, msg: Any, src: tuple[int, int]) -> None:
+        """Policy (docs/mavlink.md, "Signing policy"): refused while armed, refused when the
+        key was given with --signing-key, accepted only from a --signing-setup-from link."""
+        why = None
+        if self.armed:
+            why = "armed"
+        elif self.config.signing_key is not None:
+            why = "key set by --signing-key"
+        elif ep.url not in self.config.signing_setup_from:
+            why = "not --signing-setup-from"
+        if why is not None:
+            self.statustext(mav.MAV_SEVERITY_WARNING, f"SETUP_SIGNING refused: {why}",
+                            limited=True)
+            return
         key = bytes(int(b) & 0xFF for b in msg.secret_key)
         if len(key) != 32:
             return

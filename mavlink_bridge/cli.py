@@ -28,6 +28,10 @@ def register(sub: Any) -> None:
                      help="WGS84 point of the local NED origin (deg, deg, m AMSL; default: "
                           "PX4 SITL's home 47.397742,8.545594,488; a negative LAT: "
                           "--origin=-33.9,151.2,40)")
+    fly.add_argument("--signing-setup-from", action="append", default=[], metavar="URL",
+                     help="accept SETUP_SIGNING (while disarmed, without --signing-key) only "
+                          "from this endpoint (udpin:HOST:PORT or udpout:HOST:PORT; added to "
+                          "the endpoints if not a --gcs one; default: SETUP_SIGNING refused)")
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
     fly.set_defaults(func=_fly)
@@ -44,8 +48,10 @@ def _fly(args: argparse.Namespace) -> int:
         raise ValueError("--speed must be positive or 'max'")
     if args.duration is not None and not args.duration > 0:
         raise ValueError("--duration must be positive")
-    config = BridgeConfig(urls=args.gcs or list(DEFAULT_URLS), speed=speed,
-                          duration=args.duration)
+    urls = list(args.gcs or DEFAULT_URLS)
+    urls += [u for u in args.signing_setup_from if u not in urls]
+    config = BridgeConfig(urls=urls, speed=speed, duration=args.duration,
+                          signing_setup_from=tuple(args.signing_setup_from))
     if args.scenario is not None:
         from orchestrator.scenario import load_scenario
 

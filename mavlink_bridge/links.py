@@ -144,9 +144,13 @@ class Endpoint:
         except (OSError, struct.error, ValueError):
             pass  # a full socket buffer or an unreachable peer must not stop the loop
 
-    def receive(self, budget: int) -> Iterator[tuple[bytes, Any]]:
-        """Up to ``budget`` datagrams, as (datagram, parsed message or None) per message."""
-        for _ in range(budget):
+    def receive(self, budget: int, deadline: float = float("inf")
+                ) -> Iterator[tuple[bytes, Any]]:
+        """Up to ``budget`` datagrams, as (datagram, parsed message or None) per message;
+        no datagram is started once ``time.perf_counter()`` has passed ``deadline``."""
+        for i in range(budget):
+            if i and time.perf_counter() >= deadline:
+                return
             data = self.conn.recv()
             if not data:
                 return

@@ -1,53 +1,134 @@
-"""MAVLink parameter names for the tunable controller parameters and the bridge's own.
+"""MAVLink parameters: the controller FMU's tunables and the bridge's own, typed and ranged.
 
-MAVLink parameter ids are at most 16 characters.  The controller FMU's tunable
+Names.  MAVLink parameter ids are at most 16 characters; the controller FMU's tunable
 parameters are mapped by a fixed rule (docs/mavlink.md lists them all):
+``K_pos_A[i] .. K_rate_D[i]`` -> ``FP_KPOS_A1 .. FP_KRATE_D3``, ``W_u[i]`` -> ``FP_W_U1``,
+``W_v[i]``, ``W_nu[i]``, ``euler_min[i]``/``euler_max[i]`` -> ``FP_EUL_MIN1``/``FP_EUL_MAX1``,
+``gamma_opt`` -> ``FP_GAMMA_OPT``, ``w_pref``, ``pref_omega_scale`` -> ``FP_PREF_OM_SC``,
+``qp_max_iter`` -> ``FP_QP_MAX_ITER``, ``yaw_rate_max`` -> ``FP_YAW_RATE_MAX``.  The bridge's
+own parameters start with ``FPB_``.
 
-========================  ================  =======================================
-FMU variable              MAVLink name      valid values (checked before setting)
-========================  ================  =======================================
-K_pos_A[i] .. K_rate_D[i] FP_KPOS_A1 ..     finite; the A entries |A| < 1
-                          FP_KRATE_D3
-gamma_opt                 FP_GAMMA_OPT      > 0
-W_u[i], W_v[i], W_nu[i]   FP_W_U1, FP_W_V1, > 0
-                          FP_W_NU1 ...
-euler_min[i], euler_max[i] FP_EUL_MIN1 ...  inside (-pi/2, pi/2), min <= max
-w_pref                    FP_W_PREF         > 0
-pref_omega_scale          FP_PREF_OM_SC     > 0
-qp_max_iter               FP_QP_MAX_ITER    integer 1..1000
-========================  ================  =======================================
+Ranges.  A controller parameter's range is the one the FMU declares in its modelDescription
+(``min``/``max``, generated from fmu_src/controller/controller_vars.h; an open bound is
+written in the variable's description as ``range (a, b)``, see fmu_src/tools/mdgen.c
+``write_variable``): read from the installed FMU, never restated here.  Two further rules
+refuse values that are inside the FMU's range but absurd for a flight:
 
-The bridge's own parameters start with ``FPB_`` (setpoint-loss timeout and setpoint
-limits).  Every parameter is reported as MAV_PARAM_TYPE_REAL32 (integers carry an
-integral float value, no byte-wise encoding).
+* a positive weight or scale (declared range ``(0, inf)``) must stay within ``PLAUSIBLE``
+  (three decades) either side of the FMU's start value (``FP_W_U1 = 1e-30`` is refused);
+* a gain change must keep the linear design model's closed loop stable (the ``guard``
+  callable, :mod:`mavlink_bridge.stability`).
+
+Types.  A parameter whose FMU variable is an Integer (or a bridge parameter marked integer) is
+reported as MAV_PARAM_TYPE_INT32 with the byte-wise encoding PX4 uses (the int32's four bytes
+in the float field: MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE); the others as REAL32.
+A PARAM_SET is decoded by its own param_type.
 """
 
 from __future__ import annotations
 
 import math
 import re
-from collections.abc import Callable, Iterable
+import struct
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass
+from typing import Any
 
-from mavlink_bridge.identity import PX4_PARAMETERS
+from mavlink_bridge.identity import INTEGER_PARAMETERS, PX4_PARAMETERS
+
+MAV_PARAM_TYPE_UINT8, MAV_PARAM_TYPE_INT8, MAV_PARAM_TYPE_UINT16 = 1, 2, 3
+MAV_PARAM_TYPE_INT16, MAV_PARAM_TYPE_UINT32, MAV_PARAM_TYPE_INT32 = 4, 5, 6
+MAV_PARAM_TYPE_REAL32 = 9
+#: integer types that fit the 4-byte field byte-wise (struct format of each)
+_INT_FORMATS = {MAV_PARAM_TYPE_UINT8: "<B", MAV_PARAM_TYPE_INT8: "<b",
+                MAV_PARAM_TYPE_UINT16: "<H", MAV_PARAM_TYPE_INT16: "<h",
+                MAV_PARAM_TYPE_UINT32: "<I", MAV_PARAM_TYPE_INT32: "<i"}
+
+#: a positive weight may move this factor either side of its FMU start value
+PLAUSIBLE = 1e3
 
 _BLOCK = re.compile(r"^K_(pos|vel|att|rate)_([ABCD])\[(\d+)\]$")
 _VECTOR = {"W_u": "FP_W_U", "W_v": "FP_W_V", "W_nu": "FP_W_NU", "euler_min": "FP_EUL_MIN",
            "euler_max": "FP_EUL_MAX"}
 _SCALAR = {"gamma_opt": "FP_GAMMA_OPT", "w_pref": "FP_W_PREF",
-           "pref_omega_scale": "FP_PREF_OM_SC", "qp_max_iter": "FP_QP_MAX_ITER"}
+           "pref_omega_scale": "FP_PREF_OM_SC", "qp_max_iter": "FP_QP_MAX_ITER",
+           "yaw_rate_max": "FP_YAW_RATE_MAX"}
 
-#: Bridge parameters: name -> (default, minimum, maximum, description)
-BRIDGE_PARAMETERS: dict[str, tuple[float, float, float, str]] = {
-    "FPB_SP_TIMEOUT": (0.5, 0.05, 60.0, "offboard setpoint-loss timeout (s, simulated time)"),
-    "FPB_SP_XY_MAX": (100.0, 0.1, 10000.0, "largest accepted |x|, |y| of a setpoint (m)"),
-    "FPB_SP_Z_MAX": (100.0, 0.1, 10000.0, "largest accepted |z| of a setpoint (m)"),
-    "FPB_SP_VEL_MAX": (10.0, 0.0, 100.0, "largest accepted velocity component (m/s)"),
-    "FPB_SP_ACC_MAX": (20.0, 0.0, 100.0, "largest accepted acceleration component (m/s^2)"),
-    "FPB_SP_RATE_MAX": (6.0, 0.0, 50.0, "largest accepted body/yaw rate (rad/s)"),
-    "FPB_SP_TILT_MAX": (1.4, 0.0, 1.5, "largest accepted |roll|, |pitch| of a setpoint (rad)"),
-    **PX4_PARAMETERS,  # the identity's read-only PX4 parameters (mavlink_bridge.identity)
-}
+
+@dataclass(frozen=True)
+class Range:
+    """An interval, closed unless told; None: unbounded on that side."""
+
+    lo: float | None = None
+    hi: float | None = None
+    lo_open: bool = False
+    hi_open: bool = False
+    integer: bool = False
+
+    def contains(self, v: float) -> bool:
+        if not math.isfinite(v) or (self.integer and v != int(v)):
+            return False
+        if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
+            return False
+        return not (self.hi is not None and (v > self.hi or (self.hi_open and v == self.hi)))
+
+    def text(self) -> str:
+        if self.integer and self.lo is not None and self.hi is not None:
+            return f"{self.lo:g}..{self.hi:g}"
+        lo = "-inf" if self.lo is None else f"{self.lo:g}"
+        hi = "inf" if self.hi is None else f"{self.hi:g}"
+        return f"{'(' if self.lo_open or self.lo is None else '['}{lo}, " \
+               f"{hi}{')' if self.hi_open or self.hi is None else ']'}"
+
+
+def fmu_range(var: Any) -> Range:
+    """The range an fmpy ScalarVariable declares (min/max, open bounds from the description
+    mdgen writes: ``...; range (0, inf)``)."""
+    lo = None if getattr(var, "min", None) in (None, "") else float(var.min)
+    hi = None if getattr(var, "max", None) in (None, "") else float(var.max)
+    desc = str(getattr(var, "description", "") or "")
+    lo_open = hi_open = False
+    if "; range " in desc:
+        text = desc.rsplit("; range ", 1)[1].strip()
+        lo_open, hi_open = text.startswith("("), text.endswith(")")
+    return Range(lo, hi, lo_open, hi_open, integer=getattr(var, "type", "Real") == "Integer")
+
+
+@dataclass(frozen=True)
+class BridgeParam:
+    name: str
+    default: float
+    range: Range
+    description: str
+
+
+#: the bridge's own parameters; FPB_SP_TIMEOUT defaults to PX4's COM_OF_LOSS_T (1.0 s,
+#: PX4-Autopilot src/modules/commander/commander_params.c)
+BRIDGE_PARAMETERS: tuple[BridgeParam, ...] = (
+    BridgeParam("FPB_SP_TIMEOUT", 1.0, Range(0.05, 60.0),
+                "offboard setpoint-loss timeout (s, simulated time; PX4 COM_OF_LOSS_T)"),
+    BridgeParam("FPB_SP_STALE", 0.25, Range(0.02, 60.0),
+                "a setpoint older than this is not flown: hold the pose (s)"),
+    BridgeParam("FPB_SP_XY_MAX", 100.0, Range(0.1, 10000.0),
+                "largest accepted |x|, |y| of a setpoint (m)"),
+    BridgeParam("FPB_SP_Z_MAX", 100.0, Range(0.1, 10000.0),
+                "largest accepted |z| of a setpoint (m)"),
+    BridgeParam("FPB_SP_VEL_MAX", 10.0, Range(0.0, 100.0),
+                "largest accepted velocity component (m/s)"),
+    BridgeParam("FPB_SP_ACC_MAX", 20.0, Range(0.0, 100.0),
+                "largest accepted acceleration component (m/s^2)"),
+    BridgeParam("FPB_SP_RATE_MAX", 6.0, Range(0.0, 50.0),
+                "largest accepted body/yaw rate (rad/s)"),
+    BridgeParam("FPB_SP_TILT_MAX", 1.4, Range(0.0, 1.5),
+                "largest accepted |roll|, |pitch| of a setpoint (rad)"),
+)
+
+
+def identity_parameters() -> list[BridgeParam]:
+    """The PX4 parameters ground stations require (mavlink_bridge.identity), read-only: their
+    range is their value."""
+    return [BridgeParam(name, value, Range(lo, hi, integer=name in INTEGER_PARAMETERS), text)
+            for name, (value, lo, hi, text) in PX4_PARAMETERS.items()]
 
 
 def mavlink_name(fmu_name: str) -> str | None:
@@ -61,26 +142,58 @@ def mavlink_name(fmu_name: str) -> str | None:
     return _SCALAR.get(fmu_name)
 
 
+def encode(value: float, integer: bool) -> tuple[float, int]:
+    """(param_value, param_type) of a PARAM_VALUE: integers byte-wise as INT32."""
+    if integer:
+        return struct.unpack("<f", struct.pack("<i", int(value)))[0], MAV_PARAM_TYPE_INT32
+    return float(value), MAV_PARAM_TYPE_REAL32
+
+
+def decode(raw: float, param_type: int) -> float | None:
+    """The value a PARAM_SET carries, by its param_type (None: a type we cannot read)."""
+    if param_type == MAV_PARAM_TYPE_REAL32:
+        return float(raw)
+    fmt = _INT_FORMATS.get(param_type)
+    if fmt is None:
+        return None
+    data = struct.pack("<f", raw)
+    size = struct.calcsize(fmt)
+    return float(struct.unpack(fmt, data[:size])[0])
+
+
 @dataclass
 class Parameter:
     name: str  # MAVLink id
     fmu_name: str | None  # None: a bridge parameter
     value: float
+    range: Range
+    start: float  # the value at start-up (FMU start or bridge default)
+
+    @property
+    def integer(self) -> bool:
+        return self.range.integer
+
+
+#: Guard: (proposed {FMU name: value} of every controller parameter, the FMU name changed)
+#: -> the reason the change is refused, or None
+Guard = Callable[[Mapping[str, float], str], str | None]
 
 
 class ParameterTable:
     """The parameters a ground station sees, in a fixed order (PARAM_VALUE index)."""
 
-    def __init__(self, tunables: Iterable[tuple[str, float]],
-                 apply: Callable[[str, float], None]) -> None:
+    def __init__(self, tunables: Iterable[tuple[str, float, Range]],
+                 apply: Callable[[str, float], None], guard: Guard | None = None) -> None:
         self._apply = apply
+        self._guard = guard
         self.items: list[Parameter] = []
-        for fmu_name, value in tunables:
+        for fmu_name, value, rng in tunables:
             name = mavlink_name(fmu_name)
             if name is not None and len(name) <= 16:
-                self.items.append(Parameter(name, fmu_name, float(value)))
-        for name, (default, _, _, _) in BRIDGE_PARAMETERS.items():
-            self.items.append(Parameter(name, None, default))
+                self.items.append(Parameter(name, fmu_name, float(value), rng, float(value)))
+        for bp in (*BRIDGE_PARAMETERS, *identity_parameters()):
+            if bp.name not in {p.name for p in self.items}:
+                self.items.append(Parameter(bp.name, None, bp.default, bp.range, bp.default))
         self._by_name = {p.name: i for i, p in enumerate(self.items)}
 
     def __len__(self) -> int:
@@ -96,43 +209,49 @@ class ParameterTable:
         """MAVLink id -> FMU variable (controller parameters only)."""
         return {p.name: p.fmu_name for p in self.items if p.fmu_name is not None}
 
-    def set(self, name: str, value: float) -> str | None:
+    def controller_values(self) -> dict[str, float]:
+        return {p.fmu_name: p.value for p in self.items if p.fmu_name is not None}
+
+    def set(self, name: str, value: float, param_type: int = MAV_PARAM_TYPE_REAL32
+            ) -> str | None:
         """Check and apply a value; returns the reason it was refused, or None."""
         i = self._by_name.get(name)
         if i is None:
             return f"unknown parameter {name}"
         p = self.items[i]
-        reason = self._check(p, value)
+        reason = self._check(p, value, param_type)
         if reason is not None:
-            return f"{name} = {value:g} refused: {reason}"
+            return f"{name} {value:.4g} refused: {reason}"
         if p.fmu_name is not None:
-            self._apply(p.fmu_name, int(value) if p.name == "FP_QP_MAX_ITER" else float(value))
+            self._apply(p.fmu_name, int(value) if p.integer else float(value))
         p.value = float(value)
         return None
 
-    def _check(self, p: Parameter, value: float) -> str | None:
+    def _check(self, p: Parameter, value: float, param_type: int) -> str | None:
         if not math.isfinite(value):
             return "not finite"
+        if p.integer and param_type == MAV_PARAM_TYPE_REAL32 and value != int(value):
+            return "an integer parameter"
+        if not p.integer and param_type != MAV_PARAM_TYPE_REAL32:
+            return "a REAL32 parameter"
+        if not p.range.contains(value):
+            return f"outside {p.range.text()}"
         if p.fmu_name is None:
-            _, lo, hi, _ = BRIDGE_PARAMETERS[p.name]
-            return None if lo <= value <= hi else f"must be in [{lo:g}, {hi:g}]"
-        f = p.fmu_name
-        base = f.split("[")[0]
-        if _BLOCK.match(f):
-            if "_A[" in f and abs(value) >= 1.0:
-                return "a block's pole must satisfy |A| < 1"
             return None
-        if base in ("gamma_opt", "W_u", "W_v", "W_nu", "w_pref", "pref_omega_scale"):
-            return None if value > 0.0 else "must be positive"
-        if base == "qp_max_iter":
-            ok = value == int(value) and 1 <= value <= 1000
-            return None if ok else "must be an integer in 1..1000"
+        r = p.range
+        if r.lo == 0.0 and r.lo_open and r.hi is None and p.start > 0:
+            lo, hi = p.start / PLAUSIBLE, p.start * PLAUSIBLE
+            if not lo <= value <= hi:
+                return f"outside [{lo:.3g}, {hi:.3g}]"
+        base, _, idx = p.fmu_name.partition("[")
         if base in ("euler_min", "euler_max"):
-            if abs(value) >= math.pi / 2:
-                return "must be inside (-pi/2, pi/2)"
-            idx = f[f.index("["):]
-            other = "euler_max" if base == "euler_min" else "euler_min"
-            other_value = next(q.value for q in self.items if q.fmu_name == other + idx)
+            other = ("euler_max" if base == "euler_min" else "euler_min") + "[" + idx
+            other_value = next(q.value for q in self.items if q.fmu_name == other)
             lo, hi = (value, other_value) if base == "euler_min" else (other_value, value)
-            return None if lo <= hi else "euler_min must not exceed euler_max"
+            if lo > hi:
+                return "euler_min above euler_max"
+        if self._guard is not None:
+            proposed = self.controller_values()
+            proposed[p.fmu_name] = float(value)
+            return self._guard(proposed, p.fmu_name)
         return None

@@ -30,6 +30,11 @@ MAV_FRAME_BODY_OFFSET_NED = 9
 MAV_FRAME_GLOBAL_INT, MAV_FRAME_GLOBAL_RELATIVE_ALT_INT = 5, 6
 MAV_FRAME_GLOBAL_TERRAIN_ALT_INT = 11
 
+#: largest accepted |yaw| of a position setpoint (rad): one turn covers both conventions
+#: clients use, [-pi, pi] and [0, 2 pi); anything larger can only be a unit error (degrees
+#: sent as radians) or garbage, and wrapping it would fly an arbitrary heading
+YAW_MAX = 2 * math.pi
+
 
 class Rejected(ValueError):
     """A setpoint refused, with the reason told to the ground station."""
@@ -95,6 +100,8 @@ def decode_position(msg: object, state: VehicleState, limits: Limits) -> Positio
     for n, b in (("yaw", YAW_IGNORE), ("yaw_rate", YAW_RATE_IGNORE)):
         if not mask & b and not math.isfinite(float(getattr(msg, n))):
             raise Rejected(f"{n} not finite")
+    if not mask & YAW_IGNORE and abs(float(msg.yaw)) > YAW_MAX:  # type: ignore[attr-defined]
+        raise Rejected("|yaw| above 2 pi rad")
     pos = _fields(msg, used[0][0], mask, used[0][1])
     vel = _fields(msg, used[1][0], mask, used[1][1])
     acc = _fields(msg, used[2][0], mask, used[2][1])

@@ -311,6 +311,7 @@ def servo_output_raw_beta(s: Snapshot) -> Any:
 
 def autopilot_version(s: Snapshot) -> Any:
     caps = (mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT |
+            mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE |  # INT32 params, as PX4
             mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT |
             mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET |
             mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED |
