@@ -37,6 +37,14 @@ LAND = (4 << 16) | (6 << 24)
 FTP_HEADER = struct.Struct("<HBBBBBBI")
 
 
+
+def param_value(pv):
+    """A PARAM_VALUE's value as a client reads it: INT32 byte-wise (PX4's encoding, which
+    AUTOPILOT_VERSION announces with MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE)."""
+    if pv.param_type == mav.MAV_PARAM_TYPE_INT32:
+        return struct.unpack("<i", struct.pack("<f", pv.param_value))[0]
+    return pv.param_value
+
 def free_port():
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
         s.bind(("127.0.0.1", 0))
@@ -254,10 +262,10 @@ def test_unknown_parameter_and_identity_parameters(ground):
     assert g.wait("PARAM_ERROR", 5.0).param_index == 30000
     g.gcs.mav.param_request_read_send(1, 1, b"SYS_AUTOSTART", -1)
     pv = g.wait("PARAM_VALUE", 5.0, lambda m: m.param_id == "SYS_AUTOSTART")
-    assert pv.param_value == 4001
+    assert param_value(pv) == 4001
     g.gcs.mav.param_set_send(1, 1, b"SYS_AUTOSTART", 13000, mav.MAV_PARAM_TYPE_REAL32)
     pv = g.wait("PARAM_VALUE", 5.0, lambda m: m.param_id == "SYS_AUTOSTART")
-    assert pv.param_value == 4001  # read-only: the value in force
+    assert param_value(pv) == 4001  # read-only: the value in force
 
 
 def test_actuator_control_target_is_told_unsupported_once(ground):
@@ -317,7 +325,7 @@ def qgc_sequence(g):
     total = None
     while time.monotonic() < deadline and (total is None or len(names) < total):
         pv = g.wait("PARAM_VALUE", 5.0)
-        names[pv.param_id] = pv.param_value
+        names[pv.param_id] = param_value(pv)
         total = pv.param_count
     assert len(names) == total
     assert names["SYS_AUTOSTART"] != 0  # AirframeComponent::setupComplete
@@ -387,6 +395,11 @@ def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
         [sys.executable, "-m", "orchestrator.cli", "fly", "--gcs", f"udpout:127.0.0.1:{port}",
          "--speed", "2", "--duration", "60"], cwd=ROOT, stdout=subprocess.PIPE,
         stderr=subprocess.STDOUT, text=True)
+    # MAVProxy starts its FTP download before it hears the vehicle, and a udpin link has no
+    # peer to send to until then: start it once the vehicle is up, as a user would
+    for line in fly.stdout:
+        if line.startswith("mavlink endpoint"):
+            break
     proxy = subprocess.Popen(
         [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait",
          "--default-modules=ftp,param,cmdlong", "--state-basedir", str(tmp_path)],
