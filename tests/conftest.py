@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import shutil
+import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping
 from pathlib import Path
@@ -13,6 +14,10 @@ from fmpy import extract
 
 import plant
 from orchestrator.fmu import FmuInstance
+
+# helper modules of the tests (mavlink_harness.py) import by name: pytest's importlib mode
+# does not put this folder on sys.path itself
+sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 H = 0.002
 """Communication step of the co-simulation (500 Hz), s."""

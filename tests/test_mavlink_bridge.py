@@ -6,88 +6,26 @@ import math
 import os
 import random
 import socket
-import threading
 import time
 
 import pytest
 
 os.environ["MAVLINK20"] = "1"
 
+import mavlink_harness as harness
+from mavlink_harness import ATT_ONLY, POS_ONLY
 from pymavlink import mavutil
 
 from controller.gains_defaults import controller_parameters
-from mavlink_bridge.bridge import Bridge, BridgeConfig
-from mavlink_bridge.geometry import euler_to_quat
 
-POS_ONLY = 0b0000_1101_1111_1000  # x, y, z, yaw used
-ATT_ONLY = 0b0100_0111  # quaternion used (rates and throttle ignored)
 KEY = bytes(range(32))
 
 
-def free_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Flight:
+class Flight(harness.Flight):
     """A bridge in a thread and a pymavlink ground station listening for it."""
 
     def __init__(self, speed=4.0, key=None, duration=60.0):
-        self.port = free_port()
-        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
-                                              source_system=255, source_component=190,
-                                              dialect="common")
-        self.bridge = Bridge(BridgeConfig(urls=[f"udpout:127.0.0.1:{self.port}"], speed=speed,
-                                          signing_key=key, duration=duration))
-        self.thread = threading.Thread(target=self.bridge.run, daemon=True)
-        self.thread.start()
-        self.texts = []
-        self.wait("HEARTBEAT", 5.0)
-
-    def close(self):
-        self.bridge.stop()
-        self.thread.join(timeout=10)
-        self.bridge.close()
-        self.gcs.close()
-
-    def wait(self, kind, timeout=3.0, cond=lambda m: True, during=None):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if during is not None:
-                during()
-            m = self.gcs.recv_match(blocking=True, timeout=0.02)
-            if m is None:
-                continue
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-            if m.get_type() == kind and cond(m):
-                return m
-        raise AssertionError(f"no {kind} within {timeout} s")
-
-    def drain(self):
-        while (m := self.gcs.recv_match(blocking=False)) is not None:
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-
-    def command(self, cmd, *params, expect=None):
-        p = list(params) + [0.0] * (7 - len(params))
-        self.gcs.mav.command_long_send(1, 1, cmd, 0, *p)
-        ack = self.wait("COMMAND_ACK", 3.0, lambda m: m.command == cmd)
-        if expect is not None:
-            assert ack.result == expect, ack
-        return ack
-
-    def position(self, x, y, z, yaw=0.0, mask=POS_ONLY, frame=1):
-        self.gcs.mav.set_position_target_local_ned_send(0, 1, 1, frame, mask, x, y, z,
-                                                        0, 0, 0, 0, 0, 0, yaw, 0)
-
-    def attitude(self, roll, pitch, yaw, mask=ATT_ONLY):
-        self.gcs.mav.set_attitude_target_send(0, 1, 1, mask, euler_to_quat(roll, pitch, yaw),
-                                              0, 0, 0, 0.5, [0.0, 0.0, 0.0])
-
-    def offboard(self, expect=0):
-        return self.command(176, 1, 6, 0, expect=expect)
+        super().__init__(speed, signing_key=key, duration=duration)
 
 
 @pytest.fixture

@@ -5,27 +5,18 @@ MAVProxy test); each test picks free UDP ports at runtime and every wait is boun
 """
 
 import os
-import socket
-import subprocess
-import sys
-import sysconfig
 import threading
 import time
 from pathlib import Path
 
-import pytest
+import mavlink_harness as harness
+from mavlink_harness import free_port
 
 os.environ["MAVLINK20"] = "1"
 
 from mavlink_bridge.bridge import Bridge, BridgeConfig
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-def free_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 def start(config):
@@ -43,31 +34,9 @@ def finish(bridge, thread):
 
 
 def test_mavproxy_headless_sees_mode_attitude_and_position(tmp_path):
-    # the script installed beside the running interpreter, not one found on PATH
-    exe = Path(sysconfig.get_path("scripts")) / "mavproxy.py"
-    if not exe.is_file():
-        pytest.fail(f"{exe} missing: MAVProxy is a test dependency: pip install '.[test]'")
-    port = free_port()
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "orchestrator.cli", "fly", "--gcs", f"udpout:127.0.0.1:{port}",
-         "--speed", "2", "--duration", "40"], cwd=ROOT, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
     # MAVProxy without a console or map: commands on stdin, no default modules (no GUI)
-    proxy = subprocess.Popen(
-        [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait", "--default-modules=",
-         "--state-basedir", str(tmp_path)], cwd=tmp_path, stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        time.sleep(6.0)
-        for command in ("status ATTITUDE", "status LOCAL_POSITION_NED"):
-            proxy.stdin.write(command + "\n")
-            proxy.stdin.flush()
-            time.sleep(1.0)
-        out, _ = proxy.communicate(timeout=30)
-    finally:
-        proxy.kill()
-        fly.kill()
-        fly.communicate(timeout=10)
+    out, _ = harness.mavproxy_session(
+        tmp_path, [], "", [("status ATTITUDE", 1.0), ("status LOCAL_POSITION_NED", 1.0)])
     assert "Detected vehicle 1:1" in out, out
     assert "Mode LOITER" in out, out  # PX4 AUTO.LOITER = the bridge's HOLD
     assert "ATTITUDE {" in out and "roll :" in out, out

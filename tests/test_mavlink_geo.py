@@ -7,7 +7,6 @@ pymavlink over real UDP and against MAVSDK (its mavsdk_server), with a Bridge in
 
 import math
 import os
-import socket
 import subprocess
 import sys
 import threading
@@ -18,6 +17,8 @@ import pytest
 
 os.environ["MAVLINK20"] = "1"
 
+import mavlink_harness as harness
+from mavlink_harness import POS_ONLY, free_port
 from pymavlink import mavutil
 
 from mavlink_bridge.bridge import Bridge, BridgeConfig
@@ -25,7 +26,6 @@ from mavlink_bridge.geodesy import PX4_SITL_HOME, Origin, parse_origin
 from mavlink_bridge.geometry import euler_to_quat
 
 ROOT = Path(__file__).resolve().parents[1]
-POS_ONLY = 0b0000_1101_1111_1000  # x, y, z used (velocity, acceleration, yaw, yaw rate not)
 POS_YAW = 0b0000_1001_1111_1000  # x, y, z and yaw used
 ATT_ONLY = 0b0100_0111
 A, F = 6378137.0, 1 / 298.257223563  # WGS84
@@ -45,12 +45,6 @@ def oracle_ned(origin, lat, lon, alt):
     return (math.radians(lat - origin.lat) * (m + origin.alt),
             math.radians(lon - origin.lon) * (n + origin.alt) * math.cos(math.radians(origin.lat)),
             origin.alt - alt)
-
-
-def free_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
 
 
 # -- the conversion --------------------------------------------------------------------
@@ -108,20 +102,9 @@ def test_origin_option_and_scenario_field_reject_bad_values(tmp_path):
 
 # -- pymavlink over UDP ------------------------------------------------------------------
 
-class Flight:
+class Flight(harness.Flight):
     def __init__(self, origin=None, speed=4.0):
-        self.port = free_port()
-        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
-                                              source_system=255, source_component=190,
-                                              dialect="common")
-        cfg = BridgeConfig(urls=[f"udpout:127.0.0.1:{self.port}"], speed=speed, duration=120.0)
-        if origin is not None:
-            cfg.origin = origin
-        self.bridge = Bridge(cfg)
-        self.thread = threading.Thread(target=self.bridge.run, daemon=True)
-        self.thread.start()
-        self.texts = []
-        self.wait("HEARTBEAT", 5.0)
+        super().__init__(speed, **({} if origin is None else {"origin": origin}))
         # these tests are about where the vehicle goes, not setpoint loss: a test process
         # stalled by a busy host, or a run of refused setpoints (which refresh nothing),
         # must not lose OFFBOARD (at speed 4, 1 s simulated is 0.25 s wall): the longest
@@ -131,32 +114,8 @@ class Flight:
         self.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "FPB_SP_TIMEOUT"
                   and m.param_value == 60.0)
 
-    def close(self):
-        self.bridge.stop()
-        self.thread.join(timeout=10)
-        self.bridge.close()
-        self.gcs.close()
-
-    def wait(self, kind, timeout=5.0, cond=lambda m: True, during=None):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if during is not None:
-                during()
-            m = self.gcs.recv_match(blocking=True, timeout=0.02)
-            if m is None:
-                continue
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-            if m.get_type() == kind and cond(m):
-                return m
-        raise AssertionError(f"no {kind} within {timeout} s (texts {self.texts[-5:]})")
-
     def command(self, cmd, *params, expect=0):
-        p = list(params) + [0.0] * (7 - len(params))
-        self.gcs.mav.command_long_send(1, 1, cmd, 0, *p)
-        ack = self.wait("COMMAND_ACK", 3.0, lambda m: m.command == cmd)
-        assert ack.result == expect, ack
-        return ack
+        return super().command(cmd, *params, expect=expect)
 
     def local(self, x, y, z, yaw=0.0, frame=1, mask=POS_ONLY):
         self.gcs.mav.set_position_target_local_ned_send(0, 1, 1, frame, mask, x, y, z,
@@ -371,32 +330,10 @@ def test_mavsdk_position_home_health_battery_and_set_position_global():
 # -- MAVProxy ------------------------------------------------------------------------------
 
 def test_mavproxy_sees_the_global_position_and_no_fence_breach(tmp_path):
-    import sysconfig
-
-    exe = Path(sysconfig.get_path("scripts")) / "mavproxy.py"
-    if not exe.is_file():
-        pytest.fail(f"{exe} missing: MAVProxy is a test dependency: pip install '.[test]'")
-    port = free_port()
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "orchestrator.cli", "fly", "--gcs", f"udpout:127.0.0.1:{port}",
-         "--speed", "2", "--duration", "40", "--origin", "46.518,6.566,400"], cwd=ROOT,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     # no GUI modules; the fence module is the one that printed "fence breach"
-    proxy = subprocess.Popen(
-        [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait", "--default-modules=fence",
-         "--state-basedir", str(tmp_path)], cwd=tmp_path, stdin=subprocess.PIPE,
-        stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
-    try:
-        time.sleep(8.0)
-        for command in ("status GLOBAL_POSITION_INT", "status HOME_POSITION"):
-            proxy.stdin.write(command + "\n")
-            proxy.stdin.flush()
-            time.sleep(1.0)
-        out, _ = proxy.communicate(timeout=30)
-    finally:
-        proxy.kill()
-        fly.kill()
-        fly_out, _ = fly.communicate(timeout=10)
+    out, fly_out = harness.mavproxy_session(
+        tmp_path, ["--origin", "46.518,6.566,400"], "fence",
+        [("status GLOBAL_POSITION_INT", 1.0), ("status HOME_POSITION", 1.0)], settle=8.0)
     assert "origin              46.5180000, 6.5660000, 400.00 m AMSL" in fly_out, fly_out
     assert "Detected vehicle 1:1" in out, out
     assert "GLOBAL_POSITION_INT {" in out and "lat : 465180000" in out, out

@@ -8,11 +8,7 @@ time and no bound depends on a fast machine (replies are immediate in the protoc
 import math
 import os
 import re
-import socket
 import struct
-import subprocess
-import sys
-import sysconfig
 import threading
 import time
 from pathlib import Path
@@ -21,13 +17,13 @@ import pytest
 
 os.environ["MAVLINK20"] = "1"
 
-from pymavlink import mavutil
+import mavlink_harness as harness
+from mavlink_harness import POS_ONLY, free_port
 from pymavlink.dialects.v20 import common as mav
 
 from mavlink_bridge.bridge import Bridge, BridgeConfig
 
 ROOT = Path(__file__).resolve().parents[1]
-POS_ONLY = 0b0000_1101_1111_1000
 CUSTOM = mav.MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 OFFBOARD = 6 << 16
 HOLD = (4 << 16) | (3 << 24)  # AUTO.LOITER
@@ -45,48 +41,12 @@ def param_value(pv):
         return struct.unpack("<i", struct.pack("<f", pv.param_value))[0]
     return pv.param_value
 
-def free_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Ground:
+class Ground(harness.Flight):
     """A bridge in a thread and one pymavlink client (system/component as given)."""
 
     def __init__(self, system=255, component=190, speed=4.0, dialect="common"):
-        self.port = free_port()
-        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
-                                              source_system=system,
-                                              source_component=component, dialect=dialect)
-        self.src = (system, component)
-        self.bridge = Bridge(BridgeConfig(urls=[f"udpout:127.0.0.1:{self.port}"], speed=speed,
-                                          duration=120.0))
-        self.thread = threading.Thread(target=self.bridge.run, daemon=True)
-        self.thread.start()
-        self.texts = []
         self._last_setpoint = -math.inf
-        self.wait("HEARTBEAT", 10.0)
-
-    def close(self):
-        self.bridge.stop()
-        self.thread.join(timeout=10)
-        self.bridge.close()
-        self.gcs.close()
-
-    def wait(self, kind, timeout=5.0, cond=lambda m: True, during=None):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            if during is not None:
-                during()
-            m = self.gcs.recv_match(blocking=True, timeout=0.02)
-            if m is None:
-                continue
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-            if m.get_type() == kind and cond(m):
-                return m
-        raise AssertionError(f"no {kind} within {timeout} s; texts {self.texts}")
+        super().__init__(speed, system, component, dialect)
 
     def collect(self, seconds):
         out = []
@@ -387,37 +347,10 @@ def test_mavros_connect_and_offboard_sequence_replayed():
 
 
 def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
-    exe = Path(sysconfig.get_path("scripts")) / "mavproxy.py"
-    if not exe.is_file():
-        pytest.fail(f"{exe} missing: MAVProxy is a test dependency: pip install '.[test]'")
-    port = free_port()
-    fly = subprocess.Popen(
-        [sys.executable, "-m", "orchestrator.cli", "fly", "--gcs", f"udpout:127.0.0.1:{port}",
-         "--speed", "2", "--duration", "60"], cwd=ROOT, stdout=subprocess.PIPE,
-        stderr=subprocess.STDOUT, text=True)
-    # MAVProxy starts its FTP download before it hears the vehicle, and a udpin link has no
-    # peer to send to until then: start it once the vehicle is up, as a user would
-    for line in fly.stdout:
-        if line.startswith("mavlink endpoint"):
-            break
-    proxy = subprocess.Popen(
-        [exe, f"--master=udpin:127.0.0.1:{port}", "--nowait",
-         "--default-modules=ftp,param,cmdlong", "--state-basedir", str(tmp_path)],
-        cwd=tmp_path, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.STDOUT,
-        text=True)
-    try:
-        proxy.stdin.write("ftp set debug 1\n")  # print the FTP outcome
-        proxy.stdin.flush()
-        time.sleep(6.0)
-        for command in ("long DO_SET_MODE 1 3 0", "long DO_SET_MODE 1 1 0"):
-            proxy.stdin.write(command + "\n")
-            proxy.stdin.flush()
-            time.sleep(2.0)
-        out, _ = proxy.communicate(timeout=30)
-    finally:
-        proxy.kill()
-        fly.kill()
-        fly.communicate(timeout=10)
+    out, _ = harness.mavproxy_session(
+        tmp_path, ["--duration", "60"], "ftp,param,cmdlong",
+        [("long DO_SET_MODE 1 3 0", 2.0), ("long DO_SET_MODE 1 1 0", 2.0)],
+        setup=["ftp set debug 1"])  # print the FTP outcome
     assert "Detected vehicle 1:1" in out, out
     # the param module's FTP download of @PARAM/param.pck is NAKed at once: no retry, no
     # timeout, and the parameters come by PARAM_REQUEST_LIST instead

@@ -5,97 +5,29 @@ setpoint loss (hold, PX4's timeout) and the infeasible-attitude report.  Every r
 checked by its STATUSTEXT; every test checks that the vehicle keeps flying."""
 
 import math
-import socket
 import struct
 import threading
 import time
 
+import mavlink_harness as harness
 import numpy as np
 import pytest
-from pymavlink import mavutil
+from mavlink_harness import free_port
 
 from controller import hinf
 from controller.gains_defaults import controller_parameters
 from mavlink_bridge import stability
 from mavlink_bridge.bridge import Bridge, BridgeConfig
-from mavlink_bridge.geometry import euler_to_quat
 
 REAL32, INT32 = 9, 6
 VEL_ONLY = 0b0000_1101_1100_0111  # vx, vy, vz, yaw used
 
 
-POS_ONLY = 0b0000_1101_1111_1000  # x, y, z, yaw used
-ATT_ONLY = 0b0100_0111  # quaternion used
 YAW_USED = 0b0000_1001_1111_1000  # x, y, z, yaw used
 
 
-def free_port():
-    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as s:
-        s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
-
-
-class Flight:
-    """A bridge (BridgeConfig of our own) in a thread and a pymavlink ground station
-    (the harness of tests/test_mavlink_bridge.py; pytest's importlib mode keeps test
-    modules apart)."""
-
-    def __init__(self, speed=4.0, **config):
-        self.port = free_port()
-        self.gcs = mavutil.mavlink_connection(f"udpin:127.0.0.1:{self.port}",
-                                              source_system=255, source_component=190,
-                                              dialect="common")
-        url = f"udpout:127.0.0.1:{self.port}"
-        if config.pop("setup_from_gcs", False):
-            config["signing_setup_from"] = (url,)
-        self.bridge = Bridge(BridgeConfig(urls=[url], speed=speed, duration=120.0, **config))
-        self.thread = threading.Thread(target=self.bridge.run, daemon=True)
-        self.thread.start()
-        self.texts = []
-        self.wait("HEARTBEAT", 5.0)
-
-    def close(self):
-        self.bridge.stop()
-        self.thread.join(timeout=10)
-        self.bridge.close()
-        self.gcs.close()
-
-    def wait(self, kind, timeout=3.0, cond=lambda m: True):
-        deadline = time.monotonic() + timeout
-        while time.monotonic() < deadline:
-            m = self.gcs.recv_match(blocking=True, timeout=0.02)
-            if m is None:
-                continue
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-            if m.get_type() == kind and cond(m):
-                return m
-        raise AssertionError(f"no {kind} within {timeout} s (texts: {self.texts[-5:]})")
-
-    def drain(self):
-        while (m := self.gcs.recv_match(blocking=False)) is not None:
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
-
-    def command(self, cmd, *params, expect=None):
-        p = list(params) + [0.0] * (7 - len(params))
-        self.gcs.mav.command_long_send(1, 1, cmd, 0, *p)
-        ack = self.wait("COMMAND_ACK", 3.0, lambda m: m.command == cmd)
-        if expect is not None:
-            assert ack.result == expect, ack
-        return ack
-
-    def position(self, x, y, z, yaw=0.0, mask=POS_ONLY):
-        self.gcs.mav.set_position_target_local_ned_send(0, 1, 1, 1, mask, x, y, z,
-                                                        0, 0, 0, 0, 0, 0, yaw, 0)
-
-    def attitude(self, roll, pitch, yaw):
-        self.gcs.mav.set_attitude_target_send(0, 1, 1, ATT_ONLY,
-                                              euler_to_quat(roll, pitch, yaw),
-                                              0, 0, 0, 0.5, [0.0, 0.0, 0.0])
-
-    def offboard(self, expect=0):
-        return self.command(176, 1, 6, 0, expect=expect)
+class Flight(harness.Flight):
+    """A bridge (BridgeConfig of our own) in a thread and a pymavlink ground station."""
 
 
 def stream(f, seconds, send):
