@@ -64,8 +64,6 @@ from pathlib import Path
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linprog, minimize, nnls
-from scipy.spatial import ConvexHull, HalfspaceIntersection, QhullError
 
 from plant.airframe import Airframe, load_airframe
 from plant.effectiveness import thrust_direction
@@ -156,6 +154,8 @@ class _Rotor:
         return [(float(self.grid_alpha[k // nb]), float(self.grid_beta[k % nb])) for k in idx]
 
     def _refine(self, d: Array, start: tuple[float, float]) -> tuple[float, tuple[float, float]]:
+        from scipy.optimize import minimize
+
         def neg(x: Array) -> float:
             return -float(d @ self.direction(float(x[0]), float(x[1])))
 
@@ -222,6 +222,8 @@ class _Oracle:
 
     def _lp(self, c: Array) -> tuple[float, Array, Array]:
         """max c . f over the sampled (inner) set: value, maximiser, equality multipliers."""
+        from scipy.optimize import linprog
+
         n = len(self.rotors)
         kw: dict[str, object] = {}
         if self._pinned:
@@ -347,6 +349,8 @@ def _outer_vertices(A: Array, b: Array, interior: Array) -> Array:
 
 def _intersection(A: Array, b: Array, interior: Array) -> tuple[Array, int]:
     """(vertices, number of non-redundant halfspaces) of {x : A x <= b}."""
+    from scipy.spatial import HalfspaceIntersection
+
     hs = HalfspaceIntersection(np.column_stack([A, -b]), interior)
     active = {int(i) for facet in hs.dual_facets for i in facet}
     return np.asarray(hs.intersections, dtype=float), len(active)
@@ -358,6 +362,8 @@ def _sandwich(oracle: _Oracle, p0: Array, Q: Array, budget: int) -> list[Array]:
     Directions are added until ``budget`` of them are non-redundant (facets made redundant
     by later ones do not count), or the outer and inner polytopes meet.
     """
+    from scipy.spatial import ConvexHull, QhullError
+
     k = Q.shape[1]
     if k == 0:
         return []
@@ -404,6 +410,8 @@ def _sandwich(oracle: _Oracle, p0: Array, Q: Array, budget: int) -> list[Array]:
 
 def _drop_redundant(A: Array, b: Array, keep: int, tol: float) -> tuple[Array, Array]:
     """Remove rows (from index ``keep`` on) whose removal does not enlarge the polytope."""
+    from scipy.optimize import linprog
+
     rows = list(range(A.shape[0]))
     for j in range(A.shape[0] - 1, keep - 1, -1):
         others = [r for r in rows if r != j]
@@ -419,6 +427,8 @@ def _distances(outer: Array, inner: Array) -> Array:
 
     With conv(inner) inside conv(outer), the largest one is their Hausdorff distance.
     """
+    from scipy.optimize import nnls
+
     P = inner.T
     weight = 1e3 * (1.0 + float(np.abs(inner).max()))
     M = np.vstack([P, weight * np.ones((1, P.shape[1]))])
@@ -510,6 +520,8 @@ class Polytope:
     def inner_slice_polygon(self, f_bz: float) -> Array:
         """The slice of the inner hull conv(inner_points) at f_bz (attainable side), or an
         empty (0, 2) array when the inner hull is flat or misses the plane."""
+        from scipy.spatial import ConvexHull
+
         if self.dimension < 3:
             return np.zeros((0, 2))
         eq = ConvexHull(self.inner_points).equations
@@ -533,6 +545,8 @@ class Polytope:
 
 
 def _volume(points: Array) -> float:
+    from scipy.spatial import ConvexHull, QhullError
+
     try:
         return float(ConvexHull(points).volume)
     except (QhullError, ValueError):  # flat or too few points
@@ -545,6 +559,9 @@ def _polygon(A: Array, b: Array, tol: float) -> Array:
     A polygon thinner than ``tol`` (a point or a segment, e.g. a slice through a vertex) is
     returned as its extreme points along x and y.
     """
+    from scipy.optimize import linprog
+    from scipy.spatial import ConvexHull
+
     # Chebyshev centre: max r s.t. A x + r |a_i| <= b + tol (tol: not empty by round-off)
     norms = np.linalg.norm(A, axis=1)
     res = linprog([0.0, 0.0, -1.0], A_ub=np.column_stack([A, norms]), b_ub=b + tol,
@@ -696,6 +713,8 @@ def same_polytope(A1: ArrayLike, b1: ArrayLike, A2: ArrayLike, b2: ArrayLike,
 
 def _set_support(A: Array, b: Array, c: Array) -> float | None:
     """max c . x over {x : A x <= b}: inf if unbounded, None if empty."""
+    from scipy.optimize import linprog
+
     res = linprog(-c, A_ub=A, b_ub=b, bounds=(None, None), method="highs-ds",
                   options=_LP_OPTIONS)
     if res.status == 2:
@@ -716,6 +735,8 @@ def _dedupe(points: Array, tol: float) -> Array:
 
 
 def _lp_extreme(A: Array, b: Array, c: Array, minimise: bool) -> float:
+    from scipy.optimize import linprog
+
     res = linprog(c if minimise else -c, A_ub=A, b_ub=b, bounds=(None, None),
                   method="highs-ds", options=_LP_OPTIONS)
     if res.status != 0:

@@ -132,11 +132,12 @@ def _cmd_airframes(args: argparse.Namespace) -> int:
 
 
 def _cmd_force_set(args: argparse.Namespace) -> int:
-    from controller.force_sets import feasible_force_set, hover_force
+    from controller.force_sets import hover_force
     from controller.plots_force_sets import plot_force_sets
+    from controller.polytope_cache import force_sets
 
     af = load_airframe(args.airframe)
-    poly = feasible_force_set(af)
+    afs, poly = force_sets(af)
     polygon = poly.slice_polygon(float(hover_force(af)[2]))
     print(f"airframe           {af.name}")
     print(f"S(0) facets        {len(poly.b)} (dimension {poly.dimension})")
@@ -146,7 +147,7 @@ def _cmd_force_set(args: argparse.Namespace) -> int:
               f"|f_y| {np.abs(polygon[:, 1]).max():.3f} N (outer approximation)")
     print(f"approximation gap  {poly.gap:.3f} N ({100 * poly.relative_gap:.1f} %)")
     if args.plot is not None:
-        plot_force_sets(af, args.plot)
+        plot_force_sets(af, args.plot, afs=afs, s0=poly)
         print(f"plot               {args.plot}")
     return 0
 

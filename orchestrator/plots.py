@@ -32,7 +32,6 @@ line has at most ``MAX_POINTS`` points.
 from __future__ import annotations
 
 import math
-import threading
 import warnings
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
@@ -500,27 +499,13 @@ def resolve_airframe(result: RunResult,
     return None
 
 
-_SET_CACHE: dict[tuple[object, ...], tuple[Polytope, Polytope]] = {}
-_SET_LOCK = threading.Lock()
-_SET_CACHE_SIZE = 8
-
-
 def force_sets(airframe: Airframe) -> tuple[Polytope, Polytope]:
-    """(AFS, S(0)) of an airframe, computed once per process for equal airframe parameters
-    (about 1.5 s each time otherwise; plotting several runs of one airframe reuses them)."""
-    from controller.force_sets import attainable_force_set, feasible_force_set
+    """(AFS, S(0)) of an airframe: the shipped airframes' design-time sets, else the
+    content-addressed cache, else computed once and cached
+    (:func:`controller.polytope_cache.force_sets`)."""
+    from controller.polytope_cache import force_sets as sets
 
-    key = (airframe.name, *sorted(airframe.fmu_parameters().items()))
-    with _SET_LOCK:
-        hit = _SET_CACHE.get(key)
-    if hit is not None:
-        return hit
-    sets = attainable_force_set(airframe), feasible_force_set(airframe)
-    with _SET_LOCK:
-        if len(_SET_CACHE) >= _SET_CACHE_SIZE:
-            _SET_CACHE.pop(next(iter(_SET_CACHE)))
-        _SET_CACHE[key] = sets
-    return sets
+    return sets(airframe)
 
 
 def plot_run(result: RunResult, out_dir: Path, force_set_png: bool = True,
