@@ -31,6 +31,7 @@ from controller.force_sets import (
 from plant.airframe import Airframe, load_airframe
 
 GREEN, BLUE, RED = "#2ca02c", "#1f77b4", "#d62728"
+FORCE_SET_DPI = 110
 
 
 def _faces(poly: Polytope) -> list[np.ndarray]:
@@ -104,6 +105,15 @@ def plot_force_sets(
     af = airframe if isinstance(airframe, Airframe) else load_airframe(airframe)
     afs = attainable_force_set(af) if afs is None else afs
     s0 = feasible_force_set(af) if s0 is None else s0
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    fig = force_set_figure(af, afs, s0)
+    fig.savefig(out, dpi=FORCE_SET_DPI, pil_kwargs={"compress_level": 1})
+    return out
+
+
+def force_set_figure(af: Airframe, afs: Polytope, s0: Polytope) -> Figure:
+    """The figure of :func:`plot_force_sets`."""
     hover = hover_force(af)
     z = s0.clamp_z(hover[2])
     pxy = s0.slice_polygon(z)
@@ -148,10 +158,7 @@ def plot_force_sets(
     ax2.set_title(f"lateral force limits at hover (m g = {-hover[2]:.2f} N): "
                   f"|f_bx| <= {ext[0]:.2f} N, |f_by| <= {ext[1]:.2f} N", fontsize=9)
     ax2.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
-    out = Path(path)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    fig.savefig(out, dpi=110)
-    return out
+    return fig
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -67,7 +67,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     sys.stdout.flush()
     try:
         output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
-                              csv=not args.no_csv, engine=args.engine)
+                              csv=args.csv, engine=args.engine)
     except (Exception, KeyboardInterrupt):
         kept = (out / "metrics.json").is_file()
         args.after_error = ("no results written" + (f"; the previous results in {out} are "
@@ -226,7 +226,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-timing", action="store_true",
                      help="do not measure FMU compute times (runs become bit-reproducible)")
     run.add_argument("--no-plots", action="store_true", help="skip the PNG figures")
-    run.add_argument("--no-csv", action="store_true", help="skip results.csv (keep .npz)")
+    run.add_argument("--csv", action="store_true",
+                     help="also write results.csv (exact float64 text, ~20x the Parquet file)")
+    run.add_argument("--no-csv", action="store_true", help=argparse.SUPPRESS)  # the default now
     run.add_argument("--engine", choices=("native", "python"), default="native",
                      help="step loop: C kernel (default) or the pure-Python reference")
     run.set_defaults(func=_cmd_run)

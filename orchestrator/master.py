@@ -249,7 +249,8 @@ class CoSimulation:
             "plant_parameters": dict(sc.plant_parameters),
             "controller_parameters": dict(sc.controller_parameters),
         }
-        return RunResult(columns=columns + rec.int_columns, data=full, meta=meta)
+        return RunResult(columns=columns + rec.int_columns, data=full, meta=meta,
+                         integer=frozenset(rec.int_columns))
 
     # -- the loop ------------------------------------------------------------
 

@@ -2,11 +2,12 @@
 
 Files written into the output directory:
 
-- ``results.csv``    every recorded signal at every step (header = column names)
-- ``results.npz``    the same, compressed numpy archive with the columns and run metadata
-  (``RunResult.read_npz``)
-- ``metrics.json``   the metrics summary (``orchestrator.metrics``) and the run metadata
-- ``*.png``          the paper's figures for this run (``orchestrator.plots``)
+- ``results.parquet``  every recorded signal at every step, typed columns with the run's
+  metadata (``orchestrator.results``; ``RunResult.read``)
+- ``results.csv``      the same in text, exact float64 (on request: ``csv=True``)
+- ``metrics.json``     the metrics summary (``orchestrator.metrics``) and the run metadata
+- ``*.png``            the paper's figures for this run (``orchestrator.plots``), drawn by
+  worker processes beside the run where the OS allows (``orchestrator.figure_pool``)
 
 The folder is whole or absent: everything is written into a hidden temporary folder beside
 it, which replaces the previous folder only once complete.  A run that fails or is
@@ -20,16 +21,20 @@ import json
 import os
 import shutil
 import tempfile
+import time
 import uuid
 from collections.abc import Callable, Iterable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from orchestrator.master import run
 from orchestrator.metrics import compare_with_paper, compute_metrics
-from orchestrator.results import RunResult
+from orchestrator.results import CSV_FILE, RESULTS_FILE, RunResult
 from orchestrator.scenario import Scenario, load_scenario, scenario_names
+
+if TYPE_CHECKING:
+    from orchestrator.figure_pool import FigurePool
 
 RESULT_MARKER = "metrics.json"
 """Every results folder holds this file; only such folders (or empty ones) are replaced."""
@@ -45,6 +50,10 @@ class RunOutput:
     metrics: dict[str, Any]
     files: list[Path]
     paper: list[str]
+    timings: dict[str, float] = field(default_factory=dict)
+    """Wall time of each phase, s: ``setup`` (FMUs loaded and initialized, references
+    sampled), ``loop``, ``metrics``, ``results``, ``csv``, ``json``, ``figures`` (waiting for
+    them after the rest was written), ``publish``."""
 
 
 def prepare(name_or_path: str | Path, duration: float | None = None,
@@ -130,39 +139,94 @@ def paper_conditions(scenario: Scenario) -> str | None:
 
 
 def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: bool = True,
-                 plots: bool = True, csv: bool = True, progress: bool | None = None,
-                 engine: str = "native") -> RunOutput:
+                 plots: bool = True, csv: bool = False, progress: bool | None = None,
+                 engine: str = "native", figure_workers: bool | None = None) -> RunOutput:
     """Run and, with an output directory, write results, metrics and figures (whole or not
     at all: :func:`publish`).  A lost vehicle is a completed call: ``metrics["outcome"]``
-    says ``"lost"``, with the time and reason in ``metrics["lost"]``."""
+    says ``"lost"``, with the time and reason in ``metrics["lost"]``.  ``figure_workers``:
+    draw the figures in worker processes started before the run (None: where
+    :func:`orchestrator.figure_pool.available`)."""
     if out_dir is not None:
         check_output_dir(out_dir)  # before the run, not after minutes of it
+    draw = plots and out_dir is not None
+    pool = _start_pool(scenario) if draw and figure_workers is not False else None
+    try:
+        return _run_and_write(scenario, out_dir, pool, timing=timing, plots=draw, csv=csv,
+                              progress=progress, engine=engine)
+    finally:
+        if pool is not None:
+            pool.close()
+
+
+def _start_pool(scenario: Scenario) -> FigurePool | None:
+    from orchestrator import figure_pool
+
+    if not figure_pool.available():
+        return None
+    try:
+        return figure_pool.FigurePool(scenario.airframe)
+    except OSError:  # no processes to be had: the figures are drawn here
+        return None
+
+
+def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | None, *,
+                   timing: bool, plots: bool, csv: bool, progress: bool | None,
+                   engine: str) -> RunOutput:
+    timings: dict[str, float] = {}
+    mark = time.perf_counter()
+
+    def phase(name: str) -> None:
+        nonlocal mark
+        now = time.perf_counter()
+        timings[name] = timings.get(name, 0.0) + now - mark
+        mark = now
+
     result = run(scenario, timing=timing, progress=progress, engine=engine)
+    phase("setup")
+    timings["loop"] = float(result.meta["wall_time"])
+    timings["setup"] -= timings["loop"]
     metrics = compute_metrics(result)
     lost = metrics.get("lost")
     why_not = (f"the vehicle was lost at t = {lost['time']:.3f} s" if lost
                else paper_conditions(scenario))
     paper = compare_with_paper(metrics, scenario.name, not_comparable=why_not)
     names: list[str] = []
+    phase("metrics")
 
     def write(folder: Path) -> None:
+        from orchestrator.plots import RUN_FIGURES
+
+        if pool is not None and plots:
+            pool.submit(result, RUN_FIGURES)  # first: the workers draw while this writes
+        result.write_parquet(folder / RESULTS_FILE)
+        names.append(RESULTS_FILE)
+        phase("results")
         if csv:
-            result.write_csv(folder / "results.csv")
-            names.append("results.csv")
-        result.write_npz(folder / "results.npz")
-        names.append("results.npz")
+            result.write_csv(folder / CSV_FILE)
+            names.append(CSV_FILE)
+            phase("csv")
         doc = {"scenario": scenario.name, "metrics": metrics, "paper": paper,
                "meta": result.meta}
         (folder / RESULT_MARKER).write_text(json.dumps(doc, indent=2, default=str) + "\n")
         names.append(RESULT_MARKER)
-        if plots:
+        phase("json")
+        if not plots:
+            return
+        if pool is None:
             names.extend(p.name for p in plot_files(result, folder, scenario))
+        else:
+            for name, png in pool.collect().items():
+                (folder / f"{name}.png").write_bytes(png)
+                names.append(f"{name}.png")
+        phase("figures")
 
     files: list[Path] = []
     if out_dir is not None:
         publish(out_dir, write)
+        phase("publish")
         files = [Path(out_dir) / n for n in names]
-    return RunOutput(result=result, metrics=metrics, files=files, paper=paper)
+    return RunOutput(result=result, metrics=metrics, files=files, paper=paper,
+                     timings=timings)
 
 
 def plot_files(result: RunResult, out_dir: Path, scenario: Scenario) -> list[Path]:

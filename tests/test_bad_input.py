@@ -141,7 +141,7 @@ def check_lost_results(out: Path) -> None:
     m = doc["metrics"]
     assert m["outcome"] == "lost" and m["lost"]["time"] > 0 and m["lost"]["reason"]
     assert all("not comparable" in line for line in doc["paper"][:1])
-    result = RunResult.read_npz(out / "results.npz")
+    result = RunResult.read(out)
     err = np.linalg.norm(result.get("plant.pos") - result.get("ref.pos_ref"), axis=1)
     euler = result.get("plant.euler")
     tilt = np.degrees(np.arccos(np.cos(euler[:, 0]) * np.cos(euler[:, 1])))

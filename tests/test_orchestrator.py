@@ -106,13 +106,17 @@ def test_every_exchanged_signal_is_recorded():
 
 
 def test_result_files_read_back(tmp_path):
-    out = run_scenario(prepare("hover", duration=1.0), tmp_path, timing=False, plots=False)
-    from_npz = RunResult.read_npz(tmp_path / "results.npz")
-    from_csv = RunResult.read_csv(tmp_path / "results.csv")
-    assert from_npz.columns == out.result.columns == from_csv.columns
-    assert np.array_equal(from_npz.data, out.result.data)
-    assert np.array_equal(from_csv.data, out.result.data)  # %.17g round-trips
-    assert from_npz.meta["scenario"] == "hover"
+    out = run_scenario(prepare("hover", duration=1.0), tmp_path, timing=False, plots=False,
+                       csv=True)
+    from_parquet = RunResult.read(tmp_path)  # the folder: its results.parquet
+    from_csv = RunResult.read(tmp_path / "results.csv")
+    assert from_parquet.columns == out.result.columns == from_csv.columns
+    assert np.array_equal(from_csv.data, out.result.data)  # shortest repr round-trips
+    for i, name in enumerate(out.result.columns):  # each column exactly as it claims
+        kept = out.result.data[:, i].astype(out.result.precision(name).replace("int", "float"))
+        assert np.array_equal(from_parquet.data[:, i], kept), name
+    assert from_parquet.integer == out.result.integer and "ctrl.guid_iter" in out.result.integer
+    assert from_parquet.meta["scenario"] == "hover"
     doc = json.loads((tmp_path / "metrics.json").read_text())
     assert doc["metrics"]["position_error"]["max"] < 1e-3
 
@@ -121,7 +125,7 @@ def test_cli_run_writes_metrics_and_figures(tmp_path):
     res = cli("run", "hover_varying_orientation", "--duration", "4", "--out", str(tmp_path))
     assert res.returncode == 0, res.stderr
     assert "max position error" in res.stdout
-    for name in ("results.csv", "results.npz", "metrics.json", "tracking.png", "actuators.png",
+    for name in ("results.parquet", "metrics.json", "tracking.png", "actuators.png",
                  "forces.png", "disturbance_timing.png", "force_set.png"):
         path = tmp_path / name
         assert path.is_file() and path.stat().st_size > 1000, name
@@ -154,7 +158,8 @@ def test_cli_parameter_overrides(tmp_path):
     res = cli("run", "position_step", "--duration", "3", "--no-plots", "--no-csv", "--out",
               str(tmp_path / "slow"), "--set", "controller.K_pos_D[1]=1.0")
     assert res.returncode == 0, res.stderr
-    slow = RunResult.read_npz(tmp_path / "slow" / "results.npz").get("plant.pos")[:, 0]
+    assert not (tmp_path / "slow" / "results.csv").exists()  # CSV only with --csv
+    slow = RunResult.read(tmp_path / "slow").get("plant.pos")[:, 0]
     fast = run(prepare("position_step", duration=3.0)).get("plant.pos")[:, 0]
     assert slow[-1] < fast[-1]  # a softer position gain is slower
     bad = cli("run", "position_step", "--set", "controller.no_such=1", "--out",

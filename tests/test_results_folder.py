@@ -117,6 +117,40 @@ def test_cached_s0_is_the_airframes_s0(cache):
     assert same, why
 
 
+def test_shipped_sets_are_fresh_for_every_shipped_airframe():
+    """Oracle: the sets computed now by controller.force_sets and controller.failures,
+    compared as sets (``python -m controller.shipped_sets --check``)."""
+    from controller import shipped_sets
+
+    for name in shipped_sets.list_airframes():
+        af = load_airframe(name)
+        assert polytope_cache.shipped(af) is not None, f"{name}: no shipped sets for its numbers"
+        assert shipped_sets.check(af) == [], name
+
+
+def test_shipped_sets_serve_only_the_shipped_numbers(cache):
+    af = load_airframe("quadrotor")
+    weaker = dataclasses.replace(af, omega_max=af.omega_max * 0.9)
+    assert polytope_cache.shipped(weaker) is None
+    afs, s0 = polytope_cache.force_sets(weaker)  # computed, then kept in the cache
+    assert [p.name.split("-")[1] for p in sorted(cache.iterdir())] == ["afs", "s0"]
+    fresh = feasible_force_set(weaker)
+    assert same_polytope(s0.A, s0.b, fresh.A, fresh.b)[0]
+    assert s0.z_range[0] > polytope_cache.force_sets(af)[1].z_range[0]  # less thrust
+
+
+def test_polytope_documents_round_trip_exactly():
+    af = load_airframe("fixed_tilt_hexarotor")
+    for poly in polytope_cache.force_sets(af):
+        back = polytope_cache.polytope_from_doc(json.loads(json.dumps(
+            polytope_cache.polytope_doc(poly))))
+        for field in ("A", "b", "vertices", "inner_points", "torque"):
+            assert np.array_equal(getattr(back, field), getattr(poly, field)), field
+        assert (back.z_range, back.gap, back.kind) == (poly.z_range, poly.gap, poly.kind)
+    with pytest.raises(ValueError, match="not a polytope document"):
+        polytope_cache.polytope_from_doc({"A": []})
+
+
 # -- paper conditions ------------------------------------------------------------
 
 

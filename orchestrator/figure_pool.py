@@ -1,0 +1,198 @@
+"""Worker processes that draw a run's figures beside the simulation.
+
+Drawing the five figures of a run costs ~3 s of matplotlib on one core, more than the run
+itself.  A :class:`FigurePool` is started before the run: its workers import matplotlib and
+draw the airframe's force-set figure (which needs no run) while the simulation steps on the
+other core, then share the run's figures, each drawn once, while the caller writes the
+results.  The workers only return PNG bytes; the caller writes every file, so the results
+folder stays whole or absent (``orchestrator.runner.publish``).
+
+The run's data reaches the workers as a temporary ``.npy`` file that they map read-only
+(no copy through a pipe).  Workers are forked, which is cheap and needs no re-import, where
+the OS forks safely (Linux); elsewhere :func:`available` is False and the caller draws in
+its own process.  A worker that fails or dies costs only the parallelism: the caller draws
+what is missing itself.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import multiprocessing as mp
+import os
+import queue
+import sys
+import tempfile
+import time
+import warnings
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import TYPE_CHECKING, Any
+
+import numpy as np
+
+from orchestrator.results import RunResult
+
+if TYPE_CHECKING:
+    from plant.airframe import Airframe
+
+WORKERS = 2
+POLL = 0.05  # s between checks that the workers are alive while waiting
+
+
+def available() -> bool:
+    """Whether figures can be drawn in forked workers here (Linux with 2 or more cores)."""
+    return (sys.platform.startswith("linux") and "fork" in mp.get_all_start_methods()
+            and (os.cpu_count() or 1) >= 2)
+
+
+@dataclass(frozen=True)
+class _Job:
+    name: str
+    airframe: Airframe | None
+    data: str | None  # path of the run's .npy file (None: a figure that needs no run)
+    columns: tuple[str, ...] = ()
+    meta: dict[str, Any] | None = None
+    integer: frozenset[str] = frozenset()
+
+
+def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
+    from orchestrator.plots import figure_inputs, render_png
+
+    result = None
+    if job.data is not None:
+        result = runs.get(job.data)
+        if result is None:
+            result = RunResult(list(job.columns), np.load(job.data, mmap_mode="r"),
+                               dict(job.meta or {}), job.integer)
+            runs.clear()
+            runs[job.data] = result
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        if result is not None:
+            af, afs, s0 = figure_inputs(result, job.airframe)
+        else:
+            from plant.airframe import Airframe
+
+            af = job.airframe if isinstance(job.airframe, Airframe) else None
+            afs = s0 = None
+            if af is not None:
+                from orchestrator.plots import force_sets
+
+                afs, s0 = force_sets(af)
+        png = render_png(job.name, result, af, afs, s0)
+    return png, [str(w.message) for w in caught]
+
+
+def _worker(jobs: Any, done: Any) -> None:
+    import orchestrator.plots  # noqa: F401  (imported while the run steps)
+
+    runs: dict[str, RunResult] = {}
+    while True:
+        job = jobs.get()
+        if job is None:
+            return
+        try:
+            png, notes = _draw(job, runs)
+            done.put((job.name, png, notes, None))
+        except Exception as exc:  # reported to the caller, which draws the figure itself
+            done.put((job.name, None, [], f"{type(exc).__name__}: {exc}"))
+
+
+class FigurePool:
+    """``FigurePool(airframe)`` forks the workers and queues the force-set figure;
+    :meth:`submit` queues a run's figures, :meth:`collect` returns every PNG, :meth:`close`
+    ends the workers."""
+
+    def __init__(self, airframe: Airframe | None, workers: int = WORKERS,
+                 force_set: bool = True) -> None:
+        ctx = mp.get_context("fork")
+        self._jobs = ctx.Queue()
+        self._done = ctx.Queue()
+        self._airframe = airframe
+        self._pending: set[str] = set()
+        self._results: dict[str, tuple[bytes | None, list[str], str | None]] = {}
+        self._data: str | None = None
+        self._run: RunResult | None = None
+        self._names: list[str] = []
+        self._procs = [ctx.Process(target=_worker, args=(self._jobs, self._done), daemon=True,
+                                   name=f"fullpose-figures-{i + 1}") for i in range(workers)]
+        for p in self._procs:
+            p.start()
+        if force_set and airframe is not None:
+            self._submit(_Job("force_set", airframe, None))
+
+    def _submit(self, job: _Job) -> None:
+        self._pending.add(job.name)
+        self._jobs.put(job)
+
+    def submit(self, result: RunResult, names: Sequence[str]) -> None:
+        """Queue the run figures ``names`` of ``result``; :meth:`collect` returns them."""
+        fd, path = tempfile.mkstemp(prefix="fullpose-run-", suffix=".npy")
+        os.close(fd)
+        self._data = path
+        np.save(path, np.ascontiguousarray(result.data))
+        self._run = result
+        self._names = list(names)
+        for name in names:
+            self._submit(self._job(name))
+
+    def _job(self, name: str) -> _Job:
+        r = self._run
+        if r is None or self._data is None:
+            return _Job(name, self._airframe, None)
+        return _Job(name, self._airframe, self._data, tuple(r.columns), r.meta, r.integer)
+
+    def collect(self, timeout: float = 600.0) -> dict[str, bytes]:
+        """The PNGs of the submitted run figures and of the force-set figure, by name.
+        Figures the workers could not draw are drawn here; their warnings are re-issued."""
+        self._wait(timeout)
+        out: dict[str, bytes] = {}
+        for name in [n for n in ("force_set", *self._names) if n in self._results]:
+            png, notes, _ = self._results[name]
+            for note in notes:
+                warnings.warn(note, stacklevel=2)
+            if png is None:  # the worker failed: drawn here, so its error shows as such
+                png, notes = _draw(self._job(name), {})
+                for note in notes:
+                    warnings.warn(note, stacklevel=2)
+            out[name] = png
+        return out
+
+    def _wait(self, timeout: float) -> None:
+        deadline = time.monotonic() + timeout
+        while self._pending:
+            try:
+                name, png, notes, error = self._done.get(timeout=POLL)
+            except queue.Empty:
+                # a dead worker's job would never come back: the caller draws what is left
+                if not all(p.is_alive() for p in self._procs) or time.monotonic() > deadline:
+                    for name in self._pending:  # drawn by the caller instead
+                        self._results[name] = (None, [], "the figure workers stopped")
+                    self._pending.clear()
+                continue
+            self._pending.discard(name)
+            self._results[name] = (png, notes, error)
+
+    def close(self) -> None:
+        for _ in self._procs:
+            with contextlib.suppress(Exception):
+                self._jobs.put(None)
+        for p in self._procs:
+            p.join(timeout=1.0)
+            if p.is_alive():
+                p.terminate()
+                p.join()
+        for q in (self._jobs, self._done):
+            q.close()
+            q.cancel_join_thread()
+        if self._data is not None:
+            with contextlib.suppress(OSError):
+                Path(self._data).unlink()
+            self._data = None
+
+    def __enter__(self) -> FigurePool:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

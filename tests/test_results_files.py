@@ -1,0 +1,121 @@
+"""The results files (orchestrator/results.py) read by tools that are not ours.
+
+Oracles: pyarrow's own Parquet reader (what pandas, polars and DuckDB use), Python's csv module
+with ``float()``, and the in-memory recording the files were written from.
+"""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pyarrow as pa
+import pyarrow.parquet as pq
+import pytest
+
+from orchestrator.results import ROW_GROUP, ResultsFileError, RunResult
+
+INTS = ("ctrl.guid_iter", "ctrl.feasible")
+
+
+def sample(rows: int = int(2.5 * ROW_GROUP)) -> RunResult:
+    rng = np.random.default_rng(7)
+    columns = ["time", "plant.pos[1]", "plant.pos[2]", "ctrl.t_step", *INTS]
+    data = np.empty((rows, len(columns)))
+    data[:, 0] = np.arange(rows) * 0.002
+    data[:, 1] = np.cumsum(rng.standard_normal(rows)) * 1e-3 + 3.0
+    data[:, 2] = rng.standard_normal(rows) * 1e-12  # round-off sized values
+    data[:, 3] = rng.uniform(1e-6, 3e-5, rows)
+    data[:, 4] = rng.integers(0, 20, rows)
+    data[:, 5] = rng.integers(0, 2, rows)
+    data[7, 1] = -0.0  # signed zero and extremes survive too
+    data[8, 1] = 1e300
+    data[9, 1] = 5e-324
+    return RunResult(columns, data, {"scenario": "synthetic", "step": 0.002},
+                     integer=frozenset(INTS))
+
+
+def test_parquet_is_typed_streamed_and_readable_without_fullpose(tmp_path: Path):
+    r = sample()
+    path = tmp_path / "results.parquet"
+    r.write_parquet(path)
+    f = pq.ParquetFile(path)
+    assert f.metadata.num_row_groups == math.ceil(r.data.shape[0] / ROW_GROUP)
+    types = {fld.name: fld.type for fld in f.schema_arrow}
+    assert types["time"] == pa.float64() and types["plant.pos[2]"] == pa.float32()
+    assert types["plant.pos[1]"] == pa.float64()  # it holds 1e300: float32 would make it inf
+    assert all(types[c] == pa.int32() for c in INTS)
+    table = pq.read_table(path)
+    assert table.column_names == r.columns
+    for i, name in enumerate(r.columns):
+        got = table.column(name).to_numpy()
+        want = r.data[:, i].astype({pa.float64(): np.float64, pa.float32(): np.float32,
+                                    pa.int32(): np.int32}[types[name]])
+        assert np.array_equal(got, want), name
+    meta = json.loads(table.schema.metadata[b"fullpose.meta"])
+    assert meta == r.meta
+    # float32 keeps a relative 2**-24 (0.2 um at 3 m): below any bound a test or plot has
+    back = RunResult.read(path)
+    np.testing.assert_allclose(back.get("ctrl.t_step"), r.get("ctrl.t_step"),
+                               rtol=2.0**-24, atol=0)
+    assert back.integer == r.integer and back.meta == r.meta
+
+
+def test_values_beyond_float32_keep_their_column_in_float64(tmp_path: Path):
+    r = sample(100)
+    r.data[3, 3] = np.nan  # a non-finite value does not widen a column
+    r.write_parquet(tmp_path / "r.parquet")
+    back = RunResult.read(tmp_path / "r.parquet")
+    assert back.data[8, 1] == 1e300 and back.data[9, 1] == 5e-324  # no inf, no flush to 0
+    assert math.copysign(1.0, back.data[7, 1]) == -1.0
+    assert r.precision("ctrl.t_step") == "float32" and np.isnan(back.data[3, 3])
+
+
+def test_csv_is_exact_and_parsed_by_the_csv_module(tmp_path: Path):
+    r = sample(5000)
+    path = tmp_path / "results.csv"
+    r.write_csv(path)
+    with open(path, newline="") as fh:
+        rows = list(csv.reader(fh))
+    assert rows[0] == r.columns
+    values = np.array([[float(x) for x in row] for row in rows[1:]])
+    assert np.array_equal(values, r.data)  # float64 exactly: shortest round-trip repr
+    assert all(rows[5][r.columns.index(c)].lstrip("-").isdigit() for c in INTS)
+    assert np.array_equal(RunResult.read(path).data, r.data)
+
+
+def test_npz_of_earlier_versions_still_reads(tmp_path: Path):
+    r = sample(300)
+    r.write_npz(tmp_path / "results.npz")
+    back = RunResult.read(tmp_path)  # a folder with only the npz
+    assert np.array_equal(back.data, r.data) and back.columns == r.columns
+    r.write_parquet(tmp_path / "results.parquet")
+    assert RunResult.read(tmp_path).integer == r.integer  # the Parquet file is preferred
+
+
+@pytest.mark.parametrize("content, suffix, reason", [
+    (None, ".parquet", "file not found"),
+    (b"not parquet", ".parquet", "not a readable Parquet file"),
+    (b"x", ".txt", "not a results file"),
+    (b"a,b\n1,x\n", ".csv", "is not numeric"),
+])
+def test_unreadable_results_name_the_file(tmp_path: Path, content: bytes | None, suffix: str,
+                                          reason: str):
+    path = tmp_path / f"results{suffix}"
+    if content is not None:
+        path.write_bytes(content)
+    with pytest.raises(ResultsFileError, match=reason) as e:
+        RunResult.read(path)
+    assert str(path) in str(e.value)
+
+
+def test_foreign_parquet_is_refused(tmp_path: Path):
+    path = tmp_path / "other.parquet"
+    pq.write_table(pa.table({"x": [1.0, 2.0]}), path)
+    with pytest.raises(ResultsFileError, match="not a fullpose results file"):
+        RunResult.read(path)
+    with pytest.raises(ResultsFileError, match=r"no results\.parquet"):
+        RunResult.read(tmp_path)
