@@ -49,6 +49,7 @@ from matplotlib.axes import Axes
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
+from orchestrator import figure_pool
 from orchestrator.metrics import wrap_deg
 from orchestrator.results import RunResult
 
@@ -562,7 +563,7 @@ def force_sets(airframe: Airframe) -> tuple[Polytope, Polytope]:
     return sets(airframe)
 
 
-RUN_FIGURES = ("tracking", "actuators", "forces", "disturbance_timing")
+RUN_FIGURES = figure_pool.RUN_FIGURES
 """The figures of every run, in the order :func:`plot_run` writes them (then ``force_set``)."""
 
 

@@ -194,7 +194,7 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
     phase("metrics")
 
     def write(folder: Path) -> None:
-        from orchestrator.plots import RUN_FIGURES
+        from orchestrator.figure_pool import RUN_FIGURES
 
         if pool is not None and plots:
             pool.submit(result, RUN_FIGURES)  # first: the workers draw while this writes

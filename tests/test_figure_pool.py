@@ -1,0 +1,55 @@
+"""Figures drawn by worker processes (orchestrator/figure_pool.py) are the figures drawn in
+the caller's process, byte for byte (Agg is deterministic), whatever happens to a worker."""
+
+from __future__ import annotations
+
+import os
+import signal
+from pathlib import Path
+
+import pytest
+
+from orchestrator import figure_pool
+from orchestrator.plots import RUN_FIGURES, figure_inputs, render_png
+from orchestrator.results import RunResult
+from orchestrator.runner import prepare, run_scenario
+
+pytestmark = pytest.mark.skipif(not figure_pool.available(),
+                                reason="figure workers need fork and 2 cores (Linux)")
+
+
+@pytest.fixture(scope="module")
+def short(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
+    """The same 3 s run written with the workers and without them."""
+    sc = prepare("hover_varying_orientation", duration=3.0)
+    base = tmp_path_factory.mktemp("pool")
+    run_scenario(sc, base / "pool", timing=False, figure_workers=True)
+    run_scenario(sc, base / "here", timing=False, figure_workers=False)
+    return base / "pool", base / "here"
+
+
+def test_workers_draw_the_figures_the_caller_draws(short: tuple[Path, Path]):
+    pool, here = short
+    names = sorted(p.name for p in here.glob("*.png"))
+    assert names == sorted(f"{n}.png" for n in (*RUN_FIGURES, "force_set"))
+    assert sorted(p.name for p in pool.glob("*.png")) == names
+    for name in names:
+        assert (pool / name).read_bytes() == (here / name).read_bytes(), name
+    assert not list(Path("/dev/shm").glob("fullpose-run-*.npy"))  # the hand-over is gone
+
+
+def test_a_dead_worker_costs_only_the_parallelism(short: tuple[Path, Path]):
+    here = short[1]
+    result = RunResult.read(here)  # float32 columns: the figures are the reader's own
+    af, afs, s0 = figure_inputs(result)
+    pool = figure_pool.FigurePool(af)
+    try:
+        os.kill(pool._procs[1].pid or 0, signal.SIGKILL)
+        pool._procs[1].join()
+        pool.submit(result, RUN_FIGURES)
+        pngs = pool.collect(timeout=120.0)
+    finally:
+        pool.close()
+    assert sorted(pngs) == sorted((*RUN_FIGURES, "force_set"))
+    for name in RUN_FIGURES:
+        assert pngs[name] == render_png(name, result, af, afs, s0), name
