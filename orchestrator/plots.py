@@ -346,7 +346,7 @@ def forces_figure(result: RunResult, afs: Polytope | None = None,
     """The figure of :func:`plot_forces`."""
     t = result.time
     f_ref, f_c = result.optional("ctrl.f_b_ref"), result.optional("ctrl.f_b_c")
-    fig = _new_figure(15.0, 10.0, left=0.06, right=0.8, top=0.93, hspace=0.9, wspace=0.15)
+    fig = _new_figure(15.0, 10.0, left=0.06, right=0.8, top=0.93, hspace=0.5, wspace=0.15)
     grid = fig.add_gridspec(6, 2, width_ratios=[1.25, 1.0])
     axes_t = [fig.add_subplot(grid[2 * i:2 * i + 2, 0]) for i in range(3)]
     for i, (ax, name) in enumerate(zip(axes_t, ("f_bx", "f_by", "f_bz"), strict=True)):
@@ -467,7 +467,7 @@ def disturbance_timing_figure(result: RunResult) -> Figure:
     measured = any(_nonzero(v) for v in timing.values())
     rows = len(panels) + int(show_eff) + 1
     height = 2.6 * rows + 0.6
-    fig = _new_figure(12.0, height, left=0.09, bottom=0.5 / height, top=1 - 0.55 / height,
+    fig = _new_figure(12.0, height, left=0.09, bottom=0.5 / height, top=1 - 0.85 / height,
                       hspace=0.35)
     axs = np.atleast_1d(fig.subplots(rows, 1, sharex=True))
     for ax, (name, sig, unit) in zip(axs, panels, strict=False):
