@@ -37,6 +37,10 @@ if TYPE_CHECKING:
     from plant.airframe import Airframe
 
 WORKERS = 2
+HANDOFF_BYTES = 512 * 2**20
+"""Runs up to this size reach the workers as a copy in shared memory (~2 min of 500 Hz
+recording); larger ones through their written ``results.parquet``, so a long run never
+needs a second copy of itself in memory."""
 AFFINITY = {"force_set": 0, "forces": 0, "disturbance_timing": 0, "tracking": 1,
             "actuators": 1}
 """Which worker draws which figure: the two with force sets (they import scipy for the
@@ -58,7 +62,7 @@ def available() -> bool:
 class _Job:
     name: str
     airframe: Airframe | None
-    data: str | None  # path of the run's .npy file (None: a figure that needs no run)
+    data: str | None  # the run's .npy copy or results file (None: a figure without a run)
     columns: tuple[str, ...] = ()
     meta: dict[str, Any] | None = None
     integer: frozenset[str] = frozenset()
@@ -70,9 +74,11 @@ def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
     result = None
     if job.data is not None:
         result = runs.get(job.data)
-        if result is None:
+        if result is None and job.data.endswith(".npy"):
             result = RunResult(list(job.columns), np.load(job.data, mmap_mode="r"),
                                dict(job.meta or {}), job.integer)
+        elif result is None:
+            result = RunResult.read(job.data)
             runs.clear()
             runs[job.data] = result
     with warnings.catch_warnings(record=True) as caught:
@@ -134,7 +140,8 @@ class FigurePool:
         self._airframe = airframe
         self._pending: set[str] = set()
         self._results: dict[str, tuple[bytes | None, list[str], str | None]] = {}
-        self._data: str | None = None
+        self._data: str | None = None  # the temporary file to remove
+        self._handoff: str | None = None
         self._run: RunResult | None = None
         self._names: list[str] = []
         self._procs = [ctx.Process(target=_worker, args=(q, self._done), daemon=True,
@@ -149,14 +156,24 @@ class FigurePool:
         self._pending.add(job.name)
         self._queues[AFFINITY.get(job.name, 0) % len(self._queues)].put(job)
 
-    def submit(self, result: RunResult, names: Sequence[str]) -> None:
-        """Queue the run figures ``names`` of ``result``; :meth:`collect` returns them."""
-        shm = Path("/dev/shm")  # memory, not disk, where the OS has it
-        fd, path = tempfile.mkstemp(prefix="fullpose-run-", suffix=".npy",
-                                    dir=shm if shm.is_dir() else None)
-        os.close(fd)
-        self._data = path
-        np.save(path, np.ascontiguousarray(result.data))
+    def submit(self, result: RunResult, names: Sequence[str],
+               written: Path | None = None) -> None:
+        """Queue the run figures ``names`` of ``result``; :meth:`collect` returns them.
+        ``written``: the run's results file, which the workers read instead of a copy of
+        the data (required above :data:`HANDOFF_BYTES`)."""
+        if written is not None:
+            path = str(written)
+        else:
+            if result.data.nbytes > HANDOFF_BYTES:
+                raise ValueError(f"a {result.data.nbytes / 2**20:.0f} MiB run reaches the "
+                                 "figure workers through its results file: pass written=")
+            shm = Path("/dev/shm")  # memory, not disk, where the OS has it
+            fd, path = tempfile.mkstemp(prefix="fullpose-run-", suffix=".npy",
+                                        dir=shm if shm.is_dir() else None)
+            os.close(fd)
+            self._data = path
+            np.save(path, np.ascontiguousarray(result.data))
+        self._handoff = path
         self._run = result
         self._names = list(names)
         for name in names:
@@ -164,9 +181,9 @@ class FigurePool:
 
     def _job(self, name: str) -> _Job:
         r = self._run
-        if r is None or self._data is None:
+        if r is None or self._handoff is None:
             return _Job(name, self._airframe, None)
-        return _Job(name, self._airframe, self._data, tuple(r.columns), r.meta, r.integer)
+        return _Job(name, self._airframe, self._handoff, tuple(r.columns), r.meta, r.integer)
 
     def collect(self, timeout: float = 600.0) -> dict[str, bytes]:
         """The PNGs of the submitted run figures and of the force-set figure, by name.

@@ -194,12 +194,15 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
     phase("metrics")
 
     def write(folder: Path) -> None:
-        from orchestrator.figure_pool import RUN_FIGURES
+        from orchestrator.figure_pool import HANDOFF_BYTES, RUN_FIGURES
 
-        if pool is not None and plots:
+        small = result.data.nbytes <= HANDOFF_BYTES
+        if pool is not None and plots and small:
             pool.submit(result, RUN_FIGURES)  # first: the workers draw while this writes
         result.write_parquet(folder / RESULTS_FILE)
         names.append(RESULTS_FILE)
+        if pool is not None and plots and not small:  # no second copy of a long run
+            pool.submit(result, RUN_FIGURES, written=folder / RESULTS_FILE)
         phase("results")
         if csv:
             result.write_csv(folder / CSV_FILE)

@@ -53,3 +53,15 @@ def test_a_dead_worker_costs_only_the_parallelism(short: tuple[Path, Path]):
     assert sorted(pngs) == sorted((*RUN_FIGURES, "force_set"))
     for name in RUN_FIGURES:
         assert pngs[name] == render_png(name, result, af, afs, s0), name
+
+
+def test_a_long_run_reaches_the_workers_through_its_results_file(tmp_path: Path,
+                                                                 monkeypatch: pytest.MonkeyPatch):
+    monkeypatch.setattr(figure_pool, "HANDOFF_BYTES", 0)  # every run counts as long here
+    sc = prepare("hover_varying_orientation", duration=2.0)
+    run_scenario(sc, tmp_path / "r", timing=False, figure_workers=True)
+    written = RunResult.read(tmp_path / "r")  # what the workers drew from
+    af, afs, s0 = figure_inputs(written)
+    for name in RUN_FIGURES:
+        assert (tmp_path / "r" / f"{name}.png").read_bytes() == render_png(
+            name, written, af, afs, s0), name

@@ -132,7 +132,7 @@ def test_shipped_sets_serve_only_the_shipped_numbers(cache):
     af = load_airframe("quadrotor")
     weaker = dataclasses.replace(af, omega_max=af.omega_max * 0.9)
     assert polytope_cache.shipped(weaker) is None
-    afs, s0 = polytope_cache.force_sets(weaker)  # computed, then kept in the cache
+    _, s0 = polytope_cache.force_sets(weaker)  # computed, then kept in the cache
     assert [p.name.split("-")[1] for p in sorted(cache.iterdir())] == ["afs", "s0"]
     fresh = feasible_force_set(weaker)
     assert same_polytope(s0.A, s0.b, fresh.A, fresh.b)[0]
