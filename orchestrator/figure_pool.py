@@ -9,8 +9,9 @@ folder stays whole or absent (``orchestrator.runner.publish``).
 
 The run's data reaches the workers as a temporary ``.npy`` file that they map read-only
 (no copy through a pipe).  Workers are forked, which is cheap and needs no re-import, where
-the OS forks safely (Linux); elsewhere :func:`available` is False and the caller draws in
-its own process.  A worker that fails or dies costs only the parallelism: the caller draws
+the OS forks safely (Linux): the first worker imports matplotlib and forks the second from
+itself, so the import is paid once.  Elsewhere :func:`available` is False and the caller draws
+in its own process.  A worker that fails or dies costs only the parallelism: the caller draws
 what is missing itself.
 """
 
@@ -20,6 +21,7 @@ import contextlib
 import multiprocessing as mp
 import os
 import queue
+import signal
 import sys
 import tempfile
 import time
@@ -112,9 +114,16 @@ def _warm() -> None:
     png_bytes(fig)
 
 
-def _worker(jobs: Any, done: Any) -> None:
-    with contextlib.suppress(Exception):  # only a head start: the jobs work without it
-        _warm()
+def _die_with_parent() -> None:
+    """Linux: this process is killed when the process that forked it ends, so a worker
+    never outlives the run that started it."""
+    import ctypes
+
+    with contextlib.suppress(Exception):
+        ctypes.CDLL(None, use_errno=True).prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG
+
+
+def _serve(jobs: Any, done: Any) -> None:
     runs: dict[str, RunResult] = {}
     while True:
         job = jobs.get()
@@ -125,6 +134,48 @@ def _worker(jobs: Any, done: Any) -> None:
             done.put((job.name, png, notes, None))
         except Exception as exc:  # reported to the caller, which draws the figure itself
             done.put((job.name, None, [], f"{type(exc).__name__}: {exc}"))
+
+
+def _zygote(queues: Sequence[Any], done: Any) -> None:
+    """The first worker: imports matplotlib once, forks the others from itself (so they
+    start with it imported), then serves its own queue."""
+    _die_with_parent()
+    with contextlib.suppress(Exception):  # only a head start: the jobs work without it
+        _warm()
+    children = []
+    for i, jobs in enumerate(queues[1:], start=1):
+        pid = os.fork()
+        if pid == 0:
+            code = 0
+            try:
+                _die_with_parent()
+                _serve(jobs, done)
+            except BaseException:
+                code = 1
+            finally:
+                os._exit(code)
+        children.append(pid)
+        done.put((_PID, i, pid, None))
+    try:
+        _serve(queues[0], done)
+    finally:
+        for pid in children:
+            with contextlib.suppress(ChildProcessError):
+                os.waitpid(pid, 0)
+
+
+_PID = "<pid>"  # a done-queue message that names a forked worker's process id
+
+
+def _alive(pid: int | None) -> bool:
+    """Whether a process (not necessarily our child) still runs: Linux's /proc."""
+    if pid is None:
+        return True  # not started yet: its parent's liveness says
+    try:
+        state = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()[0]
+    except (OSError, IndexError):
+        return False
+    return state not in ("Z", "X")
 
 
 class FigurePool:
@@ -144,11 +195,10 @@ class FigurePool:
         self._handoff: str | None = None
         self._run: RunResult | None = None
         self._names: list[str] = []
-        self._procs = [ctx.Process(target=_worker, args=(q, self._done), daemon=True,
-                                   name=f"fullpose-figures-{i + 1}")
-                       for i, q in enumerate(self._queues)]
-        for p in self._procs:
-            p.start()
+        self._zygote = ctx.Process(target=_zygote, args=(self._queues, self._done),
+                                   daemon=True, name="fullpose-figures")
+        self._zygote.start()
+        self._pids: list[int | None] = [self._zygote.pid] + [None] * (workers - 1)
         if force_set and airframe is not None:
             self._submit(_Job("force_set", airframe, None))
 
@@ -204,27 +254,47 @@ class FigurePool:
     def _wait(self, timeout: float) -> None:
         deadline = time.monotonic() + timeout
         while self._pending:
-            try:
-                name, png, notes, error = self._done.get(timeout=POLL)
-            except queue.Empty:
-                # a dead worker's job would never come back: the caller draws what is left
-                if not all(p.is_alive() for p in self._procs) or time.monotonic() > deadline:
-                    for name in self._pending:  # drawn by the caller instead
-                        self._results[name] = (None, [], "the figure workers stopped")
-                    self._pending.clear()
+            if self._pump():
                 continue
+            # a dead worker's job would never come back: the caller draws what is left
+            alive = self._zygote.is_alive() and all(map(_alive, self._pids[1:]))
+            if not alive or time.monotonic() > deadline:
+                for name in self._pending:
+                    self._results[name] = (None, [], "the figure workers stopped")
+                self._pending.clear()
+
+    def _pump(self) -> bool:
+        """Takes one message from the workers (False: none came within :data:`POLL`)."""
+        try:
+            name, png, notes, error = self._done.get(timeout=POLL)
+        except queue.Empty:
+            return False
+        if name == _PID:
+            self._pids[png] = notes
+        else:
             self._pending.discard(name)
             self._results[name] = (png, notes, error)
+        return True
+
+    def worker_pids(self, timeout: float = 30.0) -> list[int | None]:
+        """The workers' process ids (None: not forked yet after ``timeout`` s)."""
+        deadline = time.monotonic() + timeout
+        while None in self._pids and time.monotonic() < deadline:
+            self._pump()
+        return list(self._pids)
 
     def close(self) -> None:
         for q in self._queues:
             with contextlib.suppress(Exception):
                 q.put(None)
-        for p in self._procs:
-            p.join(timeout=1.0)
-            if p.is_alive():
-                p.terminate()
-                p.join()
+        self._zygote.join(timeout=1.0)
+        for pid in self._pids[1:]:
+            if pid is not None and _alive(pid):
+                with contextlib.suppress(OSError):
+                    os.kill(pid, signal.SIGKILL)
+        if self._zygote.is_alive():
+            self._zygote.terminate()
+            self._zygote.join()
         for q in (*self._queues, self._done):
             q.close()
             q.cancel_join_thread()

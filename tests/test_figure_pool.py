@@ -44,8 +44,9 @@ def test_a_dead_worker_costs_only_the_parallelism(short: tuple[Path, Path]):
     af, afs, s0 = figure_inputs(result)
     pool = figure_pool.FigurePool(af)
     try:
-        os.kill(pool._procs[1].pid or 0, signal.SIGKILL)
-        pool._procs[1].join()
+        second = pool.worker_pids()[1]
+        assert second is not None and second != os.getpid()
+        os.kill(second, signal.SIGKILL)
         pool.submit(result, RUN_FIGURES)
         pngs = pool.collect(timeout=120.0)
     finally:
@@ -53,6 +54,14 @@ def test_a_dead_worker_costs_only_the_parallelism(short: tuple[Path, Path]):
     assert sorted(pngs) == sorted((*RUN_FIGURES, "force_set"))
     for name in RUN_FIGURES:
         assert pngs[name] == render_png(name, result, af, afs, s0), name
+
+
+def test_workers_end_with_the_pool():
+    pool = figure_pool.FigurePool(None, force_set=False)
+    pids = pool.worker_pids()
+    assert all(p is not None for p in pids)
+    pool.close()
+    assert not any(figure_pool._alive(p) for p in pids)
 
 
 def test_a_long_run_reaches_the_workers_through_its_results_file(tmp_path: Path,
