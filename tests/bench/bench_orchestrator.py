@@ -44,13 +44,13 @@ def main() -> None:
                   f"{1e6 * master / steps:15.2f} {100 * master / fmu:8.1f}%")
         with tempfile.TemporaryDirectory() as tmp:
             t0 = time.perf_counter()
-            result.write_npz(Path(tmp) / "r.npz")
-            t_npz = time.perf_counter() - t0
+            result.write_parquet(Path(tmp) / "r.parquet")
+            t_parquet = time.perf_counter() - t0
             t0 = time.perf_counter()
             result.write_csv(Path(tmp) / "r.csv")
             t_csv = time.perf_counter() - t0
         print(f"{'':30s} writing {result.data.shape[0]} x {result.data.shape[1]} values: "
-              f"npz {t_npz:.2f} s, csv {t_csv:.2f} s")
+              f"parquet {t_parquet:.2f} s, csv {t_csv:.2f} s")
 
 
 if __name__ == "__main__":
