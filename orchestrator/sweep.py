@@ -14,6 +14,14 @@ Metrics per run: max and RMS position error after the disturbance onset, recover
 after the step on and after the step off until the error stays below the recovery band: 5 mm,
 or 4x the RMS error of the undisturbed hover before the step when sensor noise makes that
 larger; the larger of the two times), stable (finite and max error < ``diverged_bound``).
+
+Workers (:class:`Worker`): the calling process (``workers=1``), each process of the local pool
+and each Dask worker process instantiates the plant and controller FMUs once (one unzip, one
+library load) and between cases only resets them (fmi2Reset) and sets the next case's start
+values; the hover scenario and the start values every case shares (the airframe, the pose,
+S(0)) are built once per duration.  A worker sends back only the case's row of metrics.
+``reuse=False`` flies every case on freshly loaded FMUs instead: the previous path, and the
+oracle the tests hold the reused one to, bit for bit.
 """
 
 from __future__ import annotations
@@ -346,14 +354,16 @@ def _in_process(tasks: Sequence[Task], bar: Callable[..., None]) -> list[dict[st
 
 
 def _chunks(tasks: Sequence[Task], workers: int) -> list[list[Task]]:
-    """The tasks in batches, about 8 per worker: few enough messages that the scheduling
-    costs nothing, enough that no worker waits long for the last one."""
-    size = max(1, len(tasks) // (8 * max(workers, 1)))
+    """The tasks in batches of about 1 % of a worker's share (one task each up to 100 per
+    worker): a worker idles at most one batch at the end, and a message carries a batch."""
+    size = max(1, len(tasks) // (100 * max(workers, 1)))
     return [list(tasks[i:i + size]) for i in range(0, len(tasks), size)]
 
 
 def _on_pool(workers: int, tasks: Sequence[Task],
              bar: Callable[..., None]) -> list[dict[str, Any]]:
+    from orchestrator import master, runner  # noqa: F401  (forked workers inherit them)
+
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=workers) as ex:
         for done in ex.map(_batch, _chunks(tasks, workers)):

@@ -5,8 +5,9 @@ disturbance step, sensor noise; ``--duration`` s each, designs hinf and baseline
 
 * the single-run loop speed: ``orchestrator.master.run`` of the first sweep runs, each on
   fresh FMUs, real-time factor of the stepping loop alone (``meta["wall_time"]``);
-* sweeps (``orchestrator.sweep.run_sweep``), wall time of the whole call: every worker's
-  start-up (process, FMU loading) included, the designs' gains computed beforehand:
+* sweeps (``orchestrator.sweep.run_sweep``, the designs' gains computed beforehand), each
+  timed at two sizes: the whole call of the larger (every worker's start-up, process and
+  FMU loading, included) and the marginal rate between the two (start-up cancelled out):
 
   - the old path, fresh FMUs for every case (``reuse=False``), 1 worker;
   - FMUs instantiated once per worker and reset between cases: 1 worker (in process),
@@ -28,7 +29,7 @@ import os
 import platform
 import statistics
 import time
-from collections.abc import Callable
+from dataclasses import dataclass
 from typing import Any
 
 from orchestrator import sweep
@@ -52,15 +53,36 @@ def loop_rtf(n_runs: int, duration: float) -> tuple[float, float]:
     return duration / mean, mean
 
 
-def timed_sweep(cases: int, duration: float, **kw: Any) -> tuple[float, list[dict[str, Any]]]:
+@dataclass
+class Sweep:
+    """A sweep timed at two sizes: the whole call of the larger one (workers' start-up
+    included) and the marginal rate between them (start-up cancelled out)."""
+
+    label: str
+    workers: int
+    runs: int
+    wall: float
+    marginal: float  # runs/s
+    per_run: float  # mean wall time of one run_case, s
+
+
+def timed(cases: int, duration: float, **kw: Any) -> tuple[float, list[dict[str, Any]]]:
     t0 = time.perf_counter()
     rows = sweep.run_sweep(cases, seed=0, duration=duration, design_set=DESIGNS,
                            progress=False, **kw)
     return time.perf_counter() - t0, rows
 
 
-def with_dask(work: Callable[[Any], tuple[float, list[dict[str, Any]]]]
-              ) -> tuple[float, list[dict[str, Any]]] | None:
+def measure(label: str, n_workers: int, small: int, large: int, duration: float,
+            **kw: Any) -> Sweep:
+    t_small, rows_small = timed(small, duration, **kw)
+    t_large, rows = timed(large, duration, **kw)
+    marginal = (len(rows) - len(rows_small)) / (t_large - t_small)
+    return Sweep(label, n_workers, len(rows), t_large, marginal,
+                 statistics.fmean(r["wall_time"] for r in rows))
+
+
+def dask_sweeps(small: int, large: int, duration: float) -> Sweep | None:
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError:
@@ -68,19 +90,18 @@ def with_dask(work: Callable[[Any], tuple[float, list[dict[str, Any]]]]
     with LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
                       dashboard_address=None) as cluster, Client(cluster) as client:
         client.run(lambda: __import__("orchestrator.sweep"))  # imports, not FMUs
-        return work(client)
+        return measure("reused FMUs, Dask LocalCluster 2x1", 2, small, large, duration,
+                       dask=client)
 
 
-def row(label: str, workers: int, wall: float, rows: list[dict[str, Any]], duration: float,
-        rtf_loop: float, one: float | None) -> float:
-    rate = len(rows) / wall
-    per = rate / workers
-    vs_one = f"{rate / one:10.2f}x" if one else f"{'':11s}"
-    steady = duration / statistics.fmean(r["wall_time"] for r in rows)
-    print(f"{label:34s} {workers:7d} {len(rows):5d} {wall:7.2f} {rate:7.2f} {per:13.2f} "
-          f"{duration * per:9.1f}x {100 * duration * per / rtf_loop:7.0f} % {vs_one} "
-          f"{steady:8.1f}x")
-    return rate
+def report(s: Sweep, duration: float, rtf_loop: float, one: Sweep | None) -> None:
+    whole, per_whole = s.runs / s.wall, s.runs / s.wall / s.workers
+    per = s.marginal / s.workers
+    vs_one = (f"{whole / (one.runs / one.wall):6.2f}x {s.marginal / one.marginal:6.2f}x"
+              if one else f"{'':15s}")
+    print(f"{s.label:35s} {s.workers:2d} {s.runs:5d} {s.wall:6.2f} {whole:7.2f} "
+          f"{duration * per_whole:6.1f}x {s.marginal:7.2f} {duration * per:6.1f}x "
+          f"{100 * duration * per / rtf_loop:5.0f} % {vs_one} {duration / s.per_run:6.1f}x")
 
 
 def main() -> None:
@@ -93,7 +114,8 @@ def main() -> None:
                         help="single runs that give the loop speed (default 10)")
     parser.add_argument("--duration", type=float, default=6.0, help="s per run (default 6)")
     args = parser.parse_args()
-    d = args.duration
+    d, n = args.duration, args.cases
+    small = max(1, n // 6)
     load0 = os.getloadavg()
     print(f"machine: {platform.processor() or platform.machine()}, {os.cpu_count()} CPUs, "
           f"Python {platform.python_version()}; load average {load0[0]:.2f} before")
@@ -101,21 +123,28 @@ def main() -> None:
     rtf_loop, loop_s = loop_rtf(args.loop_runs, d)
     print(f"single-run loop (orchestrator.master.run, meta wall_time, {args.loop_runs} runs of "
           f"the sweep's cases, {d:g} s each): RTF {rtf_loop:.1f}x ({1e3 * loop_s:.1f} ms/run)")
-    print(f"{'sweep':34s} {'workers':>7s} {'runs':>5s} {'wall s':>7s} {'runs/s':>7s} "
-          f"{'runs/s/worker':>13s} {'RTF/worker':>10s} {'vs loop':>9s} {'vs 1 worker':>11s} "
-          f"{'per run':>9s}")
-    row("fresh FMUs per case (reuse=False)", 1,
-        *timed_sweep(args.old_cases, d, reuse=False), d, rtf_loop, None)
-    one = row("reused FMUs, in process", 1, *timed_sweep(args.cases, d), d, rtf_loop, None)
-    row("reused FMUs, 2 local processes", 2, *timed_sweep(args.cases, d, workers=2), d,
-        rtf_loop, one)
-    done = with_dask(lambda client: timed_sweep(args.cases, d, dask=client))
-    if done is None:
+    print(f"sweeps of {n} cases x {len(DESIGNS)} designs, and of {small} x {len(DESIGNS)} for "
+          "the marginal rate (the difference: workers' start-up cancelled out)")
+    print(f"{'':35s} {'':2s} {'':5s} {'whole call':^21s} {'marginal':^29s} "
+          f"{'vs 1 worker':^15s}")
+    print(f"{'sweep':35s} {'w':>2s} {'runs':>5s} {'wall s':>6s} {'runs/s':>7s} "
+          f"{'RTF/w':>7s} {'runs/s':>7s} {'RTF/w':>7s} {'vs loop':>7s} {'whole':>7s} "
+          f"{'marg.':>7s} {'1 run':>7s}")
+    old = args.old_cases
+    report(measure("fresh FMUs per case (reuse=False)", 1, max(1, old // 5), old, d,
+                   reuse=False), d, rtf_loop, None)
+    one = measure("reused FMUs, in process", 1, small, n, d)
+    report(one, d, rtf_loop, None)
+    report(measure("reused FMUs, 2 local processes", 2, small, n, d, workers=2), d, rtf_loop,
+           one)
+    dask = dask_sweeps(small, n, d)
+    if dask is None:
         print("dask.distributed not installed: no Dask figures")
     else:
-        row("reused FMUs, Dask LocalCluster 2x1", 2, *done, d, rtf_loop, one)
-    print(f"load average {os.getloadavg()[0]:.2f} after; 'per run': RTF of one run_case "
-          "(reset, set-up, loop, metrics) without the sweep around it")
+        report(dask, d, rtf_loop, one)
+    print(f"load average {os.getloadavg()[0]:.2f} after.  RTF/w: real-time factor per worker; "
+          "vs loop: marginal RTF per worker / single-run loop RTF; 1 run: RTF of one run_case "
+          "(reset, set-up, loop, metrics) alone")
 
 
 if __name__ == "__main__":
