@@ -354,10 +354,15 @@ def _in_process(tasks: Sequence[Task], bar: Callable[..., None]) -> list[dict[st
 
 
 def _chunks(tasks: Sequence[Task], workers: int) -> list[list[Task]]:
-    """The tasks in batches of about 1 % of a worker's share (one task each up to 100 per
-    worker): a worker idles at most one batch at the end, and a message carries a batch."""
-    size = max(1, len(tasks) // (100 * max(workers, 1)))
-    return [list(tasks[i:i + size]) for i in range(0, len(tasks), size)]
+    """Guided self-scheduling: each batch is 1 / (4 x workers) of the tasks still to hand
+    out, so batches shrink towards the end: few messages (a Dask task costs milliseconds of
+    scheduling), and the last ones single tasks, so no worker idles long at the end."""
+    out, i, n = [], 0, len(tasks)
+    while i < n:
+        size = max(1, (n - i) // (4 * max(workers, 1)))
+        out.append(list(tasks[i:i + size]))
+        i += size
+    return out
 
 
 def _on_pool(workers: int, tasks: Sequence[Task],

@@ -19,7 +19,7 @@ disturbance step, sensor noise; ``--duration`` s each, designs hinf and baseline
 
 The figures need a quiet machine: the load average before and after is printed.
 
-Usage: python tests/bench/bench_sweep.py [--cases 60] [--old-cases 10] [--duration 6]
+Usage: python tests/bench/bench_sweep.py [--cases 40] [--old-cases 10] [--duration 6]
 """
 
 from __future__ import annotations
@@ -27,6 +27,7 @@ from __future__ import annotations
 import argparse
 import os
 import platform
+import resource
 import statistics
 import time
 from dataclasses import dataclass
@@ -64,6 +65,21 @@ class Sweep:
     wall: float
     marginal: float  # runs/s
     per_run: float  # mean wall time of one run_case, s
+    cpu: float  # CPU seconds of the larger sweep, every process of it
+
+
+def _cpu(who: int) -> float:
+    r = resource.getrusage(who)
+    return r.ru_utime + r.ru_stime
+
+
+def cpu_now(client: Any = None) -> float:
+    """CPU seconds so far of this process, its reaped children (pool workers) and, with a
+    Dask client, the cluster's workers."""
+    total = _cpu(resource.RUSAGE_SELF) + _cpu(resource.RUSAGE_CHILDREN)
+    if client is not None:
+        total += sum(client.run(_cpu, resource.RUSAGE_SELF).values())
+    return total
 
 
 def timed(cases: int, duration: float, **kw: Any) -> tuple[float, list[dict[str, Any]]]:
@@ -76,10 +92,12 @@ def timed(cases: int, duration: float, **kw: Any) -> tuple[float, list[dict[str,
 def measure(label: str, n_workers: int, small: int, large: int, duration: float,
             **kw: Any) -> Sweep:
     t_small, rows_small = timed(small, duration, **kw)
+    cpu0 = cpu_now(kw.get("dask"))
     t_large, rows = timed(large, duration, **kw)
+    cpu = cpu_now(kw.get("dask")) - cpu0
     marginal = (len(rows) - len(rows_small)) / (t_large - t_small)
     return Sweep(label, n_workers, len(rows), t_large, marginal,
-                 statistics.fmean(r["wall_time"] for r in rows))
+                 statistics.fmean(r["wall_time"] for r in rows), cpu)
 
 
 def dask_sweeps(small: int, large: int, duration: float) -> Sweep | None:
@@ -90,8 +108,22 @@ def dask_sweeps(small: int, large: int, duration: float) -> Sweep | None:
     with LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
                       dashboard_address=None) as cluster, Client(cluster) as client:
         client.run(lambda: __import__("orchestrator.sweep"))  # imports, not FMUs
+        idle_background(client)
         return measure("reused FMUs, Dask LocalCluster 2x1", 2, small, large, duration,
                        dask=client)
+
+
+def idle_background(client: Any, seconds: float = 2.0) -> None:
+    """What an idle LocalCluster burns (heartbeats, monitors, the workers' profilers): the
+    cores it takes from the work on a 2-core machine."""
+    workers0, main0 = sum(client.run(_cpu, resource.RUSAGE_SELF).values()), _cpu(
+        resource.RUSAGE_SELF)
+    time.sleep(seconds)
+    workers = sum(client.run(_cpu, resource.RUSAGE_SELF).values()) - workers0
+    main = _cpu(resource.RUSAGE_SELF) - main0
+    print(f"idle Dask LocalCluster: {(workers + main) / seconds:.2f} cores (scheduler, nannies "
+          f"and client in this process {main / seconds:.2f}, the 2 workers "
+          f"{workers / seconds:.2f})")
 
 
 def report(s: Sweep, duration: float, rtf_loop: float, one: Sweep | None) -> None:
@@ -101,13 +133,14 @@ def report(s: Sweep, duration: float, rtf_loop: float, one: Sweep | None) -> Non
               if one else f"{'':15s}")
     print(f"{s.label:35s} {s.workers:2d} {s.runs:5d} {s.wall:6.2f} {whole:7.2f} "
           f"{duration * per_whole:6.1f}x {s.marginal:7.2f} {duration * per:6.1f}x "
-          f"{100 * duration * per / rtf_loop:5.0f} % {vs_one} {duration / s.per_run:6.1f}x")
+          f"{100 * duration * per / rtf_loop:5.0f} % {vs_one} {duration / s.per_run:6.1f}x "
+          f"{1e3 * s.cpu / s.runs:7.1f} {s.cpu / s.wall:5.2f}")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    parser.add_argument("--cases", type=int, default=60,
-                        help="cases of the reused-FMU sweeps (x 2 designs; default 60)")
+    parser.add_argument("--cases", type=int, default=40,
+                        help="cases of the reused-FMU sweeps (x 2 designs; default 40)")
     parser.add_argument("--old-cases", type=int, default=10,
                         help="cases of the fresh-FMU sweep (x 2 designs; default 10)")
     parser.add_argument("--loop-runs", type=int, default=10,
@@ -129,7 +162,7 @@ def main() -> None:
           f"{'vs 1 worker':^15s}")
     print(f"{'sweep':35s} {'w':>2s} {'runs':>5s} {'wall s':>6s} {'runs/s':>7s} "
           f"{'RTF/w':>7s} {'runs/s':>7s} {'RTF/w':>7s} {'vs loop':>7s} {'whole':>7s} "
-          f"{'marg.':>7s} {'1 run':>7s}")
+          f"{'marg.':>7s} {'1 run':>7s} {'CPU ms':>7s} {'cores':>5s}")
     old = args.old_cases
     report(measure("fresh FMUs per case (reuse=False)", 1, max(1, old // 5), old, d,
                    reuse=False), d, rtf_loop, None)
@@ -144,7 +177,10 @@ def main() -> None:
         report(dask, d, rtf_loop, one)
     print(f"load average {os.getloadavg()[0]:.2f} after.  RTF/w: real-time factor per worker; "
           "vs loop: marginal RTF per worker / single-run loop RTF; 1 run: RTF of one run_case "
-          "(reset, set-up, loop, metrics) alone")
+          "(reset, set-up, loop, metrics) alone; CPU ms: CPU time per run of every process of "
+          "the sweep (the same with 1 and 2 workers: nothing is done twice or waits spinning); "
+          "cores: CPU time / wall time, the cores the sweep got (2 workers below 2: the "
+          "machine was busy)")
 
 
 if __name__ == "__main__":
