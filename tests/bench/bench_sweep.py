@@ -168,13 +168,17 @@ def main() -> None:
                    reuse=False), d, rtf_loop, None)
     one = measure("reused FMUs, in process", 1, small, n, d)
     report(one, d, rtf_loop, None)
-    report(measure("reused FMUs, 2 local processes", 2, small, n, d, workers=2), d, rtf_loop,
-           one)
+    pool = measure("reused FMUs, 2 local processes", 2, small, n, d, workers=2)
+    report(pool, d, rtf_loop, one)
     dask = dask_sweeps(small, n, d)
     if dask is None:
         print("dask.distributed not installed: no Dask figures")
     else:
         report(dask, d, rtf_loop, one)
+    bound = ", ".join(f"{s.label.split(', ')[-1]} {2 * one.cpu / one.runs / (s.cpu / s.runs):.2f}x"
+                      for s in (pool, dask) if s is not None)
+    print(f"2 workers vs 1 if the CPU per run stays as measured and 2 cores are free "
+          f"(2 x CPU per run of 1 worker / CPU per run of 2): {bound}")
     print(f"load average {os.getloadavg()[0]:.2f} after.  RTF/w: real-time factor per worker; "
           "vs loop: marginal RTF per worker / single-run loop RTF; 1 run: RTF of one run_case "
           "(reset, set-up, loop, metrics) alone; CPU ms: CPU time per run of every process of "
