@@ -103,7 +103,8 @@ def test_outputs_and_cli(tmp_path, capsys):
     assert main(["sweep", "--cases", "1", "--duration", "2", "--out", str(tmp_path)]) == 0
     for name in ("sweep.csv", "report.md", "sweep_errors.png", "sweep_worst.png"):
         assert (tmp_path / name).stat().st_size > 0
-    assert "runs/s" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "runs/s" in out and "per worker" in out and "x real time" in out
     assert main(["sweep", "--cases", "0"]) == 2
     assert "fullpose: error:" in capsys.readouterr().err
     assert main(["sweep", "--cases", "1", "--noise", "-1"]) == 2
