@@ -89,10 +89,14 @@ def test_each_pool_worker_instantiates_its_fmus_once(monkeypatch, tmp_path):
     assert str(os.getpid()) not in pids
 
 
-def test_dask_local_cluster_gives_the_same_table(serial):
+@pytest.mark.parametrize("config", ["default", "sweep.DASK_CONFIG"])
+def test_dask_local_cluster_gives_the_same_table(serial, config):
     distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                                  dashboard_address=None) as cluster, \
+    import dask
+
+    with dask.config.set(sweep.DASK_CONFIG if config != "default" else {}), \
+            distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                     dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
         rows = sweep.run_sweep(N, seed=7, duration=DURATION, dask=client, progress=False)
     assert sweep.table_rows(rows) == sweep.table_rows(serial)

@@ -12,7 +12,8 @@ disturbance step, sensor noise; ``--duration`` s each, designs hinf and baseline
   - the old path, fresh FMUs for every case (``reuse=False``), 1 worker;
   - FMUs instantiated once per worker and reset between cases: 1 worker (in process),
     2 local worker processes, 2 workers of a local Dask cluster (2 processes x 1 thread,
-    started and its workers' imports done before the clock starts);
+    ``sweep.DASK_CONFIG``, started and its workers' imports done before the clock starts;
+    the idle CPU of a default cluster and of that one printed beside);
 
   with runs/s, runs/s and real-time factor per worker, per worker against the loop
   (target >= 80 %) and 2 workers against 1 (target >= 1.9x).
@@ -101,19 +102,26 @@ def measure(label: str, n_workers: int, small: int, large: int, duration: float,
 
 
 def dask_sweeps(small: int, large: int, duration: float) -> Sweep | None:
+    """The sweeps on a LocalCluster with ``sweep.DASK_CONFIG``; the idle background of a
+    default one and of that one."""
     try:
+        import dask
         from dask.distributed import Client, LocalCluster
     except ImportError:
         return None
-    with LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                      dashboard_address=None) as cluster, Client(cluster) as client:
-        client.run(lambda: __import__("orchestrator.sweep"))  # imports, not FMUs
-        idle_background(client)
-        return measure("reused FMUs, Dask LocalCluster 2x1", 2, small, large, duration,
-                       dask=client)
+    for label, config in (("default", {}), ("sweep.DASK_CONFIG", sweep.DASK_CONFIG)):
+        with dask.config.set(config), LocalCluster(
+                n_workers=2, processes=True, threads_per_worker=1,
+                dashboard_address=None) as cluster, Client(cluster) as client:
+            client.run(lambda: __import__("orchestrator.sweep"))  # imports, not FMUs
+            idle_background(client, label)
+            if config:
+                return measure("reused FMUs, Dask 2x1, DASK_CONFIG", 2, small, large,
+                               duration, dask=client)
+    return None
 
 
-def idle_background(client: Any, seconds: float = 2.0) -> None:
+def idle_background(client: Any, label: str, seconds: float = 2.0) -> None:
     """What an idle LocalCluster burns (heartbeats, monitors, the workers' profilers): the
     cores it takes from the work on a 2-core machine."""
     workers0, main0 = sum(client.run(_cpu, resource.RUSAGE_SELF).values()), _cpu(
@@ -121,7 +129,8 @@ def idle_background(client: Any, seconds: float = 2.0) -> None:
     time.sleep(seconds)
     workers = sum(client.run(_cpu, resource.RUSAGE_SELF).values()) - workers0
     main = _cpu(resource.RUSAGE_SELF) - main0
-    print(f"idle Dask LocalCluster: {(workers + main) / seconds:.2f} cores (scheduler, nannies "
+    print(f"idle Dask LocalCluster, {label}: {(workers + main) / seconds:.2f} cores "
+          f"(scheduler, nannies "
           f"and client in this process {main / seconds:.2f}, the 2 workers "
           f"{workers / seconds:.2f})")
 
@@ -175,8 +184,9 @@ def main() -> None:
         print("dask.distributed not installed: no Dask figures")
     else:
         report(dask, d, rtf_loop, one)
-    bound = ", ".join(f"{s.label.split(', ')[-1]} {2 * one.cpu / one.runs / (s.cpu / s.runs):.2f}x"
-                      for s in (pool, dask) if s is not None)
+    bound = ", ".join(f"{name} {2 * one.cpu / one.runs / (s.cpu / s.runs):.2f}x"
+                      for name, s in (("2 local processes", pool), ("Dask", dask))
+                      if s is not None)
     print(f"2 workers vs 1 if the CPU per run stays as measured and 2 cores are free "
           f"(2 x CPU per run of 1 worker / CPU per run of 2): {bound}")
     print(f"load average {os.getloadavg()[0]:.2f} after.  RTF/w: real-time factor per worker; "
