@@ -204,7 +204,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         print(f"{d:9s} stable {100 * s['stable_fraction']:.0f} %  max err mean "
               f"{s['max_err_mean']:.4f} m (worst {s['max_err_worst']:.4f})  RMS mean "
               f"{s['rms_err_mean']:.4f} m  recovery mean {s['recovery_mean']:.2f} s")
-    print(f"{len(rows)} runs in {wall:.1f} s ({len(rows) / wall:.2f} runs/s)")
+    rate = f"{len(rows) / wall:.2f} runs/s"
+    if not args.dask:  # a Dask cluster's worker count is the cluster's
+        per = len(rows) / wall / max(1, args.workers)
+        rate += f"; per worker {per:.2f} runs/s, {per * args.duration:.0f}x real time"
+    print(f"{len(rows)} runs in {wall:.1f} s ({rate})")
     print(f"wrote               {', '.join(str(f) for f in files)}")
     return 0
 

@@ -184,8 +184,30 @@ class FmuInstance:
                 self.slave.setBoolean(ref, [bool(value)])
 
     def set_many(self, values: Mapping[str, float | int | bool]) -> None:
+        """Sets every value: one FMI call per type (an FMU refuses a whole call before it
+        writes anything), and when a call is refused, one set per name, so the error names
+        the variable."""
+        by_type: dict[str, tuple[list[int], list[float | int | bool]]] = {}
         for name, value in values.items():
-            self.set(name, value)
+            v = self.variables.get(name)
+            if v is None:
+                raise KeyError(f"{self.md.modelName} has no variable {name!r}")
+            refs, vals = by_type.setdefault(v.type, ([], []))
+            refs.append(int(v.valueReference))
+            vals.append(value)
+        first = len(self.messages)
+        try:
+            for kind, (refs, vals) in by_type.items():
+                if kind == "Real":
+                    self.slave.setReal(refs, [float(x) for x in vals])
+                elif kind == "Integer":
+                    self.slave.setInteger(refs, [int(x) for x in vals])
+                else:
+                    self.slave.setBoolean(refs, [bool(x) for x in vals])
+        except FMICallException:
+            del self.messages[first:]  # the refused call's messages: said again below
+            for name, value in values.items():
+                self.set(name, value)
 
     # -- lifecycle -------------------------------------------------------------
 
@@ -219,6 +241,17 @@ class FmuInstance:
                    parameters: Mapping[str, float | int | bool] | None = None) -> None:
         self.enter_initialization(start_time, parameters)
         self.exit_initialization()
+
+    def reset(self) -> None:
+        """fmi2Reset: the instance is back in the Instantiated state with every variable at
+        its start value, as after fmi2Instantiate, ready for :meth:`enter_initialization`
+        (the FMU's unzipped files and loaded library are kept).  Legal in every state but
+        Fatal, so also after a failed run.  The messages logged so far are dropped: each run
+        of a reused instance sees its own."""
+        with self.call("fmi2Reset"):
+            self.slave.reset()
+        self.messages.clear()
+        self.time = 0.0
 
     def step(self, h: float) -> None:
         with self.call(f"fmi2DoStep at t = {self.time:.6g} s"):

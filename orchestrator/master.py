@@ -17,6 +17,7 @@ import ctypes
 import os
 import sys
 import time
+import weakref
 from collections.abc import Callable
 from dataclasses import replace
 from typing import TYPE_CHECKING
@@ -121,11 +122,27 @@ def lost_in(engine: Engine, first: int, last: int, criteria: LostCriteria) -> Lo
     return replace(found, row=found.row + first)
 
 
+_CONNECTIONS: weakref.WeakKeyDictionary[FmuInstance, tuple[FmuInstance, int, Connections]] = (
+    weakref.WeakKeyDictionary())
+
+
+def connections(plant: FmuInstance, ctrl: FmuInstance, n_rotors: int) -> Connections:
+    """``Connections.closed_loop``, found once per pair of instances and rotor count (a
+    reused pair, as in sweep workers, finds them at its first run only)."""
+    found = _CONNECTIONS.get(plant)
+    if found is not None and found[0] is ctrl and found[1] == n_rotors:
+        return found[2]
+    conn = Connections.closed_loop(plant, ctrl, n_rotors)
+    _CONNECTIONS[plant] = (ctrl, n_rotors, conn)
+    return conn
+
+
 class CoSimulation:
     """One run of a scenario: ``CoSimulation(scenario).run() -> RunResult``."""
 
     def __init__(self, scenario: Scenario, *, timing: bool = False,
-                 progress: bool | None = None, engine: str = "native") -> None:
+                 progress: bool | None = None, engine: str = "native",
+                 fmus: tuple[FmuInstance, FmuInstance] | None = None) -> None:
         if scenario.coupling not in COUPLINGS:
             raise ValueError(f"coupling must be one of {COUPLINGS}, got {scenario.coupling!r}")
         if engine not in ENGINES:
@@ -134,10 +151,15 @@ class CoSimulation:
         self.engine = engine
         self.timing = timing
         self.progress = progress
+        # (plant, controller) instantiated by the caller, freshly or after
+        # FmuInstance.reset(): the run uses them and leaves them open (sweep workers)
+        self.fmus = fmus
 
     def run(self, on_chunk: Callable[[int, int], None] | None = None) -> RunResult:
         """The whole run; stops early, with ``meta["outcome"]`` saying so, when the vehicle
         is lost (``orchestrator.outcome``)."""
+        if self.fmus is not None:
+            return self._run(*self.fmus, on_chunk)
         plant_inst = FmuInstance(plant_fmu(), "plant")
         try:
             ctrl_inst = FmuInstance(controller_fmu(), "controller")
@@ -179,7 +201,7 @@ class CoSimulation:
         refs0 = sc.references(np.zeros(1))
         refs0["rotor_health"] = sc.health(np.zeros(1))
         start = self.start_values(refs0)
-        conn = Connections.closed_loop(plant_inst, ctrl_inst, sc.airframe.n_rotors)
+        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors)
         check_memory(planned_rows or rows, sum(conn.widths()))  # refuses too large first
         engine = make_engine(self.engine, plant_inst, ctrl_inst, conn, Recording(conn, rows),
                              sc.step, sc.coupling)

@@ -14,22 +14,40 @@ Metrics per run: max and RMS position error after the disturbance onset, recover
 after the step on and after the step off until the error stays below the recovery band: 5 mm,
 or 4x the RMS error of the undisturbed hover before the step when sensor noise makes that
 larger; the larger of the two times), stable (finite and max error < ``diverged_bound``).
+
+Workers (:class:`Worker`): the calling process (``workers=1``), each process of the local pool
+and each Dask worker process instantiates the plant and controller FMUs once (one unzip, one
+library load) and between cases only resets them (fmi2Reset) and sets the next case's start
+values; the hover scenario and the start values every case shares (the airframe, the pose,
+S(0)) are built once per duration.  A worker sends back only the case's row of metrics.
+``reuse=False`` flies every case on freshly loaded FMUs instead: the previous path, and the
+oracle the tests hold the reused one to, bit for bit.
 """
 
 from __future__ import annotations
 
+import atexit
 import csv
 import dataclasses
+import functools
 import math
+import multiprocessing.util
 import os
 import sys
+import threading
 import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ProcessPoolExecutor
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
+
+if TYPE_CHECKING:
+    from orchestrator.fmu import FmuInstance
+    from orchestrator.master import CoSimulation
+    from orchestrator.scenario import Scenario
+    from orchestrator.start_values import StartValues
 
 NOISE = {"noise_pos": 0.002, "noise_vel": 0.005, "noise_acc": 0.05, "noise_att": 0.002,
          "noise_rate": 0.005, "noise_ang_acc": 0.05}
@@ -66,6 +84,19 @@ def sample_cases(n: int, seed: int = 0, noise: float = 1.0) -> list[dict[str, fl
     return cases
 
 
+DASK_CONFIG: dict[str, Any] = {
+    "distributed.admin.tick.interval": "200ms",  # the event-loop watchdog (default 20 ms)
+    "distributed.worker.profile.enabled": False,  # the statistical profiler (every 10 ms)
+    "distributed.worker.memory.monitor-interval": "1s",  # (100 ms)
+    "distributed.admin.system-monitor.interval": "2s",  # (500 ms)
+    "distributed.scheduler.work-stealing": False,  # uniform tasks, handed out in order
+}
+"""Dask settings for a cluster that runs sweeps: ``with dask.config.set(DASK_CONFIG):`` around
+creating a LocalCluster, or the matching ``DASK_DISTRIBUTED__...`` environment variables for
+``dask scheduler`` / ``dask worker``.  An idle default LocalCluster of 2 workers burns about
+0.2 cores (watchdog ticks, monitors, profiling), a tenth of a 2-core machine; with these
+about 0.04 (docs/orchestrator.md)."""
+
 MATCHED = "_matched"
 BASE_DESIGNS = ("hinf", "baseline", "prototype")
 
@@ -76,6 +107,12 @@ def designs() -> dict[str, dict[str, float]]:
     2.2, 6, 9, 20 1/s).  ``NAME_matched`` is
     NAME with the controller told the perturbed plant's true mass and inertia (the reference
     for what the model mismatch costs)."""
+    return {name: dict(p) for name, p in _designs().items()}
+
+
+@functools.cache
+def _designs() -> dict[str, dict[str, float]]:
+    """designs(), computed once per process (the baseline's crossover tuning takes ~0.5 s)."""
     from controller import baseline, gains_defaults
 
     base = dict(zip(BASE_DESIGNS, (gains_defaults.controller_parameters(),
@@ -85,18 +122,15 @@ def designs() -> dict[str, dict[str, float]]:
     return {**base, **{name + MATCHED: p for name, p in base.items()}}
 
 
-def run_case(case: dict[str, float], design: str, params: dict[str, float],
-             duration: float) -> dict[str, Any]:
-    """One closed-loop run; returns a table row."""
-    from orchestrator.engine import RunError
-    from orchestrator.fmu import FmuError
-    from orchestrator.master import run
-    from orchestrator.runner import prepare
+def perturbed(hover: Scenario, case: dict[str, float], design: str,
+              params: dict[str, float], duration: float) -> Scenario:
+    """The hover scenario of one (case, design): the sampled plant, the disturbance step and
+    sensor noise, the design's gains (``NAME_matched``: also the true mass and inertia).  It
+    differs from ``hover`` only in parameters and disturbances, never in the airframe, the
+    pose or the references."""
     from orchestrator.signals import Steps
 
-    t0 = time.perf_counter()
-    sc = prepare("hover", duration)
-    af = sc.airframe
+    af = hover.airframe
     plant: dict[str, Any] = {"mass": af.mass * case["mass_scale"]}
     for i, key in enumerate(("ixx_scale", "iyy_scale", "izz_scale")):
         plant[f"inertia[{i + 1},{i + 1}]"] = float(af.inertia[i, i]) * case[key]
@@ -105,90 +139,272 @@ def run_case(case: dict[str, float], design: str, params: dict[str, float],
     for name, level in NOISE.items():
         plant[name] = level * case["noise_scale"]
     plant["noise_seed"] = int(case["seed"])
-    t_off = T_ON + 0.5 * (duration - T_ON)
     amp = case["dist_amp"]
+    t_off = _t_off(duration)
     acc_x, acc_y, acc_z = (Steps((T_ON, t_off), (amp * case[k], 0.0))
                            for k in ("dist_x", "dist_y", "dist_z"))
-    ctrl = {**sc.controller_parameters, **params}
+    ctrl = {**hover.controller_parameters, **params}
     if design.endswith(MATCHED):
         ctrl.update({k: v for k, v in plant.items() if k == "mass" or k.startswith("inertia")})
-    sc = dataclasses.replace(sc, acceleration=(acc_x, acc_y, acc_z),
-                             plant_parameters={**sc.plant_parameters, **plant},
-                             controller_parameters=ctrl)
+    return dataclasses.replace(hover, acceleration=(acc_x, acc_y, acc_z),
+                               plant_parameters={**hover.plant_parameters, **plant},
+                               controller_parameters=ctrl)
+
+
+def _t_off(duration: float) -> float:
+    return T_ON + 0.5 * (duration - T_ON)
+
+
+def run_case(case: dict[str, float], design: str, params: dict[str, float],
+             duration: float, worker: Worker | None = None) -> dict[str, Any]:
+    """One closed-loop run; returns a table row.  With a ``worker`` the run uses its FMU
+    instances, reset (fmi2Reset) from the previous case; without, it loads fresh FMUs as a
+    single run does (the reference the reused path is tested against, bit for bit)."""
+    from orchestrator.engine import RunError
+    from orchestrator.fmu import FmuError
+
+    t0 = time.perf_counter()
+    if worker is None:
+        from orchestrator.master import CoSimulation
+        from orchestrator.runner import prepare
+
+        sc = perturbed(prepare("hover", duration), case, design, params, duration)
+        sim = CoSimulation(sc)
+    else:
+        sim = worker.simulation(lambda hover: perturbed(hover, case, design, params, duration),
+                                duration)
+        sc = sim.scenario
     row: dict[str, Any] = {k: case[k] for k in COLUMNS if k in case}
     row["design"] = design
     try:
-        res = run(sc, timing=False)
+        res = sim.run()
         t = np.asarray(res.time)
         err = np.linalg.norm(np.asarray(res.get("plant.pos")) - np.asarray(res.get("ref.pos_ref")),
                              axis=1)
     except (RunError, FmuError):  # a diverged plant may make an FMU refuse a step
         t, err = np.array([0.0]), np.array([np.inf])
+    row.update(case_metrics(t, err, len(t) >= sc.n_steps, duration))
+    row["wall_time"] = time.perf_counter() - t0
+    return row
+
+
+def case_metrics(t: np.ndarray, err: np.ndarray, complete: bool,
+                 duration: float) -> dict[str, Any]:
+    """stable, max_err, rms_err, recovery_time, recovery_band of one run's position error
+    ``err`` at times ``t`` (``complete``: the run reached its end)."""
     after = t >= T_ON
     e = err[after] if after.any() else err
-    finite = bool(np.all(np.isfinite(e))) and len(t) >= sc.n_steps
+    finite = bool(np.all(np.isfinite(e))) and complete
     mx = float(np.max(e)) if finite else math.inf
-    row["stable"] = int(finite and mx < DIVERGED_BOUND)
-    row["max_err"] = mx
-    row["rms_err"] = float(np.sqrt(np.mean(e ** 2))) if finite else math.inf
+    out: dict[str, Any] = {"stable": int(finite and mx < DIVERGED_BOUND), "max_err": mx,
+                           "rms_err": float(np.sqrt(np.mean(e ** 2))) if finite else math.inf}
     rec, band = 0.0, RECOVERY_BAND
     if finite:
         quiet = err[(t >= QUIET_FROM) & (t < T_ON)]
         if quiet.size:  # the sensor-noise floor before the disturbance, as seen undisturbed
             band = max(band, NOISE_FLOOR_FACTOR * float(np.sqrt(np.mean(quiet ** 2))))
+        t_off = _t_off(duration)
         for start, stop in ((T_ON, t_off), (t_off, duration + 1.0)):
             m = (t >= start) & (t < stop)
             bad = np.nonzero(err[m] > band)[0]
             if len(bad):
                 rec = max(rec, float(t[m][bad[-1]] - start))
-    row["recovery_time"] = rec if finite else math.inf
-    row["recovery_band"] = band
-    row["wall_time"] = time.perf_counter() - t0
-    return row
+    out["recovery_time"] = rec if finite else math.inf
+    out["recovery_band"] = band
+    return out
 
 
-def _task(args: tuple) -> dict[str, Any]:
-    return run_case(*args)
+class Worker:
+    """What one worker keeps from case to case: the plant and controller FMU instantiated
+    once (one unzip, one library load), reset with fmi2Reset before every case and then
+    given the case's parameters; the hover scenario and its start values (the airframe's
+    S(0) among them) once per duration.  ``with Worker() as w`` closes the instances."""
+
+    def __init__(self) -> None:
+        self.pid = os.getpid()
+        self._fmus: tuple[FmuInstance, FmuInstance] | None = None
+        self._hover: dict[float, tuple[Scenario, StartValues]] = {}
+
+    def fmus(self) -> tuple[FmuInstance, FmuInstance]:
+        """(plant, controller) in the Instantiated state, ready for a run: instantiated at
+        the first call, reset at every call (whatever the previous run left: completed,
+        lost, refused).  A pair that cannot be reset (an FMU gone Fatal) is replaced."""
+        from orchestrator.fmu import FmuError
+
+        if self._fmus is None:
+            self._fmus = _instantiate()
+        try:
+            for inst in self._fmus:
+                inst.reset()
+        except FmuError:
+            self.close()
+            self._fmus = _instantiate()
+        return self._fmus
+
+    def hover(self, duration: float) -> tuple[Scenario, StartValues]:
+        """The sweep's hover scenario of ``duration`` and both FMUs' start values for it."""
+        found = self._hover.get(duration)
+        if found is None:
+            from orchestrator.master import CoSimulation
+            from orchestrator.runner import prepare
+
+            sc = prepare("hover", duration)
+            found = self._hover[duration] = (sc, CoSimulation(sc).start_values())
+        return found
+
+    def simulation(self, make: Callable[[Scenario], Scenario], duration: float) -> CoSimulation:
+        """The run of ``make(hover)`` on this worker's reset instances."""
+        hover, start = self.hover(duration)
+        return _reused_run(make(hover), self.fmus(), start)
+
+    def close(self) -> None:
+        """Frees the instances (in the process that made them only: a forked child's copy
+        must not remove its parent's unzipped files)."""
+        fmus, self._fmus = self._fmus, None
+        if fmus is not None and os.getpid() == self.pid:
+            for inst in fmus:
+                inst.close()
+
+    def __enter__(self) -> Worker:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _instantiate() -> tuple[FmuInstance, FmuInstance]:
+    from controller import controller_fmu
+    from orchestrator.fmu import FmuInstance
+    from plant import plant_fmu
+
+    plant = FmuInstance(plant_fmu(), "plant")
+    try:
+        return plant, FmuInstance(controller_fmu(), "controller")
+    except BaseException:
+        plant.close()
+        raise
+
+
+def _reused_run(sc: Scenario, fmus: tuple[FmuInstance, FmuInstance],
+                base: StartValues) -> CoSimulation:
+    """A CoSimulation on reused instances whose start values are ``base`` (the hover
+    scenario's, computed once) with the case's overrides on top: what
+    ``start_values(...)`` gives for the case, as the scenario differs from the hover one
+    only in its overrides."""
+    from orchestrator.master import CoSimulation
+    from orchestrator.start_values import StartValues
+
+    class ReusedRun(CoSimulation):
+        def start_values(self, refs0: dict[str, np.ndarray] | None = None) -> StartValues:
+            return StartValues(plant={**base.plant, **self.scenario.plant_parameters},
+                               controller={**base.controller,
+                                           **self.scenario.controller_parameters})
+
+    return ReusedRun(sc, fmus=fmus)
+
+
+_LOCAL = threading.local()
+
+
+def process_worker() -> Worker:
+    """This process's worker (one per thread), made at its first case and closed when the
+    process exits; a forked child makes its own."""
+    w: Worker | None = getattr(_LOCAL, "worker", None)
+    if w is None or w.pid != os.getpid():
+        w = _LOCAL.worker = Worker()
+        atexit.register(w.close)
+        multiprocessing.util.Finalize(None, w.close, exitpriority=0)  # pool workers' exit
+    return w
+
+
+Task = tuple[dict[str, float], str, dict[str, float], float, bool]
+"""(case, design, the design's controller parameters, duration, reuse FMUs)."""
+
+
+def _task(args: Task) -> dict[str, Any]:
+    case, design, params, duration, reuse = args
+    return run_case(case, design, params, duration, process_worker() if reuse else None)
+
+
+def _batch(tasks: Sequence[Task]) -> list[dict[str, Any]]:
+    return [_task(t) for t in tasks]
 
 
 def run_sweep(n: int, seed: int = 0, duration: float = 6.0, workers: int = 1,
               dask: str | Any | None = None, progress: bool | None = None,
               design_set: Sequence[str] = ("hinf", "baseline"),
-              noise: float = 1.0) -> list[dict[str, Any]]:
-    """All (case, design) runs, sorted by (case, design); identical for any worker count."""
+              noise: float = 1.0, reuse: bool = True) -> list[dict[str, Any]]:
+    """All (case, design) runs, sorted by (case, design); identical for any worker count
+    and with or without ``reuse`` (each worker's FMUs instantiated once and reset between
+    cases; ``reuse=False``: fresh FMUs loaded for every case)."""
     params = designs()
     unknown = [d for d in design_set if d not in params]
     if unknown or not design_set:
         raise ValueError(f"unknown design(s) {unknown or '(none)'}; known: {', '.join(params)}")
-    tasks = [(c, d, params[d], duration) for c in sample_cases(n, seed, noise)
-             for d in design_set]
+    tasks: list[Task] = [(c, d, params[d], duration, reuse)
+                         for c in sample_cases(n, seed, noise) for d in design_set]
     if progress is None:
         progress = sys.stderr.isatty()
-    rows: list[dict[str, Any]] = []
     bar = _bar(len(tasks), progress)
     if dask is not None:
-        from dask.distributed import Client, as_completed
-
-        client: Any = dask if hasattr(dask, "submit") else Client(dask)
-        try:
-            futs = [client.submit(_task, t, pure=False) for t in tasks]
-            for f in as_completed(futs):
-                rows.append(f.result())
-                bar(1)
-        finally:
-            if client is not dask:
-                client.close()
+        rows = _on_dask(dask, tasks, bar)
     elif workers <= 1:
-        for t in tasks:
-            rows.append(_task(t))
-            bar(1)
+        rows = _in_process(tasks, bar)
     else:
-        with ProcessPoolExecutor(max_workers=workers) as ex:
-            for r in ex.map(_task, tasks, chunksize=1):
-                rows.append(r)
-                bar(1)
+        rows = _on_pool(workers, tasks, bar)
     bar(0, close=True)
     rows.sort(key=lambda r: (r["case"], r["design"]))
+    return rows
+
+
+def _in_process(tasks: Sequence[Task], bar: Callable[..., None]) -> list[dict[str, Any]]:
+    rows = []
+    with Worker() as w:
+        for case, design, params, duration, reuse in tasks:
+            rows.append(run_case(case, design, params, duration, w if reuse else None))
+            bar(1)
+    return rows
+
+
+def _chunks(tasks: Sequence[Task], workers: int) -> list[list[Task]]:
+    """Guided self-scheduling: each batch is 1 / (4 x workers) of the tasks still to hand
+    out, so batches shrink towards the end: few messages (a Dask task costs milliseconds of
+    scheduling), and the last ones single tasks, so no worker idles long at the end."""
+    out, i, n = [], 0, len(tasks)
+    while i < n:
+        size = max(1, (n - i) // (4 * max(workers, 1)))
+        out.append(list(tasks[i:i + size]))
+        i += size
+    return out
+
+
+def _on_pool(workers: int, tasks: Sequence[Task],
+             bar: Callable[..., None]) -> list[dict[str, Any]]:
+    from orchestrator import master, runner  # noqa: F401  (forked workers inherit them)
+
+    rows: list[dict[str, Any]] = []
+    with ProcessPoolExecutor(max_workers=workers) as ex:
+        for done in ex.map(_batch, _chunks(tasks, workers)):
+            rows += done
+            bar(len(done))
+    return rows
+
+
+def _on_dask(dask: str | Any, tasks: Sequence[Task],
+             bar: Callable[..., None]) -> list[dict[str, Any]]:
+    from dask.distributed import Client, as_completed
+
+    client: Any = dask if hasattr(dask, "submit") else Client(dask)
+    rows: list[dict[str, Any]] = []
+    try:
+        threads = sum(client.nthreads().values())
+        futs = [client.submit(_batch, b, pure=False) for b in _chunks(tasks, threads)]
+        for _, done in as_completed(futs, with_results=True):
+            rows += done
+            bar(len(done))
+    finally:
+        if client is not dask:
+            client.close()
     return rows
 
 

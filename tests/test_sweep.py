@@ -1,7 +1,11 @@
-"""The Monte-Carlo campaign: reproducible with 1 and 2 processes and on a Dask cluster;
-report files exist; the CLI runs it."""
+"""The Monte-Carlo campaign: reproducible with 1 and 2 processes and on a Dask cluster, and
+bit-identical whether each worker reuses its FMU instances (fmi2Reset between cases) or loads
+fresh ones per case; report files exist; the CLI runs it."""
 
 from __future__ import annotations
+
+import multiprocessing
+import os
 
 import pytest
 
@@ -16,6 +20,11 @@ def serial():
     return sweep.run_sweep(N, seed=7, duration=DURATION, workers=1, progress=False)
 
 
+def exact(rows):
+    """The rows without their wall times, every metric as computed (not rounded)."""
+    return [{k: v for k, v in r.items() if k != "wall_time"} for r in rows]
+
+
 def test_sampling_is_seeded():
     assert sweep.sample_cases(5, 3) == sweep.sample_cases(5, 3)
     assert sweep.sample_cases(5, 3) != sweep.sample_cases(5, 4)
@@ -27,23 +36,79 @@ def test_sampling_is_seeded():
 def test_two_processes_give_the_same_table(serial):
     par = sweep.run_sweep(N, seed=7, duration=DURATION, workers=2, progress=False)
     assert sweep.table_rows(par) == sweep.table_rows(serial)
+    assert exact(par) == exact(serial)
     assert len(serial) == 2 * N and all(r["stable"] for r in serial)
 
 
-def test_dask_local_cluster_gives_the_same_table(serial):
+def test_reused_fmus_give_the_table_of_fresh_fmus_per_case(serial):
+    """The oracle of the reused path: every case on freshly loaded FMUs (reuse=False)."""
+    fresh = sweep.run_sweep(N, seed=7, duration=DURATION, workers=1, progress=False,
+                            reuse=False)
+    assert exact(fresh) == exact(serial)
+    par = sweep.run_sweep(N, seed=7, duration=DURATION, workers=2, progress=False,
+                          reuse=False)
+    assert exact(par) == exact(serial)
+
+
+def test_a_worker_instantiates_once_and_survives_lost_and_refused_cases(monkeypatch):
+    """One worker flies a normal case, a lost one (a 300 m/s^2 disturbance), one the plant
+    refuses to initialize (a negative motor time constant), then normal ones: each row is
+    the row of that case on fresh FMUs, and the FMUs were instantiated once."""
+    made = []
+    instantiate = sweep._instantiate
+    monkeypatch.setattr(sweep, "_instantiate", lambda: made.append(1) or instantiate())
+    params = sweep.designs()
+    c0, c1, c2 = sweep.sample_cases(3, 9)
+    cases = [(c0, "hinf"), ({**c1, "dist_amp": 300.0}, "baseline"),
+             ({**c1, "tau_motor_scale": -1.0}, "hinf"), (c2, "prototype_matched"),
+             (c0, "hinf")]
+    with sweep.Worker() as w:
+        reused = [sweep.run_case(c, d, params[d], DURATION, w) for c, d in cases]
+    fresh = [sweep.run_case(c, d, params[d], DURATION) for c, d in cases]
+    assert exact(reused) == exact(fresh)
+    assert [r["stable"] for r in fresh] == [1, 0, 0, 1, 1]
+    assert made == [1]
+
+
+@pytest.mark.skipif(multiprocessing.get_start_method() != "fork",
+                    reason="counts instantiations through a patch the pool's children inherit")
+def test_each_pool_worker_instantiates_its_fmus_once(monkeypatch, tmp_path):
+    log = tmp_path / "pids"
+    instantiate = sweep._instantiate
+
+    def counted():
+        with log.open("a") as f:
+            f.write(f"{os.getpid()}\n")
+        return instantiate()
+
+    monkeypatch.setattr(sweep, "_instantiate", counted)
+    rows = sweep.run_sweep(4, seed=1, duration=2.0, workers=2, progress=False)
+    assert len(rows) == 8
+    pids = log.read_text().split()
+    assert 1 <= len(pids) <= 2 and len(set(pids)) == len(pids)
+    assert str(os.getpid()) not in pids
+
+
+@pytest.mark.parametrize("config", ["default", "sweep.DASK_CONFIG"])
+def test_dask_local_cluster_gives_the_same_table(serial, config):
     distributed = pytest.importorskip("dask.distributed")
-    with distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
-                                  dashboard_address=None) as cluster, \
+    import dask
+
+    with dask.config.set(sweep.DASK_CONFIG if config != "default" else {}), \
+            distributed.LocalCluster(n_workers=2, processes=True, threads_per_worker=1,
+                                     dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
         rows = sweep.run_sweep(N, seed=7, duration=DURATION, dask=client, progress=False)
     assert sweep.table_rows(rows) == sweep.table_rows(serial)
+    assert exact(rows) == exact(serial)
 
 
 def test_outputs_and_cli(tmp_path, capsys):
     assert main(["sweep", "--cases", "1", "--duration", "2", "--out", str(tmp_path)]) == 0
     for name in ("sweep.csv", "report.md", "sweep_errors.png", "sweep_worst.png"):
         assert (tmp_path / name).stat().st_size > 0
-    assert "runs/s" in capsys.readouterr().out
+    out = capsys.readouterr().out
+    assert "runs/s" in out and "per worker" in out and "x real time" in out
     assert main(["sweep", "--cases", "0"]) == 2
     assert "fullpose: error:" in capsys.readouterr().err
     assert main(["sweep", "--cases", "1", "--noise", "-1"]) == 2
