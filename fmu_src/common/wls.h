@@ -107,6 +107,7 @@ typedef struct {
     double mur[FP_WLS_MAX_CONS];
     double r[FP_WLS_MAX_ROWS];
     double cinv[FP_WLS_MAX_CONS];
+    double csq[FP_WLS_MAX_CONS], cnorm[FP_WLS_MAX_CONS]; /* row norms of the last solve's C */
     double qm[FP_WLS_NV1 * FP_WLS_NV1];
     double z[FP_WLS_NV1 * FP_WLS_NV1];
     double az[FP_WLS_MAX_ROWS * FP_WLS_NV1];
@@ -163,6 +164,22 @@ void fp_wls_reset(FpWls *w);
  * FP_WLS_INFEASIBLE (x is defined and usable), FP_ERROR for FP_WLS_BAD_INPUT.
  */
 FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out);
+
+/*
+ * fp_wls_solve without the two figures of the result that cost a pass over the data:
+ * out->objective and out->max_violation are -1 (not computed).  Everything else, x and the
+ * working set included, is exactly what fp_wls_solve gives.  For control loops that use
+ * only the status and the iterations.
+ */
+FpStatus fp_wls_solve_brief(FpWls *w, int max_iter, FpWlsResult *out);
+
+/*
+ * Ask the memory system for the parts of w that the next solve reads and writes (its data
+ * as sized by fp_wls_setup and the workspace it uses), so that they arrive together while
+ * the caller builds the problem instead of one cache miss at a time during the solve.
+ * A hint only (a no-op on compilers without __builtin_prefetch): changes no value.
+ */
+void fp_wls_prefetch(const FpWls *w);
 
 /* "optimal", "max_iter", "infeasible", "bad_input" (or "unknown"). */
 const char *fp_wls_status_name(int status);
