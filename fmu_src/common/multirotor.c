@@ -15,18 +15,42 @@ void fp_rotor_rotation(double alpha, double beta, double gamma, double r[3][3]) 
     m3_mul(&r[0][0], &ry[0][0], &r[0][0]);
 }
 
-void fp_thrust_direction(double alpha, double beta, double gamma, double t[3]) {
-    double sa = sin(alpha), ca = cos(alpha), sb = sin(beta), cb = cos(beta);
+static void thrust_direction_sc(double sa, double ca, double sb, double cb, double sg,
+                                double cg, double t[3]) {
     double lx = -sb, ly = sa * cb, lz = -ca * cb; /* -Rx(alpha) Ry(beta) e_z */
-    double cg = cos(gamma), sg = sin(gamma);
     t[0] = cg * lx - sg * ly;
     t[1] = sg * lx + cg * ly;
     t[2] = lz;
 }
 
-void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, double *beta) {
-    double n = sqrt(v3_dot(f, f));
+void fp_thrust_direction(double alpha, double beta, double gamma, double t[3]) {
+    double sa = sin(alpha), ca = cos(alpha), sb = sin(beta), cb = cos(beta);
     double cg = cos(gamma), sg = sin(gamma);
+    thrust_direction_sc(sa, ca, sb, cb, sg, cg, t);
+}
+
+void fp_rotor_trig_mounts(const FpRotorSet *rs, FpRotorTrig *tr) {
+    int i;
+    for (i = 0; i < rs->n && i < FP_MAX_ROTORS; i++) {
+        tr->cg[i] = cos(rs->gamma[i]);
+        tr->sg[i] = sin(rs->gamma[i]);
+    }
+}
+
+void fp_rotor_trig_tilts(const FpRotorSet *rs, const double alpha[], const double beta[],
+                         FpRotorTrig *tr) {
+    int i;
+    for (i = 0; i < rs->n && i < FP_MAX_ROTORS; i++) {
+        tr->sa[i] = sin(alpha[i]);
+        tr->ca[i] = cos(alpha[i]);
+        tr->sb[i] = sin(beta[i]);
+        tr->cb[i] = cos(beta[i]);
+    }
+}
+
+static void tilt_from_direction_sc(const double f[3], double sg, double cg, double *alpha,
+                                   double *beta) {
+    double n = sqrt(v3_dot(f, f));
     double lx, ly, lz, s;
     if (!(n > 0.0)) {
         *alpha = 0.0;
@@ -42,6 +66,11 @@ void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, doub
     if (s < -1.0) s = -1.0;
     *beta = asin(s);
     *alpha = atan2(ly, -lz);
+}
+
+void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, double *beta) {
+    double cg = cos(gamma), sg = sin(gamma);
+    tilt_from_direction_sc(f, sg, cg, alpha, beta);
 }
 
 void fp_paper_hexacopter(FpAirframe *af) {
@@ -73,10 +102,9 @@ void fp_paper_hexacopter(FpAirframe *af) {
     rs->omega_max = 2000.0 * 2.0 * pi / 60.0;
 }
 
-void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, double dt_dalpha[3],
-                                  double dt_dbeta[3]) {
-    double sa = sin(alpha), ca = cos(alpha), sb = sin(beta), cb = cos(beta);
-    double cg = cos(gamma), sg = sin(gamma);
+static void thrust_direction_jacobian_sc(double sa, double ca, double sb, double cb,
+                                         double sg, double cg, double dt_dalpha[3],
+                                         double dt_dbeta[3]) {
     /* t = Rz(gamma) [-sb, sa cb, -ca cb] */
     double ax = 0.0, ay = ca * cb, az = sa * cb;
     double bx = -cb, by = -sa * sb, bz = ca * sb;
@@ -86,6 +114,13 @@ void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, doubl
     dt_dbeta[0] = cg * bx - sg * by;
     dt_dbeta[1] = sg * bx + cg * by;
     dt_dbeta[2] = bz;
+}
+
+void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, double dt_dalpha[3],
+                                  double dt_dbeta[3]) {
+    double sa = sin(alpha), ca = cos(alpha), sb = sin(beta), cb = cos(beta);
+    double cg = cos(gamma), sg = sin(gamma);
+    thrust_direction_jacobian_sc(sa, ca, sb, cb, sg, cg, dt_dalpha, dt_dbeta);
 }
 
 static void torque_arm(const FpRotorSet *rs, int i, double m[3][3]) {
@@ -139,15 +174,25 @@ FpStatus fp_effectiveness_bprime(const FpRotorSet *rs, const double alpha[], con
 
 FpStatus fp_effectiveness_b2prime(const FpRotorSet *rs, const double alpha[], const double beta[],
                                   const double omega[], double *b2p) {
-    int i, j, k, cols;
+    FpRotorTrig tr;
     if (check_set(rs) != FP_OK || b2p == NULL) return FP_ERROR;
+    fp_rotor_trig_mounts(rs, &tr);
+    fp_rotor_trig_tilts(rs, alpha, beta, &tr);
+    return fp_effectiveness_b2prime_trig(rs, &tr, omega, b2p);
+}
+
+FpStatus fp_effectiveness_b2prime_trig(const FpRotorSet *rs, const FpRotorTrig *tr,
+                                       const double omega[], double *b2p) {
+    int i, j, k, cols;
+    if (check_set(rs) != FP_OK || b2p == NULL || tr == NULL) return FP_ERROR;
     cols = 3 * rs->n;
     for (i = 0; i < rs->n; i++) {
         double m[3][3], t[3], da[3], db[3], c[3][3];
         double thrust = rs->k_t * omega[i] * omega[i];
         torque_arm(rs, i, m);
-        fp_thrust_direction(alpha[i], beta[i], rs->gamma[i], t);
-        fp_thrust_direction_jacobian(alpha[i], beta[i], rs->gamma[i], da, db);
+        thrust_direction_sc(tr->sa[i], tr->ca[i], tr->sb[i], tr->cb[i], tr->sg[i], tr->cg[i], t);
+        thrust_direction_jacobian_sc(tr->sa[i], tr->ca[i], tr->sb[i], tr->cb[i], tr->sg[i],
+                                     tr->cg[i], da, db);
         for (j = 0; j < 3; j++) { /* d(force)/d(alpha, beta, omega) */
             c[j][0] = thrust * da[j];
             c[j][1] = thrust * db[j];
@@ -169,11 +214,19 @@ FpStatus fp_effectiveness_b2prime(const FpRotorSet *rs, const double alpha[], co
 void fp_rotor_wrench(const FpRotorSet *rs, const double alpha[], const double beta[],
                      const double omega[], const double efficiency[], double f_b[3],
                      double tau_b[3]) {
+    FpRotorTrig tr;
+    fp_rotor_trig_mounts(rs, &tr);
+    fp_rotor_trig_tilts(rs, alpha, beta, &tr);
+    fp_rotor_wrench_trig(rs, &tr, omega, efficiency, f_b, tau_b);
+}
+
+void fp_rotor_wrench_trig(const FpRotorSet *rs, const FpRotorTrig *tr, const double omega[],
+                          const double efficiency[], double f_b[3], double tau_b[3]) {
     int i, j;
     for (j = 0; j < 3; j++) f_b[j] = tau_b[j] = 0.0;
-    for (i = 0; i < rs->n; i++) {
+    for (i = 0; i < rs->n && i < FP_MAX_ROTORS; i++) {
         double t[3], f[3], arm[3], thrust;
-        fp_thrust_direction(alpha[i], beta[i], rs->gamma[i], t);
+        thrust_direction_sc(tr->sa[i], tr->ca[i], tr->sb[i], tr->cb[i], tr->sg[i], tr->cg[i], t);
         thrust = rs->k_t * omega[i] * omega[i] * (efficiency ? efficiency[i] : 1.0);
         for (j = 0; j < 3; j++) f[j] = thrust * t[j];
         v3_cross(rs->pos[i], f, arm);
@@ -228,18 +281,30 @@ FpStatus fp_cholesky_solve(double *a, int n, double *b) {
 
 FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], double alpha[],
                              double beta[], double omega[], char *why, int why_size) {
+    FpPreferredSplit ps;
+    if (fp_preferred_prepare(rs, &ps, why, why_size) != FP_OK) return FP_ERROR;
+    return fp_preferred_apply(rs, &ps, wrench, alpha, beta, omega, why, why_size);
+}
+
+FpStatus fp_preferred_prepare(const FpRotorSet *rs, FpPreferredSplit *ps, char *why,
+                              int why_size) {
     /* Columns of the reduced effectiveness matrix: 3 per tilting rotor (its
      * force vector), 1 per fixed rotor (its thrust along t_i). */
-    double cols[6][3 * FP_MAX_ROTORS];
-    double gram[36], y[6], x[3 * FP_MAX_ROTORS], back[6];
-    int first[FP_MAX_ROTORS];
-    int i, j, k, m = 0, pass;
-    double trace = 0.0, scale = 0.0, err = 0.0;
-    FpStatus status = FP_OK;
+    double (*cols)[3 * FP_MAX_ROTORS] = ps->cols;
+    double *gram = ps->gram;
+    int32_t *first = ps->first;
+    int i, j, k, m = 0;
+    double trace = 0.0;
     if (why != NULL && why_size > 0) why[0] = '\0';
+    ps->status = FP_ERROR;
+    ps->m = 0;
     if (check_set(rs) != FP_OK) {
         if (why) snprintf(why, (size_t)why_size, "invalid rotor set");
         return FP_ERROR;
+    }
+    for (i = 0; i < rs->n; i++) {
+        ps->cg[i] = cos(rs->gamma[i]);
+        ps->sg[i] = sin(rs->gamma[i]);
     }
     for (i = 0; i < rs->n; i++) {
         double arm[3][3];
@@ -276,6 +341,26 @@ FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], doubl
         if (why) snprintf(why, (size_t)why_size, "rotor geometry gives a singular allocation");
         return FP_ERROR;
     }
+    ps->m = m;
+    ps->status = FP_OK;
+    return FP_OK;
+}
+
+FpStatus fp_preferred_apply(const FpRotorSet *rs, const FpPreferredSplit *ps,
+                            const double wrench[6], double alpha[], double beta[],
+                            double omega[], char *why, int why_size) {
+    const double (*cols)[3 * FP_MAX_ROTORS] = ps->cols;
+    const double *gram = ps->gram;
+    const int32_t *first = ps->first;
+    double y[6], x[3 * FP_MAX_ROTORS], back[6];
+    int i, k, m = ps->m, pass;
+    double scale = 0.0, err = 0.0;
+    FpStatus status = FP_OK;
+    if (why != NULL && why_size > 0) why[0] = '\0';
+    if (ps->status != FP_OK || check_set(rs) != FP_OK || m < 1 || m > 3 * rs->n) {
+        if (why) snprintf(why, (size_t)why_size, "invalid rotor set");
+        return FP_ERROR;
+    }
     for (k = 0; k < m; k++) x[k] = 0.0;
     for (i = 0; i < 6; i++) y[i] = wrench[i];
     /* two passes: the second (iterative refinement) removes the regularization's
@@ -298,7 +383,7 @@ FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], doubl
         if (fp_rotor_tilts(rs, i)) {
             const double *f = &x[first[i]];
             thrust = sqrt(v3_dot(f, f));
-            fp_tilt_from_direction(f, rs->gamma[i], &alpha[i], &beta[i]);
+            tilt_from_direction_sc(f, ps->sg[i], ps->cg[i], &alpha[i], &beta[i]);
         } else {
             thrust = x[first[i]];
             alpha[i] = rs->alpha_min[i];

@@ -89,6 +89,29 @@ void fp_paper_hexacopter(FpAirframe *af);
         (rs)->omega_max = (m)->omega_max;                                     \
     } while (0)
 
+/* sin and cos of every rotor's tilt angles (alpha, beta) and mounting azimuth (gamma), so
+ * that a sample that needs the thrust directions, their derivatives and the wrench at one
+ * actuator state evaluates each once.  The *_trig functions below give exactly (to the
+ * bit) what their angle-taking counterparts give. */
+typedef struct {
+    double sa[FP_MAX_ROTORS], ca[FP_MAX_ROTORS]; /* alpha */
+    double sb[FP_MAX_ROTORS], cb[FP_MAX_ROTORS]; /* beta */
+    double sg[FP_MAX_ROTORS], cg[FP_MAX_ROTORS]; /* gamma */
+} FpRotorTrig;
+
+/* The gamma part of tr (constant for a rotor set). */
+void fp_rotor_trig_mounts(const FpRotorSet *rs, FpRotorTrig *tr);
+
+/* The alpha and beta part of tr at the tilts alpha[], beta[] (rs->n each). */
+void fp_rotor_trig_tilts(const FpRotorSet *rs, const double alpha[], const double beta[],
+                         FpRotorTrig *tr);
+
+/* fp_rotor_wrench and fp_effectiveness_b2prime from tr (both parts filled). */
+void fp_rotor_wrench_trig(const FpRotorSet *rs, const FpRotorTrig *tr, const double omega[],
+                          const double efficiency[], double f_b[3], double tau_b[3]);
+FpStatus fp_effectiveness_b2prime_trig(const FpRotorSet *rs, const FpRotorTrig *tr,
+                                       const double omega[], double *b2p);
+
 /* Partial derivatives of the thrust direction t_i with respect to alpha and beta. */
 void fp_thrust_direction_jacobian(double alpha, double beta, double gamma, double dt_dalpha[3],
                                   double dt_dbeta[3]);
@@ -133,6 +156,25 @@ int fp_rotor_tilts(const FpRotorSet *rs, int i);
  * within 1e-6 relative and every actuator is inside its limits; otherwise
  * FP_ERROR with the reason in why (and the unclamped split in the outputs).
  */
+/* What fp_preferred_config needs of the geometry alone: the reduced effectiveness
+ * columns, the Cholesky factor of their regularised Gram matrix, the mounting azimuths'
+ * sin and cos.  fp_preferred_prepare + fp_preferred_apply = fp_preferred_config, to the
+ * bit; a controller prepares once per rotor set and applies every sample. */
+typedef struct {
+    double cols[6][3 * FP_MAX_ROTORS];
+    double gram[36]; /* Cholesky factor */
+    double sg[FP_MAX_ROTORS], cg[FP_MAX_ROTORS];
+    int32_t first[FP_MAX_ROTORS]; /* first column of each rotor */
+    int32_t m;                    /* columns */
+    int32_t status;               /* FP_OK, or FP_ERROR: invalid set or singular geometry */
+} FpPreferredSplit;
+
+FpStatus fp_preferred_prepare(const FpRotorSet *rs, FpPreferredSplit *ps, char *why,
+                              int why_size);
+FpStatus fp_preferred_apply(const FpRotorSet *rs, const FpPreferredSplit *ps,
+                            const double wrench[6], double alpha[], double beta[],
+                            double omega[], char *why, int why_size);
+
 FpStatus fp_preferred_config(const FpRotorSet *rs, const double wrench[6], double alpha[],
                              double beta[], double omega[], char *why, int why_size);
 

@@ -36,6 +36,7 @@
  *   ends after this one iteration, otherwise it continues from there (or from
  *   its projection if the point is infeasible).
  */
+#include <stdint.h>
 #include <string.h>
 
 #include "wls_internal.h"
@@ -136,6 +137,12 @@ static int pick_drop(Ctx *c) {
     /* per variable: the rounding scale of its own gradient entry, so that a badly scaled
      * column's bound multiplier is judged on its own scale, not on the largest column's */
     double gsj[FP_WLS_MAX_VARS + 1], tolj[FP_WLS_MAX_VARS + 1];
+    /* no multiplier to judge (no active row, no variable at a bound): nothing to drop */
+    if (nw == 0) {
+        int fixed = 0;
+        for (j = 0; j < nv; j++) fixed |= k->state[j] == ST_LB || k->state[j] == ST_UB;
+        if (!fixed) return -1;
+    }
     /* gradient g = -2 A' r, and the scale of its rounding error:
      * 2 sum_i ||a_i|| (|r_i| + |b_i| + ||a_i|| ||x||), per variable with |a_ij| for the
      * first ||a_i|| */
@@ -147,9 +154,12 @@ static int pick_drop(Ctx *c) {
         for (j = 0; j < nv; j++) gsj[j] = gs;
     } else {
         for (j = 0; j < nv; j++) k->g[j] = 0.0;
+        double an4[4];
         for (i = 0; i < nr; i++) {
             const double *a = c->w->A + i * c->n;
-            double ri = -2.0 * k->r[i], an = vnorm(a, nv);
+            double ri = -2.0 * k->r[i], an;
+            if (i % 4 == 0) vnorm4(a, c->n, nr - i < 4 ? nr - i : 4, nv, an4);
+            an = an4[i % 4];
             double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
             for (j = 0; j < nv; j++) {
                 k->g[j] += a[j] * ri;
@@ -233,18 +243,40 @@ int wls_run(Ctx *c, int max_iter, int *iter) {
 
 static int big(double v) { return !(fabs(v) <= BIG); } /* also NaN */
 
-static int data_ok(const FpWls *w) {
-    int i, n = w->n_vars;
-    for (i = 0; i < w->n_rows * n; i++)
-        if (big(w->A[i])) return 0;
-    for (i = 0; i < w->n_rows; i++)
-        if (big(w->b[i])) return 0;
+/* No entry big (or NaN), without a branch per entry: the largest magnitude compared as the
+ * bits of |v| (IEEE doubles of one sign order as their bit patterns; inf and NaN lie above
+ * every finite value). */
+static int none_big(const double *v, int len) {
+    const double big_value = BIG;
+    uint64_t limit, top = 0;
+    int i;
+    memcpy(&limit, &big_value, sizeof limit);
+    for (i = 0; i < len; i++) {
+        uint64_t u;
+        memcpy(&u, v + i, sizeof u);
+        u &= UINT64_C(0x7FFFFFFFFFFFFFFF);
+        top = u > top ? u : top;
+    }
+    return top <= limit;
+}
+
+/* Also the sum of squares of each row of C into csq (the row norms start from it): a row
+ * whose sum is at most BIG^2 has no entry above BIG, the others are checked entry by
+ * entry (a NaN fails the comparison). */
+static int data_ok(const FpWls *w, double *csq) {
+    int i, j, n = w->n_vars;
+    if (!none_big(w->A, w->n_rows * n) || !none_big(w->b, w->n_rows)) return 0;
+    for (i = 0; i < w->n_cons; i++) {
+        const double *row = w->C + i * n;
+        double sq = 0.0;
+        for (j = 0; j < n; j++) sq += row[j] * row[j];
+        csq[i] = sq;
+        if (!(sq <= BIG * BIG) && !none_big(row, n)) return 0;
+    }
     for (i = 0; i < n; i++) {
         if (w->lb[i] != -INFINITY && big(w->lb[i])) return 0;
         if (w->ub[i] != INFINITY && big(w->ub[i])) return 0;
     }
-    for (i = 0; i < w->n_cons * n; i++)
-        if (big(w->C[i])) return 0;
     for (i = 0; i < w->n_cons; i++)
         if (w->d[i] != INFINITY && big(w->d[i])) return 0;
     return 1;
@@ -286,16 +318,22 @@ static void write_back(FpWls *w, const FpWlsWork *k) {
     for (i = 0; i < w->n_cons; i++) w->cons_ws[i] = k->act[i];
 }
 
-static FpStatus finish(FpWls *w, FpWlsStatus st, int iter, int it1, int warm, FpWlsResult *out) {
+/* The result; objective and max_violation only with stats (else -1: not computed). */
+static FpStatus finish_stats(FpWls *w, FpWlsStatus st, int iter, int it1, int warm,
+                             FpWlsResult *out, int stats) {
     if (out != NULL) {
         out->status = st;
         out->iterations = iter;
         out->phase1_iterations = it1;
         out->warm_start = warm;
-        out->objective = st == FP_WLS_BAD_INPUT ? 0.0 : objective(w, w->x);
-        out->max_violation = st == FP_WLS_BAD_INPUT ? 0.0 : max_violation(w, w->x);
-        if (!isfinite(out->objective)) out->objective = DBL_MAX;
-        if (!isfinite(out->max_violation)) out->max_violation = DBL_MAX;
+        if (!stats) {
+            out->objective = out->max_violation = -1.0;
+        } else {
+            out->objective = st == FP_WLS_BAD_INPUT ? 0.0 : objective(w, w->x);
+            out->max_violation = st == FP_WLS_BAD_INPUT ? 0.0 : max_violation(w, w->x);
+            if (!isfinite(out->objective)) out->objective = DBL_MAX;
+            if (!isfinite(out->max_violation)) out->max_violation = DBL_MAX;
+        }
     }
     if (st == FP_WLS_OPTIMAL) return FP_OK;
     if (st == FP_WLS_BAD_INPUT) return FP_ERROR;
@@ -342,6 +380,63 @@ void fp_wls_reset(FpWls *w) {
     memset(w->cons_ws, 0, sizeof w->cons_ws);
 }
 
+#if defined(__GNUC__) || defined(__clang__)
+#define FP_PREFETCH(p) __builtin_prefetch((const void *)(p), 1, 3)
+#else
+#define FP_PREFETCH(p) ((void)(p))
+#endif
+
+/* Every 64-byte line of [p, p + bytes). */
+static void prefetch_range(const void *p, size_t bytes) {
+    const char *c = (const char *)p;
+    size_t off;
+    for (off = 0; off < bytes; off += 64) FP_PREFETCH(c + off);
+    if (bytes > 0) FP_PREFETCH(c + bytes - 1);
+}
+
+void fp_wls_prefetch(const FpWls *w) {
+    const FpWlsWork *k;
+    size_t n, m, p, cols;
+    if (w == NULL || w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
+        w->n_rows > FP_WLS_MAX_ROWS || w->n_cons < 0 || w->n_cons > FP_WLS_MAX_CONS)
+        return;
+    n = (size_t)w->n_vars, m = (size_t)w->n_rows, p = (size_t)w->n_cons;
+    k = &w->work;
+    prefetch_range(w->A, m * n * sizeof(double));
+    prefetch_range(w->b, m * sizeof(double));
+    prefetch_range(w->lb, n * sizeof(double));
+    prefetch_range(w->ub, n * sizeof(double));
+    prefetch_range(w->C, p * n * sizeof(double));
+    prefetch_range(w->d, p * sizeof(double));
+    prefetch_range(w->x, n * sizeof(double));
+    prefetch_range(w->bound_ws, n);
+    prefetch_range(w->cons_ws, p);
+    /* the workspace: the vectors (one per row of names in FpWlsWork), the factors' columns */
+    {
+        const double *vecs[] = {k->x, k->p, k->g, k->u, k->v, k->qv, k->nvec, k->zvec,
+                                k->rr, k->rb, k->tau_m, k->tau_a};
+        size_t i;
+        for (i = 0; i < sizeof vecs / sizeof vecs[0]; i++)
+            prefetch_range(vecs[i], (n + 1) * sizeof(double));
+    }
+    prefetch_range(k->r, m * sizeof(double));
+    prefetch_range(k->cinv, p * sizeof(double));
+    prefetch_range(k->csq, p * sizeof(double));
+    prefetch_range(k->cnorm, p * sizeof(double));
+    prefetch_range(k->mur, p * sizeof(double));
+    prefetch_range(k->act, p);
+    prefetch_range(k->use, p);
+    prefetch_range(k->state, n + 1);
+    prefetch_range(k->free_idx, (n + 1) * sizeof(int));
+    prefetch_range(k->act_idx, (n + 1) * sizeof(int));
+    prefetch_range(k->perm, (n + 1) * sizeof(int));
+    cols = n + 1 < FP_WLS_NV1 ? n + 1 : FP_WLS_NV1;
+    {
+        size_t j;
+        for (j = 0; j < cols; j++) prefetch_range(k->az + j * FP_WLS_MAX_ROWS, m * sizeof(double));
+    }
+}
+
 const char *fp_wls_status_name(int status) {
     switch (status) {
     case FP_WLS_OPTIMAL: return "optimal";
@@ -352,11 +447,21 @@ const char *fp_wls_status_name(int status) {
     }
 }
 
+static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats);
+
 FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
+    return solve(w, max_iter, out, 1);
+}
+
+FpStatus fp_wls_solve_brief(FpWls *w, int max_iter, FpWlsResult *out) {
+    return solve(w, max_iter, out, 0);
+}
+
+static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     FpWlsWork *k;
     Ctx ctx, *c = &ctx;
     int n, i, j, iter = 0, it1 = 0, warm = 0, crossed = 0, zero_row_infeasible = 0, rc;
-    double fscale;
+    double fscale, csq[FP_WLS_MAX_CONS];
 
     if (w == NULL) return FP_ERROR;
     if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
@@ -369,7 +474,7 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
     k = &w->work;
     for (j = 0; j < n; j++)
         if (!isfinite(w->x[j])) w->x[j] = 0.0;
-    if (max_iter < 1 || !data_ok(w)) return finish(w, FP_WLS_BAD_INPUT, 0, 0, 0, out);
+    if (max_iter < 1 || !data_ok(w, csq)) return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
 
     for (j = 0; j < n; j++)
         if (w->lb[j] > w->ub[j]) crossed = 1;
@@ -378,7 +483,7 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
             double lo = fmin(w->lb[j], w->ub[j]), hi = fmax(w->lb[j], w->ub[j]);
             w->x[j] = fmin(fmax(w->x[j], lo), hi);
         }
-        return finish(w, FP_WLS_INFEASIBLE, 0, 0, 0, out);
+        return finish_stats(w, FP_WLS_INFEASIBLE, 0, 0, 0, out, stats);
     }
 
     memset(c, 0, sizeof *c);
@@ -386,24 +491,54 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
     c->k = k;
     c->n = n;
     c->nv = n;
-    for (j = 0; j < n; j++) {
-        double s = 0.0;
-        for (i = 0; i < w->n_rows; i++) s += w->A[i * n + j] * w->A[i * n + j];
-        if (s > c->anorm) c->anorm = s;
+    {
+        /* column norms row by row: each column still sums in row order, but the columns'
+         * sums proceed side by side */
+        double colsq[FP_WLS_MAX_VARS];
+        for (j = 0; j < n; j++) colsq[j] = 0.0;
+        for (i = 0; i < w->n_rows; i++) {
+            const double *a = w->A + i * n;
+            for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
+        }
+        for (j = 0; j < n; j++)
+            if (colsq[j] > c->anorm) c->anorm = colsq[j];
     }
     c->anorm = sqrt(c->anorm);
+    c->m0 = w->n_rows - n;
+    c->diag_tail = c->m0 >= 0;
+    for (i = c->m0; i < w->n_rows && c->diag_tail; i++) {
+        const double *a = w->A + i * n;
+        int ok = 1; /* without a branch per element */
+        for (j = 0; j < n; j++) ok &= (j == i - c->m0) == (a[j] != 0.0);
+        c->diag_tail = ok;
+    }
     fscale = 1.0;
     for (i = 0; i < w->n_cons; i++) {
-        double cn = vnorm(w->C + i * n, n);
+        /* vnorm of the row, its square root and 1 / norm taken from the last solve when
+         * the row's sum of squares is the same (a constant force set), as vnorm would */
+        const double *row = w->C + i * n;
+        double sq = csq[i], cn;
         k->use[i] = 0;
-        k->cinv[i] = 0.0;
-        if (w->d[i] == INFINITY) continue;
-        if (cn == 0.0 || !(1.0 / cn < INFINITY)) {
+        if (sq >= DBL_MIN && sq < HUGE_VAL && sq == k->csq[i] && k->cnorm[i] > 0.0) {
+            cn = k->cnorm[i];
+        } else {
+            cn = vnorm(row, n);
+            k->csq[i] = sq;
+            k->cnorm[i] = cn;
+            k->cinv[i] = 1.0 / cn;
+        }
+        if (w->d[i] == INFINITY) {
+            k->csq[i] = -1.0; /* cinv is 0 for a disabled row: no cache */
+            k->cinv[i] = 0.0;
+            continue;
+        }
+        if (cn == 0.0 || !(k->cinv[i] < INFINITY)) {
+            k->csq[i] = -1.0;
+            k->cinv[i] = 0.0;
             if (w->d[i] < 0.0) zero_row_infeasible = 1;
             continue;
         }
         k->use[i] = 1;
-        k->cinv[i] = 1.0 / cn;
         if (fabs(w->d[i]) / cn > fscale) fscale = fabs(w->d[i]) / cn;
     }
 
@@ -462,7 +597,15 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
             if (k->state[j] != ST_FREE) continue;
             if (k->x[j] < w->lb[j] - c->tol_feas || k->x[j] > w->ub[j] + c->tol_feas) feasible = 0;
         }
-        for (i = 0; i < w->n_cons && feasible; i++)
+        for (i = 0; i + 4 <= w->n_cons && feasible; i += 4) { /* four rows side by side */
+            double s4[4];
+            int q;
+            crow_dot4(c, i, k->x, s4);
+            for (q = 0; q < 4; q++)
+                if (k->use[i + q] && !k->act[i + q] && s4[q] - dval(c, i + q) > c->tol_feas)
+                    feasible = 0;
+        }
+        for (; i < w->n_cons && feasible; i++)
             if (k->use[i] && !k->act[i] && crow_dot(c, i, k->x) - dval(c, i) > c->tol_feas)
                 feasible = 0;
         if (feasible) {
@@ -487,7 +630,7 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
     /* Result. */
     for (j = 0; j < n; j++)
         if (!isfinite(k->x[j])) rc = RUN_NUMERIC;
-    if (rc == RUN_NUMERIC) return finish(w, FP_WLS_BAD_INPUT, iter, it1, warm, out);
+    if (rc == RUN_NUMERIC) return finish_stats(w, FP_WLS_BAD_INPUT, iter, it1, warm, out, stats);
     for (j = 0; j < n; j++) {
         double v = k->x[j];
         if (v < w->lb[j]) v = w->lb[j];
@@ -496,7 +639,7 @@ FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out) {
     }
     write_back(w, k);
     if (rc == RUN_INFEASIBLE || zero_row_infeasible)
-        return finish(w, FP_WLS_INFEASIBLE, iter, it1, warm, out);
-    if (rc == RUN_CAP) return finish(w, FP_WLS_MAX_ITER, iter, it1, warm, out);
-    return finish(w, FP_WLS_OPTIMAL, iter, it1, warm, out);
+        return finish_stats(w, FP_WLS_INFEASIBLE, iter, it1, warm, out, stats);
+    if (rc == RUN_CAP) return finish_stats(w, FP_WLS_MAX_ITER, iter, it1, warm, out, stats);
+    return finish_stats(w, FP_WLS_OPTIMAL, iter, it1, warm, out, stats);
 }

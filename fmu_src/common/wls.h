@@ -53,7 +53,10 @@
  * Numerics: the equality-constrained subproblems are solved by a null-space
  * method with Householder QR (no normal equations), rank-revealing QR with
  * column pivoting and a complete orthogonal decomposition for a rank-deficient
- * A (minimum-norm step), so weight ratios of 1e7 and more are fine.  A feasible
+ * A (minimum-norm step), so weight ratios of 1e7 and more are fine.  When A ends
+ * in a diagonal block with non-zero diagonal (rows n_rows - n_vars + j = d_j e_j',
+ * e.g. regularisation or preference rows) and no row of C is active, the face
+ * has full rank and its QR works on the other rows plus one (wls_qr.c).  A feasible
  * start comes from projecting onto the constraints with the Goldfarb-Idnani
  * dual method; degenerate vertices are handled with Bland's rule.  See wls.c.
  * An iteration is one factorisation of the working set: O(n^2 (n + rows)) flops.
@@ -107,6 +110,7 @@ typedef struct {
     double mur[FP_WLS_MAX_CONS];
     double r[FP_WLS_MAX_ROWS];
     double cinv[FP_WLS_MAX_CONS];
+    double csq[FP_WLS_MAX_CONS], cnorm[FP_WLS_MAX_CONS]; /* row norms of the last solve's C */
     double qm[FP_WLS_NV1 * FP_WLS_NV1];
     double z[FP_WLS_NV1 * FP_WLS_NV1];
     double az[FP_WLS_MAX_ROWS * FP_WLS_NV1];
@@ -163,6 +167,22 @@ void fp_wls_reset(FpWls *w);
  * FP_WLS_INFEASIBLE (x is defined and usable), FP_ERROR for FP_WLS_BAD_INPUT.
  */
 FpStatus fp_wls_solve(FpWls *w, int max_iter, FpWlsResult *out);
+
+/*
+ * fp_wls_solve without the two figures of the result that cost a pass over the data:
+ * out->objective and out->max_violation are -1 (not computed).  Everything else, x and the
+ * working set included, is exactly what fp_wls_solve gives.  For control loops that use
+ * only the status and the iterations.
+ */
+FpStatus fp_wls_solve_brief(FpWls *w, int max_iter, FpWlsResult *out);
+
+/*
+ * Ask the memory system for the parts of w that the next solve reads and writes (its data
+ * as sized by fp_wls_setup and the workspace it uses), so that they arrive together while
+ * the caller builds the problem instead of one cache miss at a time during the solve.
+ * A hint only (a no-op on compilers without __builtin_prefetch): changes no value.
+ */
+void fp_wls_prefetch(const FpWls *w);
 
 /* "optimal", "max_iter", "infeasible", "bad_input" (or "unknown"). */
 const char *fp_wls_status_name(int status);

@@ -48,6 +48,11 @@ typedef struct {
     int bland;    /* stalled long enough: use smallest-index choices */
     double anorm; /* largest column norm of A (rank cut-off scale) */
     double tol_feas;
+    /* A ends in a diagonal block: rows m0 + j (j < n) are d_j e_j', every d_j != 0 (the
+     * regularisation rows of an allocation, the W_u rows of the guidance).  Then a face
+     * without active rows of C has a full-rank A_F and its step comes from a QR that works
+     * on 1 + m0 rows per column (wls_qr.c).  m0 = n_rows - n; diag_tail 0: not so. */
+    int diag_tail, m0;
 } Ctx;
 
 /* ------------------------------------------------------------------------ */
@@ -64,11 +69,36 @@ static inline double cval(const Ctx *c, int i, int j) {
 
 static inline double dval(const Ctx *c, int i) { return c->w->d[i] * c->k->cinv[i]; }
 
+/* sum_j cval(c, i, j) x[j], in that order (the same arithmetic as the plain loop, without
+ * a branch per element). */
 static inline double crow_dot(const Ctx *c, int i, const double *x) {
+    const double *row = c->w->C + i * c->n, ci = c->k->cinv[i];
     double s = 0.0;
     int j;
-    for (j = 0; j < c->nv; j++) s += cval(c, i, j) * x[j];
+    for (j = 0; j < c->n; j++) s += row[j] * ci * x[j];
+    for (; j < c->nv; j++) s += -1.0 * x[j];
     return s;
+}
+
+/* crow_dot of the four rows i..i+3 side by side (each summed in the same order). */
+static inline void crow_dot4(const Ctx *c, int i, const double *x, double s[4]) {
+    const double *r0 = c->w->C + i * c->n, *r1 = r0 + c->n, *r2 = r1 + c->n, *r3 = r2 + c->n;
+    const double *ci = c->k->cinv + i;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int j;
+    for (j = 0; j < c->n; j++) {
+        s0 += r0[j] * ci[0] * x[j];
+        s1 += r1[j] * ci[1] * x[j];
+        s2 += r2[j] * ci[2] * x[j];
+        s3 += r3[j] * ci[3] * x[j];
+    }
+    for (; j < c->nv; j++) {
+        s0 += -1.0 * x[j];
+        s1 += -1.0 * x[j];
+        s2 += -1.0 * x[j];
+        s3 += -1.0 * x[j];
+    }
+    s[0] = s0, s[1] = s1, s[2] = s2, s[3] = s3;
 }
 
 static inline int nrows(const Ctx *c) { return c->ph1 ? 1 : c->w->n_rows; }
@@ -81,7 +111,19 @@ static inline void residual(Ctx *c) {
         k->r[0] = -k->x[n];
         return;
     }
-    for (i = 0; i < c->w->n_rows; i++) {
+    for (i = 0; i + 4 <= c->w->n_rows; i += 4) { /* four rows side by side */
+        const double *a0 = c->w->A + i * n, *a1 = a0 + n, *a2 = a1 + n, *a3 = a2 + n;
+        double s0 = c->w->b[i], s1 = c->w->b[i + 1], s2 = c->w->b[i + 2], s3 = c->w->b[i + 3];
+        for (j = 0; j < n; j++) {
+            double xj = k->x[j];
+            s0 -= a0[j] * xj;
+            s1 -= a1[j] * xj;
+            s2 -= a2[j] * xj;
+            s3 -= a3[j] * xj;
+        }
+        k->r[i] = s0, k->r[i + 1] = s1, k->r[i + 2] = s2, k->r[i + 3] = s3;
+    }
+    for (; i < c->w->n_rows; i++) {
         const double *a = c->w->A + i * n;
         double s = c->w->b[i];
         for (j = 0; j < n; j++) s -= a[j] * k->x[j];
@@ -103,6 +145,28 @@ static inline double vnorm(const double *x, int len) {
     s = 0.0;
     for (i = 0; i < len; i++) s += (x[i] / m) * (x[i] / m);
     return m * sqrt(s);
+}
+
+/* vnorm of rows rows (<= 4) of length len, ld apart, side by side: each sums in the same
+ * order as vnorm and takes its square root, or is vnorm itself when the sum under- or
+ * overflowed. */
+static inline void vnorm4(const double *x, int ld, int rows, int len, double out[4]) {
+    const double *x0 = x, *x1 = x + ld, *x2 = x + 2 * ld, *x3 = x + 3 * ld;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s[4];
+    int i;
+    if (rows < 4) {
+        for (i = 0; i < rows; i++) out[i] = vnorm(x + i * ld, len);
+        return;
+    }
+    for (i = 0; i < len; i++) {
+        s0 += x0[i] * x0[i];
+        s1 += x1[i] * x1[i];
+        s2 += x2[i] * x2[i];
+        s3 += x3[i] * x3[i];
+    }
+    s[0] = s0, s[1] = s1, s[2] = s2, s[3] = s3;
+    for (i = 0; i < 4; i++)
+        out[i] = s[i] >= DBL_MIN && s[i] < HUGE_VAL ? sqrt(s[i]) : vnorm(x + i * ld, len);
 }
 
 static inline double inf_norm(const double *x, int len) {

@@ -42,6 +42,61 @@ static void house_apply(const double *vt, int len, double tau, double *y) {
     for (i = 1; i < len; i++) y[i] -= s * vt[i - 1];
 }
 
+/* y_c <- H y_c for ncols columns y_c = y + c ld: house_apply on each, four columns at a time
+ * with one accumulator each, so the four dot products run side by side instead of one
+ * latency-bound chain after another (every column sums in the same order as house_apply:
+ * the results are the same to the bit). */
+static void house_apply_cols(const double *vt, int len, double tau, double *y, int ncols,
+                             int ld) {
+    int c = 0, i;
+    if (tau == 0.0) return;
+    for (; c + 4 <= ncols; c += 4) {
+        double *y0 = y + c * ld, *y1 = y0 + ld, *y2 = y1 + ld, *y3 = y2 + ld;
+        double s0 = y0[0], s1 = y1[0], s2 = y2[0], s3 = y3[0];
+        for (i = 1; i < len; i++) {
+            double v = vt[i - 1];
+            s0 += v * y0[i];
+            s1 += v * y1[i];
+            s2 += v * y2[i];
+            s3 += v * y3[i];
+        }
+        s0 *= tau, s1 *= tau, s2 *= tau, s3 *= tau;
+        y0[0] -= s0, y1[0] -= s1, y2[0] -= s2, y3[0] -= s3;
+        for (i = 1; i < len; i++) {
+            double v = vt[i - 1];
+            y0[i] -= s0 * v;
+            y1[i] -= s1 * v;
+            y2[i] -= s2 * v;
+            y3[i] -= s3 * v;
+        }
+    }
+    for (; c < ncols; c++) house_apply(vt, len, tau, y + c * ld);
+}
+
+/* Squared norms of rows [from, nr) of the columns [j0, j1) of a column-major matrix with
+ * leading dimension ld, four columns at a time (each summed in row order). */
+static void col_sq_norms(const double *a, int ld, int from, int nr, int j0, int j1,
+                         double *out) {
+    int j = j0, l;
+    for (; j + 4 <= j1; j += 4) {
+        const double *c0 = a + j * ld, *c1 = c0 + ld, *c2 = c1 + ld, *c3 = c2 + ld;
+        double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+        for (l = from; l < nr; l++) {
+            s0 += c0[l] * c0[l];
+            s1 += c1[l] * c1[l];
+            s2 += c2[l] * c2[l];
+            s3 += c3[l] * c3[l];
+        }
+        out[j] = s0, out[j + 1] = s1, out[j + 2] = s2, out[j + 3] = s3;
+    }
+    for (; j < j1; j++) {
+        const double *c0 = a + j * ld;
+        double s0 = 0.0;
+        for (l = from; l < nr; l++) s0 += c0[l] * c0[l];
+        out[j] = s0;
+    }
+}
+
 #define QM(i, j) k->qm[(j) * LDZ + (i)]
 #define ZM(i, j) k->z[(j) * LDZ + (i)]
 #define AZ(i, j) k->az[(j) * LDA + (i)]
@@ -100,12 +155,11 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
     for (j = 0; j < nz; j++) k->perm[j] = j;
     for (i = 0; i < kmax; i++) {
         int piv = i;
-        double best = -1.0;
+        double best = -1.0, sq[NV1];
+        col_sq_norms(k->az, LDA, i, nr, i, nz, sq);
         for (j = i; j < nz; j++) {
-            double s = 0.0;
-            for (l = i; l < nr; l++) s += AZ(l, j) * AZ(l, j);
-            if (s > best) {
-                best = s;
+            if (sq[j] > best) {
+                best = sq[j];
                 piv = j;
             }
         }
@@ -121,7 +175,7 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
             }
         }
         house_make(&AZ(i, i), nr - i, &k->tau_a[i]);
-        for (j = i + 1; j < nz; j++) house_apply(&AZ(i + 1, i), nr - i, k->tau_a[i], &AZ(i, j));
+        house_apply_cols(&AZ(i + 1, i), nr - i, k->tau_a[i], &AZ(i, i + 1), nz - i - 1, LDA);
         house_apply(&AZ(i + 1, i), nr - i, k->tau_a[i], r + i);
         kd = i + 1;
     }
@@ -179,6 +233,80 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
     return kr;
 }
 
+/* The face step when A ends in a diagonal block (Ctx.diag_tail) and no row of C is active:
+ * min ||A_F y - r|| with A_F = [M_F; D_F], M_F the m0 dense rows, D_F the free variables'
+ * diagonal rows (the fixed variables' rows are constant over F).  Householder QR of
+ * [D_F; M_F]: reflector q acts on D_F's row q and the m0 rows of M_F only (D_F's other rows
+ * are zero in column q and stay so), so it costs O(nf^2 m0) instead of O(nf^2 nr), and
+ * A_F has full rank (|R_qq| >= |d_q| > 0): no pivoting.  Returns 0 (the caller takes the
+ * general path) when some |d_q| is at the general path's rank cut-off. */
+static int diag_tail_step(Ctx *c, double *y) {
+    FpWlsWork *k = c->k;
+    const FpWls *w = c->w;
+    int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
+    double *r = k->r, *rt = &AZ(0, nf), tmp[FP_WLS_MAX_ROWS + 1]; /* rt: column nf */
+    for (q = 0; q < nf; q++) {
+        int v = k->free_idx[q];
+        double dq = w->A[(m0 + v) * n + v];
+        if (!(fabs(dq) > TOL_RANK * c->anorm)) return 0;
+    }
+    /* AZ rows 0..nf-1: D_F (R grows there), rows nf..nf+m0-1: M_F; rt likewise */
+    for (j = 0; j < nf; j++) {
+        int v = k->free_idx[j];
+        double *col = &AZ(0, j);
+        for (q = 0; q < nf; q++) col[q] = 0.0;
+        col[j] = w->A[(m0 + v) * n + v];
+        for (i = 0; i < m0; i++) col[nf + i] = w->A[i * n + v];
+        rt[j] = r[m0 + v];
+    }
+    for (i = 0; i < m0; i++) rt[nf + i] = r[i];
+    for (q = 0; q < nf; q++) {
+        double *cq = &AZ(0, q), *vt = cq + nf, tau;
+        tmp[0] = cq[q];
+        for (i = 0; i < m0; i++) tmp[1 + i] = vt[i];
+        house_make(tmp, m0 + 1, &tau);
+        cq[q] = tmp[0];
+        for (i = 0; i < m0; i++) vt[i] = tmp[1 + i];
+        if (tau == 0.0) continue;
+        /* columns q+1..nf (nf: rt): y[q] and y[nf..] through H = I - tau v v', v = [1; vt] */
+        j = q + 1;
+        for (; j + 4 <= nf + 1; j += 4) {
+            double *y0 = &AZ(0, j), *y1 = y0 + LDA, *y2 = y1 + LDA, *y3 = y2 + LDA;
+            double s0 = y0[q], s1 = y1[q], s2 = y2[q], s3 = y3[q];
+            for (i = 0; i < m0; i++) {
+                double v = vt[i];
+                s0 += v * y0[nf + i];
+                s1 += v * y1[nf + i];
+                s2 += v * y2[nf + i];
+                s3 += v * y3[nf + i];
+            }
+            s0 *= tau, s1 *= tau, s2 *= tau, s3 *= tau;
+            y0[q] -= s0, y1[q] -= s1, y2[q] -= s2, y3[q] -= s3;
+            for (i = 0; i < m0; i++) {
+                double v = vt[i];
+                y0[nf + i] -= s0 * v;
+                y1[nf + i] -= s1 * v;
+                y2[nf + i] -= s2 * v;
+                y3[nf + i] -= s3 * v;
+            }
+        }
+        for (; j <= nf; j++) {
+            double *yj = &AZ(0, j), s = yj[q];
+            for (i = 0; i < m0; i++) s += vt[i] * yj[nf + i];
+            s *= tau;
+            yj[q] -= s;
+            for (i = 0; i < m0; i++) yj[nf + i] -= s * vt[i];
+        }
+    }
+    for (j = nf - 1; j >= 0; j--) { /* R y = (Q' r)[0:nf], by columns (no serial chain) */
+        const double *rj = &AZ(0, j);
+        double yj = rt[j] / rj[j];
+        y[j] = yj;
+        for (q = 0; q < j; q++) rt[q] -= rj[q] * yj;
+    }
+    return 1;
+}
+
 /* Step p (full length nv, zero on fixed variables) to the face minimiser.
  * Needs factor_ws (and uses the current x).  Returns 0 if not finite. */
 int wls_compute_step(Ctx *c) {
@@ -187,6 +315,15 @@ int wls_compute_step(Ctx *c) {
     double *y = k->v;
     for (j = 0; j < c->nv; j++) k->p[j] = 0.0;
     if (nz == 0) return 1;
+    if (!c->ph1 && nw == 0 && c->diag_tail) {
+        residual(c);
+        if (diag_tail_step(c, y)) {
+            for (q = 0; q < nf; q++) k->p[k->free_idx[q]] = y[q];
+            for (j = 0; j < c->nv; j++)
+                if (!isfinite(k->p[j])) return 0;
+            return 1;
+        }
+    }
     if (nw > 0) build_z(c);
     residual(c);
     /* AZ = A_F Z */

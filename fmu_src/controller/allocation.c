@@ -10,14 +10,15 @@
 
 /* Preferred configuration for the rotors still working: the minimum-norm split over
  * them; lost rotors get their current state (they are fixed in the QP anyway). */
-static void preferred_without_lost(const FpRotorSet *rotors, int32_t lost_mask,
-                                   const CtrlFiltered *s, const double nu_c[6],
-                                   double a_pref[], double b_pref[], double w_pref[]) {
+static void preferred_without_lost(const FpRotorSet *rotors, const FpPreferredSplit *split,
+                                   int32_t lost_mask, const CtrlFiltered *s,
+                                   const double nu_c[6], double a_pref[], double b_pref[],
+                                   double w_pref[]) {
     FpRotorSet rs;
     double a[FP_MAX_ROTORS], b[FP_MAX_ROTORS], w[FP_MAX_ROTORS];
     int map[FP_MAX_ROTORS], i, n = 0;
-    if (lost_mask == 0) {
-        fp_preferred_config(rotors, nu_c, a_pref, b_pref, w_pref, NULL, 0);
+    if (lost_mask == 0) { /* the geometry's part prepared once (fp_preferred_config) */
+        fp_preferred_apply(rotors, split, nu_c, a_pref, b_pref, w_pref, NULL, 0);
         return;
     }
     rs = *rotors;
@@ -54,15 +55,20 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
     double lo[3], hi[3], um[3], pref[3], scale[3], t0;
     int i, j, k, n = rs->n, nv = 3 * n;
     int32_t flags = 0;
-    fp_effectiveness_b2prime(rs, s->a_m, s->b_m, s->w_m, b2);
+    fp_effectiveness_b2prime_trig(rs, &s->trig, s->w_m, b2);
     for (i = 0; i < 6; i++) /* a rotor's effectiveness scales with its known efficiency */
-        for (j = 0; j < nv; j++) b2[i * nv + j] *= s->eff[j / 3];
+        for (j = 0; j < n; j++) {
+            double *bij = &b2[i * nv + 3 * j];
+            bij[0] *= s->eff[j];
+            bij[1] *= s->eff[j];
+            bij[2] *= s->eff[j];
+        }
     for (i = 0; i < 3; i++) {
         nu_c[i] = s->f_b_m[i] + dnu_c[i];
         nu_c[3 + i] = s->tau_b_m[i] + dnu_c[3 + i];
     }
     /* an infeasible split still gives a usable preference once clamped below */
-    preferred_without_lost(rs, lost_mask, s, nu_c, a_pref, b_pref, w_pref);
+    preferred_without_lost(rs, p->pref_split, lost_mask, s, nu_c, a_pref, b_pref, w_pref);
     w->n_rows = 6 + nv;
     for (i = 0; i < 6; i++) {
         for (j = 0; j < nv; j++) w->A[i * nv + j] = p->W_nu[i] * b2[i * nv + j];
@@ -82,14 +88,15 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
         }
         for (k = 0; k < 3; k++) {
             int col = 3 * i + k, row = 6 + col;
-            for (j = 0; j < nv; j++) w->A[row * nv + j] = (j == col) ? scale[k] : 0.0;
+            memset(&w->A[row * nv], 0, (size_t)nv * sizeof(double));
+            w->A[row * nv + col] = scale[k];
             w->b[row] = scale[k] * (fmin(fmax(pref[k], lo[k]), hi[k]) - um[k]);
             w->lb[col] = lo[k] - um[k];
             w->ub[col] = hi[k] - um[k];
         }
     }
     t0 = p->timing ? fp_clock_seconds() : 0.0;
-    fp_wls_solve(w, p->max_iter, &res);
+    fp_wls_solve_brief(w, p->max_iter, &res);
     if (p->timing) out->t_solve = fp_clock_seconds() - t0;
     out->status = res.status;
     out->iterations = res.iterations;

@@ -190,6 +190,7 @@ static CtrlStabilizationParams stabilization_params(const ControllerModel *m) {
 static CtrlAllocationParams allocation_params(const ControllerModel *m) {
     CtrlAllocationParams p;
     p.rotors = &m->rotors;
+    p.pref_split = &m->pref_split;
     p.W_nu = m->W_nu;
     p.w_pref = m->w_pref, p.pref_omega_scale = m->pref_omega_scale;
     p.max_iter = m->qp_max_iter, p.timing = m->timing;
@@ -347,6 +348,9 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     double filt_before[CTRL_N_FILTERS][2], blk_before[4][3], psi_before[4];
     int i, n = m->n_rotors;
     if (!inputs_valid(m, logger)) return FP_WARNING;
+    /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
+    fp_wls_prefetch(&m->guid);
+    fp_wls_prefetch(&m->alloc);
     update_rotor_losses(m, logger);
     memcpy(filt_before, m->filt, sizeof filt_before);
     memcpy(blk_before, m->blk, sizeof blk_before);
@@ -357,8 +361,8 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     fin.psi = ctrl_unwrap(m->euler[2], &m->psi_raw, &m->psi_unwrapped);
     fin.psi_ref = ctrl_unwrap(m->euler_ref[2], &m->psi_ref_raw, &m->psi_ref_unwrapped);
     ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->filt);
-    ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, m->rotor_health, m->lost_mask,
-                      &s);
+    ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, &m->rotor_trig, m->rotor_health,
+                      m->lost_mask, &s);
     /* 2. guidance */
     fs = force_set_in_use(m);
     gp = guidance_params(m);
@@ -441,6 +445,10 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->warned_coarse = 0;
     n = m->n_rotors;
     FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
+    /* what the samples need of the geometry alone, once */
+    memset(&m->rotor_trig, 0, sizeof m->rotor_trig);
+    fp_rotor_trig_mounts(&m->rotors, &m->rotor_trig);
+    fp_preferred_prepare(&m->rotors, &m->pref_split, NULL, 0); /* apply checks its status */
     ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
     /* filters start in steady state at the initial measurements */
     fin = filter_inputs(m);

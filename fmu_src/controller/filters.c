@@ -118,7 +118,8 @@ void ctrl_filters_start(const CtrlFilterInputs *in, double x[CTRL_N_FILTERS][2])
 }
 
 void ctrl_read_filters(const double x[CTRL_N_FILTERS][2], const FpRotorSet *rotors,
-                       const double rotor_health[], int32_t lost_mask, CtrlFiltered *s) {
+                       const FpRotorTrig *mounts, const double rotor_health[],
+                       int32_t lost_mask, CtrlFiltered *s) {
     int i;
     for (i = 0; i < 3; i++) {
         s->pos_m[i] = x[F_POS + i][0];
@@ -137,5 +138,9 @@ void ctrl_read_filters(const double x[CTRL_N_FILTERS][2], const FpRotorSet *roto
         s->w_m[i] = x[F_OMEGA + i][0];
         s->eff[i] = (lost_mask >> i) & 1 ? 0.0 : fmin(fmax(rotor_health[i], 0.0), 1.0);
     }
-    fp_rotor_wrench(rotors, s->a_m, s->b_m, s->w_m, s->eff, s->f_b_m, s->tau_b_m);
+    /* the tilts' sin and cos once per sample: the wrench here, B'' in the allocation */
+    memcpy(s->trig.sg, mounts->sg, sizeof s->trig.sg);
+    memcpy(s->trig.cg, mounts->cg, sizeof s->trig.cg);
+    fp_rotor_trig_tilts(rotors, s->a_m, s->b_m, &s->trig);
+    fp_rotor_wrench_trig(rotors, &s->trig, s->w_m, s->eff, s->f_b_m, s->tau_b_m);
 }

@@ -89,8 +89,8 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
      * fraction of the tracking error even when mu_ref is feasible; with f_p both terms
      * vanish together, so mu_c = mu_ref up to second-order linearization error. */
     for (i = 0; i < 3; i++) w->b[3 + i] = p->W_u[i] * (o->f_p[i] - s->f_b_m[i]);
-    for (i = 0; i < NV; i++)
-        for (j = 0; j < NV; j++) w->A[(3 + i) * NV + j] = (i == j) ? p->W_u[i] : 0.0;
+    memset(&w->A[3 * NV], 0, NV * NV * sizeof(double));
+    for (i = 0; i < NV; i++) w->A[(3 + i) * NV + i] = p->W_u[i];
     w->b[6] = p->W_u[3] * ctrl_wrap_pi(mu_ref[0] - s->mu_m[0]);
     w->b[7] = p->W_u[4] * (mu_ref[1] - s->mu_m[1]);
     for (i = 0; i < 3; i++) {
@@ -104,7 +104,9 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     if (p->force_constraint == 0) {
         /* joint: A_poly (f_b_m + df) <= b_poly */
         for (k = 0; k < fs->n; k++, n_cons++) {
-            for (j = 0; j < NV; j++) w->C[n_cons * NV + j] = j < 3 ? fs->A[k][j] : 0.0;
+            double *row = &w->C[n_cons * NV];
+            row[0] = fs->A[k][0], row[1] = fs->A[k][1], row[2] = fs->A[k][2];
+            row[3] = row[4] = 0.0;
             w->d[n_cons] = fs->d[k] - v3_dot(fs->A[k], s->f_b_m);
         }
     } else {
@@ -174,7 +176,7 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     }
     build_qp(p, fs, in->mu_ref, s, &o, out->f_b_ref[2], w);
     t0 = p->timing ? fp_clock_seconds() : 0.0;
-    fp_wls_solve(w, p->max_iter, &res);
+    fp_wls_solve_brief(w, p->max_iter, &res);
     if (p->timing) out->t_solve = fp_clock_seconds() - t0;
     out->status = res.status;
     out->iterations = res.iterations;

@@ -92,12 +92,14 @@ typedef struct {
     double a_m[FP_MAX_ROTORS], b_m[FP_MAX_ROTORS], w_m[FP_MAX_ROTORS]; /* alpha, beta, omega */
     double eff[FP_MAX_ROTORS];               /* known rotor efficiency, 0 for lost rotors */
     double f_b_m[3], tau_b_m[3];             /* nu_m: the rotor wrench at a_m, b_m, w_m */
+    FpRotorTrig trig;                        /* sin, cos of a_m, b_m and the azimuths */
     /* the references delayed by H(s) like the measurements */
     double pos_ref_f[3], vel_ref_f[3], mu_ref_f[3];
 } CtrlFiltered;
 
 void ctrl_read_filters(const double x[CTRL_N_FILTERS][2], const FpRotorSet *rotors,
-                       const double rotor_health[], int32_t lost_mask, CtrlFiltered *s);
+                       const FpRotorTrig *mounts, const double rotor_health[],
+                       int32_t lost_mask, CtrlFiltered *s);
 
 /* ------------------------------------------------------------------------ */
 /* force_sets.c                                                             */
@@ -202,6 +204,7 @@ void ctrl_stabilization(const CtrlStabilizationParams *p, const CtrlFiltered *s,
 
 typedef struct {
     const FpRotorSet *rotors; /* geometry and actuator limits */
+    const FpPreferredSplit *pref_split; /* fp_preferred_prepare of rotors */
     const double *W_nu;       /* 6 row weights of dnu */
     double w_pref;            /* weight of the preferred configuration */
     double pref_omega_scale;  /* scale of rotor speeds in that term */

@@ -1,15 +1,23 @@
-"""Benchmark: FullPoseController cost inside the FMU, and its QPs against piqp.
+"""Benchmark: FullPoseController cost inside the FMU, old build against new, and its QPs
+against DAQP and piqp.
 
-Flies the paper's first scenario (hover with varying orientation, infeasible
-stretches included) in closed loop with the plant FMU, the controller timing
-itself (parameter ``timing``).  Prints, side by side from the same run:
-  - controller sample time inside the FMU (mean, p99, max) and the doStep call
-    as seen from Python;
-  - guidance and inner-allocation QP solve times and iteration counts;
-  - piqp solving the very same QPs (read back from the controller's FMU state),
-    and our solver re-solving them cold, with the ratios.
+Flies the paper's first scenario (hover with varying orientation, infeasible stretches
+included) in closed loop with the plant FMU, the controller timing itself (parameter
+``timing``: clock_gettime around the sample and around each QP solve).  With ``--old-fmu``
+a second controller, built from an earlier commit (tests/bench/build_old_controller.sh),
+runs in the same loop on the very same inputs, the two called in alternating order at
+every sample, so that machine load falls on both alike.  Prints, from one run:
+  - the controller sample time inside the FMU, old and new side by side (mean, p50, p99,
+    max, ratio new/old), and whether the two builds gave the same commands;
+  - guidance and inner-allocation QP solve times in the loop (warm) and iterations;
+  - the very same QPs (read back from the new controller's FMU state) re-solved by our
+    solver, cold (empty working set, x = 0) and warm (the optimal working set), by DAQP
+    cold and warm (the optimal active set as its start), timed by DAQP's own C clock, and
+    by piqp, with the ratios and the objective agreement.
 
-Usage: python tests/bench/bench_controller.py [--seconds 20] [--every 10]
+Usage:
+    bash tests/bench/build_old_controller.sh 06d7094 /tmp/old
+    python tests/bench/bench_controller.py --old-fmu /tmp/old/FullPoseController.fmu
 """
 
 from __future__ import annotations
@@ -17,6 +25,7 @@ from __future__ import annotations
 import argparse
 import math
 import time
+from pathlib import Path
 
 import numpy as np
 import piqp
@@ -27,9 +36,17 @@ from controller.wls import WlsSolver
 from orchestrator.fmu import FmuInstance
 from plant import plant_fmu
 
+try:
+    import daqp
+except ImportError:  # a test extra: pip install ".[test]"
+    daqp = None
+
 H = 0.002
 MEAS = ["pos", "vel", "acc", "euler", "rate", "omega", "alpha", "beta"]
 CMDS = ["omega_cmd", "alpha_cmd", "beta_cmd"]
+REFS = ["pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref"]
+DAQP_INF = 1e30  # DAQP's "no bound"
+REPEATS = 5  # solves per recorded QP, the median kept
 
 
 def scenario1(t: float) -> np.ndarray:
@@ -38,54 +55,159 @@ def scenario1(t: float) -> np.ndarray:
     return np.concatenate([[0.0, 0.0, -3.0], e, np.zeros(6), ed])
 
 
+def summary(us: np.ndarray) -> dict[str, float]:
+    return {"mean": float(us.mean()), "p50": float(np.percentile(us, 50)),
+            "p99": float(np.percentile(us, 99)), "max": float(us.max())}
+
+
 def stats(label: str, us: np.ndarray) -> dict[str, float]:
-    row = {"mean": float(us.mean()), "p99": float(np.percentile(us, 99)), "max": float(us.max())}
-    print(f"  {label:34s} mean {row['mean']:8.2f} us  p99 {row['p99']:8.2f} us  "
-          f"max {row['max']:9.2f} us  (n={us.size})")
+    row = summary(us)
+    print(f"  {label:40s} mean {row['mean']:7.2f}  p50 {row['p50']:7.2f}  "
+          f"p99 {row['p99']:7.2f}  max {row['max']:8.2f} us  (n={us.size})")
     return row
 
 
-def fly(seconds: float, every: int) -> tuple[dict[str, np.ndarray], list[RecordedQP],
-                                              list[RecordedQP]]:
+def ratio_line(label: str, num: dict[str, float], den: dict[str, float]) -> None:
+    print(f"  {label:40s} " + "  ".join(f"{k} {num[k] / den[k]:5.2f}x"
+                                         for k in ("mean", "p50", "p99", "max")))
+
+
+class Controller:
+    """One controller instance in the loop, timing itself."""
+
+    def __init__(self, fmu: Path, name: str) -> None:
+        self.fmu = FmuInstance(fmu, name)
+        self.y = self.fmu.signal(MEAS)
+        self.u = self.fmu.signal(CMDS)
+        self.ref = self.fmu.signal(REFS)
+        self.timing = self.fmu.signal(["t_step", "t_guid", "t_alloc"])
+
+    def start(self, meas: np.ndarray, ref: np.ndarray) -> None:
+        self.fmu.slave.setupExperiment(startTime=0.0)
+        self.fmu.set("timing", True)
+        self.fmu.slave.enterInitializationMode()
+        self.fmu.write(self.y, meas)
+        self.fmu.write(self.ref, ref)
+        self.fmu.slave.exitInitializationMode()
+
+    def sample(self, meas: np.ndarray, ref: np.ndarray) -> np.ndarray:
+        self.fmu.write(self.ref, ref)
+        self.fmu.write(self.y, meas)
+        self.fmu.step(H)
+        return self.fmu.read(self.timing) * 1e6
+
+
+def fly(seconds: float, every: int, old_fmu: Path | None) -> dict:
     plant = FmuInstance(plant_fmu(), "plant")
-    ctrl = FmuInstance(controller_fmu(), "controller")
     plant.initialize(parameters={"pos0[3]": -3.0})
-    y_p, y_c = plant.signal(MEAS), ctrl.signal(MEAS)
-    u_c, u_p = ctrl.signal(CMDS), plant.signal(CMDS)
-    ref = ctrl.signal(["pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref"])
-    timing = ctrl.signal(["t_step", "t_guid", "t_alloc"])
-    ctrl.slave.setupExperiment(startTime=0.0)
-    ctrl.set("timing", True)
-    ctrl.slave.enterInitializationMode()
-    ctrl.write(y_c, plant.read(y_p))
-    ctrl.write(ref, scenario1(0.0))
-    ctrl.slave.exitInitializationMode()
+    y_p, u_p = plant.signal(MEAS), plant.signal(CMDS)
+    new = Controller(controller_fmu(), "controller")
+    old = Controller(old_fmu, "controller_old") if old_fmu is not None else None
+    for c in (new, old):
+        if c is not None:
+            c.start(plant.read(y_p), scenario1(0.0))
     n = round(seconds / H)
-    rec = {k: np.empty(n) for k in ("step", "guid", "alloc", "call")}
-    iters = {k: np.empty(n, dtype=int) for k in ("guid", "alloc")}
-    guid_qps: list[RecordedQP] = []
-    alloc_qps: list[RecordedQP] = []
-    clock = time.perf_counter_ns
+    out: dict = {k: np.empty((n, 3)) for k in ("new", "old")}
+    out["guid_iter"] = np.empty(n, dtype=int)
+    out["alloc_iter"] = np.empty(n, dtype=int)
+    out["cmd_diff"] = 0.0
+    out["guid_qps"], out["alloc_qps"] = [], []
     for k in range(n):
-        ctrl.write(ref, scenario1(k * H))
-        ctrl.write(y_c, plant.read(y_p))
-        t0 = clock()
-        ctrl.step(H)
-        rec["call"][k] = (clock() - t0) / 1e3
-        plant.write(u_p, ctrl.read(u_c))
+        meas, ref = plant.read(y_p), scenario1(k * H)
+        if old is None:
+            out["new"][k] = new.sample(meas, ref)
+        elif k % 2 == 0:  # alternate who goes first: caches and load fall on both alike
+            out["new"][k] = new.sample(meas, ref)
+            out["old"][k] = old.sample(meas, ref)
+        else:
+            out["old"][k] = old.sample(meas, ref)
+            out["new"][k] = new.sample(meas, ref)
+        cmd = new.fmu.read(new.u)
+        if old is not None:
+            out["cmd_diff"] = max(out["cmd_diff"],
+                                  float(np.abs(old.fmu.read(old.u) - cmd).max()))
+        plant.write(u_p, cmd)
         plant.step(H)
-        rec["step"][k], rec["guid"][k], rec["alloc"][k] = ctrl.read(timing) * 1e6
-        iters["guid"][k] = ctrl.get("guid_iter")
-        iters["alloc"][k] = ctrl.get("alloc_iter")
+        out["guid_iter"][k] = new.fmu.get("guid_iter")
+        out["alloc_iter"][k] = new.fmu.get("alloc_iter")
         if k % every == 0:
-            state = bytes(ctrl.slave.serializeFMUstate(ctrl.slave.getFMUstate()))
-            guid_qps.append(qp_from_state(state, GUIDANCE))
-            alloc_qps.append(qp_from_state(state, ALLOCATION))
-    plant.close()
-    ctrl.close()
-    rec["guid_iter"] = iters["guid"]
-    rec["alloc_iter"] = iters["alloc"]
-    return rec, guid_qps, alloc_qps
+            state = bytes(new.fmu.slave.serializeFMUstate(new.fmu.slave.getFMUstate()))
+            out["guid_qps"].append(qp_from_state(state, GUIDANCE))
+            out["alloc_qps"].append(qp_from_state(state, ALLOCATION))
+    for c in (plant, new.fmu, old.fmu if old is not None else None):
+        if c is not None:
+            c.close()
+    if old is None:
+        del out["old"]
+    return out
+
+
+# --------------------------------------------------------------------------- #
+# the recorded QPs in other solvers
+
+
+def active_set(qp: RecordedQP) -> tuple[np.ndarray, np.ndarray]:
+    """The working set at the recorded optimum: bounds (-1 lower, +1 upper, 0 free) and rows
+    of C held at equality."""
+    tol = 1e-9
+    lb = np.where(np.isfinite(qp.lb), qp.lb, -np.inf)
+    ub = np.where(np.isfinite(qp.ub), qp.ub, np.inf)
+    with np.errstate(invalid="ignore"):  # inf - inf at the infinite bounds: not active
+        at_lb = qp.x <= lb + tol * (1 + np.abs(lb))
+        at_ub = qp.x >= ub - tol * (1 + np.abs(ub))
+    bounds = np.where(at_lb & (qp.lb < qp.ub), -1, np.where(at_ub & (qp.lb < qp.ub), 1, 0))
+    rows = (qp.C @ qp.x >= qp.d - tol * (1 + np.abs(qp.d))) if qp.C.size else np.zeros(0, bool)
+    return bounds.astype(np.int8), rows.astype(np.int8)
+
+
+def ours_time(qp: RecordedQP, warm: bool) -> tuple[float, int]:
+    """Our solve time (C clock, median of REPEATS) and iterations."""
+    nv, nr, nc = qp.A.shape[1], qp.A.shape[0], qp.C.shape[0]
+    solver = WlsSolver(nv, nr, nc)
+    solver.set_data(qp.A, qp.b, qp.lb, qp.ub, qp.C if nc else None, qp.d if nc else None)
+    if warm:
+        bounds, rows = active_set(qp)
+        solver.set_x(qp.x)
+        solver.working_set = np.concatenate([bounds, rows])
+    ns, res = solver.bench(100, REPEATS)
+    return float(np.median(ns)) / 1e3, res.iterations
+
+
+def daqp_problem(qp: RecordedQP) -> tuple:
+    """DAQP's form: 1/2 x'Hx + f'x, bounds first (fixed variables as equalities), then C."""
+    nv = qp.A.shape[1]
+    Hm = np.ascontiguousarray(2.0 * qp.A.T @ qp.A)
+    f = -2.0 * qp.A.T @ qp.b
+    C = np.ascontiguousarray(qp.C if qp.C.size else np.zeros((0, nv)))
+    bu = np.concatenate([np.minimum(qp.ub, DAQP_INF), qp.d])
+    bl = np.concatenate([np.maximum(qp.lb, -DAQP_INF), np.full(qp.d.size, -DAQP_INF)])
+    sense = np.zeros(bu.size, dtype=np.int32)
+    sense[:nv][qp.lb == qp.ub] = 5  # DAQP: ACTIVE | IMMUTABLE, an equality
+    return Hm, f, C, bu, bl, sense
+
+
+def daqp_time(qp: RecordedQP, warm: bool) -> tuple[float, float, int, float]:
+    """DAQP's solve and setup times (its own C clock, median of REPEATS), iterations, and
+    the relative objective difference ours minus DAQP (0 if DAQP failed)."""
+    Hm, f, C, bu, bl, sense = daqp_problem(qp)
+    if warm:
+        bounds, rows = active_set(qp)
+        nv = qp.A.shape[1]
+        free = sense[:nv] != 5
+        sense[:nv][free & (bounds == 1)] = 1  # ACTIVE (upper)
+        sense[:nv][free & (bounds == -1)] = 3  # ACTIVE | LOWER
+        sense[nv:][rows == 1] = 1
+    runs = []
+    for _ in range(REPEATS):
+        x, _, flag, info = daqp.solve(Hm, f, C, bu, bl, sense.copy())
+        runs.append((info["solve_time"], info["setup_time"], info["iterations"]))
+    diff = 0.0
+    if flag == 1:
+        ours = np.sum((qp.A @ qp.x - qp.b) ** 2)
+        theirs = np.sum((qp.A @ x - qp.b) ** 2)
+        diff = float((ours - theirs) / max(1.0, abs(theirs)))
+    return (float(np.median([r[0] for r in runs])) * 1e6,
+            float(np.median([r[1] for r in runs])) * 1e6, int(runs[-1][2]), diff)
 
 
 def piqp_times(qps: list[RecordedQP]) -> tuple[np.ndarray, float]:
@@ -114,49 +236,88 @@ def piqp_times(qps: list[RecordedQP]) -> tuple[np.ndarray, float]:
     return out, worst
 
 
-def cold_times(qps: list[RecordedQP]) -> np.ndarray:
-    out = np.empty(len(qps))
+def compare_qps(label: str, qps: list[RecordedQP], in_loop: dict[str, float]) -> None:
+    nv, nr, nc = qps[0].A.shape[1], qps[0].A.shape[0], qps[0].C.shape[0]
+    print(f"{label} QP ({nv} variables, {nr} rows, {nc} constraint rows; {len(qps)} recorded):")
+    # one QP at a time through every solver, so that load changes fall on all of them
+    t = {k: np.empty(len(qps)) for k in ("oc", "ow", "dcs", "dcu", "dws", "dwu")}
+    it = {k: np.empty(len(qps), dtype=int) for k in ("oc", "ow", "dc", "dw")}
+    worst = {"dc": 0.0, "dw": 0.0}
     for i, qp in enumerate(qps):
-        nv, nr, nc = qp.A.shape[1], qp.A.shape[0], qp.C.shape[0]
-        solver = WlsSolver(nv, nr, nc)
-        solver.set_data(qp.A, qp.b, qp.lb, qp.ub, qp.C if nc else None, qp.d if nc else None)
-        ns, _ = solver.bench(100, 5)
-        out[i] = float(np.median(ns)) / 1e3
-    return out
+        t["oc"][i], it["oc"][i] = ours_time(qp, warm=False)
+        t["ow"][i], it["ow"][i] = ours_time(qp, warm=True)
+        if daqp is not None:
+            t["dcs"][i], t["dcu"][i], it["dc"][i], d = daqp_time(qp, warm=False)
+            worst["dc"] = max(worst["dc"], d)
+            t["dws"][i], t["dwu"][i], it["dw"][i], d = daqp_time(qp, warm=True)
+            worst["dw"] = max(worst["dw"], d)
+    oc = stats("ours cold (C clock)", t["oc"])
+    ow = stats("ours warm (C clock)", t["ow"])
+    if daqp is None:
+        print("  DAQP: not installed (pip install daqp, a test extra): comparison skipped")
+    else:
+        dc = stats("DAQP cold, solve (its C clock)", t["dcs"])
+        dcu = stats("DAQP cold, setup + solve", t["dcs"] + t["dcu"])
+        dw = stats("DAQP warm, solve (its C clock)", t["dws"])
+        dwu = stats("DAQP warm, setup + solve", t["dws"] + t["dwu"])
+        ratio_line("ours cold / DAQP cold solve", oc, dc)
+        ratio_line("ours cold / DAQP cold setup + solve", oc, dcu)
+        ratio_line("ours warm / DAQP warm solve", ow, dw)
+        ratio_line("ours warm / DAQP warm setup + solve", ow, dwu)
+        print(f"  iterations: ours cold {it['oc'].mean():.2f} warm {it['ow'].mean():.2f}, "
+              f"DAQP cold {it['dc'].mean():.2f} warm {it['dw'].mean():.2f}")
+        print("  (like for like: DAQP's setup + solve.  Its setup factors H and transforms the "
+              "constraints,\n   which change every sample with B'' and the measured force; "
+              "its solve alone reuses\n   them.  H = 2 A'A itself is formed in numpy, outside "
+              "DAQP's clock; ours starts from A.)")
+        print(f"  objective, ours minus DAQP, worst relative: cold {worst['dc']:.1e}, "
+              f"warm {worst['dw']:.1e}")
+    pq, wp = piqp_times(qps)
+    pr = stats("piqp (solve, Python clock)", pq)
+    ratio_line("ours cold / piqp", oc, pr)
+    print(f"  objective, ours minus piqp, worst relative: {wp:.1e}; in the loop (warm) ours "
+          f"mean {in_loop['mean']:.2f} us, p99 {in_loop['p99']:.2f} us")
 
 
 def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--every", type=int, default=10, help="record every N-th QP")
+    parser.add_argument("--old-fmu", type=Path, default=None,
+                        help="FullPoseController.fmu of an earlier commit "
+                             "(tests/bench/build_old_controller.sh COMMIT OUTDIR)")
     args = parser.parse_args()
-    rec, gq, aq = fly(args.seconds, args.every)
+    if args.old_fmu is not None and not args.old_fmu.is_file():
+        parser.error(f"--old-fmu {args.old_fmu}: no such file")
+    rec = fly(args.seconds, args.every, args.old_fmu)
+    n = rec["new"].shape[0]
     print(f"FullPoseController, paper hexacopter, scenario 1 for {args.seconds:g} s "
-          f"({rec['step'].size} samples of 2 ms)")
-    print("inside the FMU (clock_gettime around the work):")
-    step = stats("controller sample", rec["step"])
-    guid = stats("guidance QP solve (warm)", rec["guid"])
-    alloc = stats("inner allocation QP solve (warm)", rec["alloc"])
-    print("from Python:")
-    stats("fmi2DoStep call (fmpy low-level)", rec["call"])
+          f"({n} samples of 2 ms)")
+    print("inside the FMU (clock_gettime around the work), microseconds:")
+    new = {what: rec["new"][:, i] for i, what in enumerate(("step", "guid", "alloc"))}
+    if "old" in rec:
+        old = {what: rec["old"][:, i] for i, what in enumerate(("step", "guid", "alloc"))}
+        for what, label in (("step", "controller sample"), ("guid", "guidance QP (warm)"),
+                            ("alloc", "inner allocation QP (warm)")):
+            o = stats(f"OLD {label}", old[what])
+            nw = stats(f"NEW {label}", new[what])
+            ratio_line(f"new / old, {label}", nw, o)
+        print(f"  old and new commands, largest difference over the run: {rec['cmd_diff']:.3g}")
+        step_new, step_old = summary(new["step"]), summary(old["step"])
+        print(f"target: new/old <= 0.5 at mean and p99: mean "
+              f"{step_new['mean'] / step_old['mean']:.2f}, p99 "
+              f"{step_new['p99'] / step_old['p99']:.2f}")
+    else:
+        print("  (no --old-fmu: the old-against-new comparison is skipped; build one with "
+              "tests/bench/build_old_controller.sh COMMIT OUTDIR)")
+        stats("controller sample", new["step"])
+        stats("guidance QP (warm)", new["guid"])
+        stats("inner allocation QP (warm)", new["alloc"])
     gi, ai = rec["guid_iter"], rec["alloc_iter"]
-    print(f"iterations: guidance mean {gi.mean():.2f} max {gi.max()}; "
+    print(f"iterations in the loop: guidance mean {gi.mean():.2f} max {gi.max()}; "
           f"allocation mean {ai.mean():.2f} max {ai.max()}")
-    print(f"the same recorded QPs ({len(gq)} of each), re-solved now:")
-    pg, wg = piqp_times(gq)
-    pa, wa = piqp_times(aq)
-    cg = cold_times(gq)
-    ca = cold_times(aq)
-    pgs = stats("piqp, guidance QP", pg)
-    pas = stats("piqp, allocation QP", pa)
-    stats("ours cold, guidance QP", cg)
-    stats("ours cold, allocation QP", ca)
-    print(f"ratio piqp/ours (mean, ours warm in the loop): "
-          f"guidance {pgs['mean'] / guid['mean']:.1f}x, "
-          f"allocation {pas['mean'] / alloc['mean']:.1f}x")
-    print(f"objective: ours minus piqp, worst relative: guidance {wg:.1e}, allocation {wa:.1e}")
-    print(f"targets: controller p99 {step['p99']:.1f} us (<= 20), "
-          f"guidance QP p99 {guid['p99']:.1f} us (<= 5)")
+    compare_qps("guidance", rec["guid_qps"], summary(new["guid"]))
+    compare_qps("inner allocation", rec["alloc_qps"], summary(new["alloc"]))
 
 
 if __name__ == "__main__":
