@@ -165,7 +165,10 @@ class Recording:
         iedges = np.cumsum([0] + [len(b) for b in int_names])
         self.int_blocks = {k: slice(int(a), int(b)) for k, a, b in zip(
             ("plant", "ctrl", "ctrl_bool"), iedges[:-1], iedges[1:], strict=True)}
-        self.data = np.zeros((rows + 1, len(self.columns)))
+        # one matrix with room for the integer outputs at the end of each row: the result
+        # (``result_data``) is this matrix, not a copy of it
+        self._full = np.zeros((rows + 1, len(self.columns) + len(self.int_columns)))
+        self.data = self._full[:, :len(self.columns)]
         self.ints = np.zeros((rows + 1, len(self.int_columns)), dtype=np.int32)
         self.n_commands = len(conn.commands)
         self._vectors: dict[str, slice] = {}  # columns_of, found once per name
@@ -181,6 +184,13 @@ class Recording:
     @property
     def time(self) -> np.ndarray:
         return self.data[:, 0]
+
+    def result_data(self, rows: int) -> np.ndarray:
+        """Rows 0..rows-1 of every column, the integer outputs last as floats (columns
+        ``columns + int_columns``): a view of the recording, filled in place."""
+        full = self._full[:rows]
+        full[:, len(self.columns):] = self.ints[:rows]
+        return full
 
     ref = property(lambda self: self.block("ref"), doc="references r_k, controller inputs")
     plant = property(lambda self: self.block("plant"), doc="plant outputs y_k, measured first")

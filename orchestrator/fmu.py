@@ -14,7 +14,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-from fmpy import calloc, extract, free, read_model_description
+from fmpy import calloc, extract, free
 from fmpy.fmi1 import FMICallException
 from fmpy.fmi2 import (
     FMU2Slave,
@@ -25,6 +25,8 @@ from fmpy.fmi2 import (
     fmi2ValueReference,
 )
 from fmpy.model_description import ModelDescription
+
+from plant.model_description import model_description
 
 LogSink = Callable[[int, str, str], None]
 """Receives (status, category, message) for every message the FMU logs."""
@@ -88,7 +90,7 @@ class FmuInstance:
         unzip_dir: str | Path | None = None,
     ) -> None:
         self.path = Path(fmu_path)
-        self.md: ModelDescription = read_model_description(str(self.path))
+        self.md: ModelDescription = model_description(self.path)
         self._owns_unzip = unzip_dir is None
         self.unzip_dir = str(unzip_dir) if unzip_dir is not None else extract(str(self.path))
         self.messages: list[tuple[str, str, str]] = []

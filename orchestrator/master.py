@@ -245,7 +245,7 @@ class CoSimulation:
             fmu_time = {"plant": float(data[1:rows, columns.index("plant.t_step")].sum()),
                         "controller": float(data[:rows, columns.index("ctrl.t_step")].sum())}
         warnings = [m for s, _, m in plant_inst.messages + ctrl_inst.messages if s == "WARNING"]
-        full = np.hstack([data[:rows], rec.ints[:rows].astype(float)])
+        full = rec.result_data(rows)
         del rec.data, rec.ints, data
         meta = {
             "scenario": sc.name,

@@ -127,10 +127,18 @@ class RunResult:
     def _wide(self) -> frozenset[str]:
         wide = self.__dict__.get("_wide_columns")
         if wide is None:
-            with np.errstate(invalid="ignore"):
-                big = np.abs(np.where(np.isfinite(self.data), self.data, 0.0)).max(
-                    axis=0, initial=0.0) > np.finfo(np.float32).max
-            wide = frozenset(c for c, b in zip(self.columns, big, strict=True) if b)
+            lim = float(np.finfo(np.float32).max)
+            d = self.data
+            with np.errstate(invalid="ignore"):  # (NaN compares False: checked below)
+                fits = ((d.max(axis=0, initial=-lim) <= lim)
+                        & (d.min(axis=0, initial=lim) >= -lim))
+            found = []
+            for i in np.flatnonzero(~fits):  # beyond, or NaN/inf somewhere: finite values
+                col = d[:, i]
+                finite = col[np.isfinite(col)]
+                if finite.size and float(np.abs(finite).max()) > lim:
+                    found.append(self.columns[i])
+            wide = frozenset(found)
             self.__dict__["_wide_columns"] = wide
         return wide
 

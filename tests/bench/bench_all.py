@@ -17,6 +17,7 @@ once into ``build/bench-old/`` by ``build_old_controller.sh`` for the controller
 from __future__ import annotations
 
 import argparse
+import os
 import subprocess
 import sys
 import time
@@ -53,7 +54,7 @@ def main() -> None:
         print(f"\nbuilding the controller FMU of {args.old_commit[:12]} into {old} ...",
               flush=True)
         subprocess.run(["bash", str(builder), args.old_commit, str(old)], cwd=ROOT,
-                       check=False)
+                       check=False, env={**os.environ, "PYTHON": sys.executable})
     cmd = [py, str(HERE / "bench_controller.py")]
     if old_fmu.exists():
         cmd += ["--old-fmu", str(old_fmu)]
