@@ -49,3 +49,22 @@ def qp_from_state(state: bytes, which: int) -> RecordedQP:
     return RecordedQP(A=A[: nr * nv].reshape(nr, nv).copy(), b=b[:nr].copy(),
                       lb=lb[:nv].copy(), ub=ub[:nv].copy(),
                       C=C[: nc * nv].reshape(nc, nv).copy(), d=d[:nc].copy(), x=x[:nv].copy())
+
+
+DENSE_INF = 1e30
+"""The "no bound" of dense QP solvers such as DAQP."""
+
+
+def dense_form(qp: RecordedQP) -> tuple[np.ndarray, ...]:
+    """The QP as min 1/2 x'Hx + f'x s.t. bl <= [x; C x] <= bu, the form of dense solvers such
+    as DAQP (``daqp.solve(H, f, C, bu, bl, sense)``): bounds first, fixed variables marked
+    as equalities in ``sense`` (DAQP's ACTIVE | IMMUTABLE = 5), then the rows of C."""
+    nv = qp.A.shape[1]
+    H = np.ascontiguousarray(2.0 * qp.A.T @ qp.A)
+    f = -2.0 * qp.A.T @ qp.b
+    C = np.ascontiguousarray(qp.C if qp.C.size else np.zeros((0, nv)))
+    bu = np.concatenate([np.minimum(qp.ub, DENSE_INF), qp.d])
+    bl = np.concatenate([np.maximum(qp.lb, -DENSE_INF), np.full(qp.d.size, -DENSE_INF)])
+    sense = np.zeros(bu.size, dtype=np.int32)
+    sense[:nv][qp.lb == qp.ub] = 5
+    return H, f, C, bu, bl, sense

@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 
 from controller import controller_fmu
-from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, qp_from_state
+from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, dense_form, qp_from_state
 from orchestrator.fmu import FmuInstance
 from plant import plant_fmu
 
@@ -34,7 +34,6 @@ H = 0.002
 EPS = float(np.finfo(float).eps)
 SAFETY = 100.0  # constant of the kappa^2 eps bound
 VIOL_RTOL = 1e-9  # constraint violation, relative to max(1, |d|, |bound|)
-DAQP_INF = 1e30
 MEAS = ["pos", "vel", "acc", "euler", "rate", "omega", "alpha", "beta"]
 CMDS = ["omega_cmd", "alpha_cmd", "beta_cmd"]
 REFS = ["pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref"]
@@ -79,14 +78,7 @@ def recorded() -> dict[int, list[RecordedQP]]:
 
 
 def daqp_solve(qp: RecordedQP) -> np.ndarray:
-    nv = qp.A.shape[1]
-    Hm = np.ascontiguousarray(2.0 * qp.A.T @ qp.A)
-    f = -2.0 * qp.A.T @ qp.b
-    C = np.ascontiguousarray(qp.C if qp.C.size else np.zeros((0, nv)))
-    bu = np.concatenate([np.minimum(qp.ub, DAQP_INF), qp.d])
-    bl = np.concatenate([np.maximum(qp.lb, -DAQP_INF), np.full(qp.d.size, -DAQP_INF)])
-    sense = np.zeros(bu.size, dtype=np.int32)
-    sense[:nv][qp.lb == qp.ub] = 5  # an equality
+    Hm, f, C, bu, bl, sense = dense_form(qp)
     x, _, flag, _ = daqp.solve(Hm, f, C, bu, bl, sense, primal_tol=1e-12, dual_tol=1e-12)
     assert flag == 1, f"DAQP exit flag {flag}"
     return np.asarray(x)

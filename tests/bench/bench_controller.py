@@ -31,7 +31,7 @@ import numpy as np
 import piqp
 
 from controller import controller_fmu
-from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, qp_from_state
+from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, dense_form, qp_from_state
 from controller.wls import WlsSolver
 from orchestrator.fmu import FmuInstance
 from plant import plant_fmu
@@ -45,7 +45,6 @@ H = 0.002
 MEAS = ["pos", "vel", "acc", "euler", "rate", "omega", "alpha", "beta"]
 CMDS = ["omega_cmd", "alpha_cmd", "beta_cmd"]
 REFS = ["pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref"]
-DAQP_INF = 1e30  # DAQP's "no bound"
 REPEATS = 5  # solves per recorded QP, the median kept
 
 
@@ -174,16 +173,8 @@ def ours_time(qp: RecordedQP, warm: bool) -> tuple[float, int]:
 
 
 def daqp_problem(qp: RecordedQP) -> tuple:
-    """DAQP's form: 1/2 x'Hx + f'x, bounds first (fixed variables as equalities), then C."""
-    nv = qp.A.shape[1]
-    Hm = np.ascontiguousarray(2.0 * qp.A.T @ qp.A)
-    f = -2.0 * qp.A.T @ qp.b
-    C = np.ascontiguousarray(qp.C if qp.C.size else np.zeros((0, nv)))
-    bu = np.concatenate([np.minimum(qp.ub, DAQP_INF), qp.d])
-    bl = np.concatenate([np.maximum(qp.lb, -DAQP_INF), np.full(qp.d.size, -DAQP_INF)])
-    sense = np.zeros(bu.size, dtype=np.int32)
-    sense[:nv][qp.lb == qp.ub] = 5  # DAQP: ACTIVE | IMMUTABLE, an equality
-    return Hm, f, C, bu, bl, sense
+    """DAQP's form of the QP (:func:`controller.qp_record.dense_form`)."""
+    return dense_form(qp)
 
 
 def daqp_time(qp: RecordedQP, warm: bool) -> tuple[float, float, int, float]:
