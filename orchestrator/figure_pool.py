@@ -221,8 +221,13 @@ class FigurePool:
             fd, path = tempfile.mkstemp(prefix="fullpose-run-", suffix=".npy",
                                         dir=shm if shm.is_dir() else None)
             os.close(fd)
+            try:
+                np.save(path, np.ascontiguousarray(result.data))
+            except OSError:  # (a full /dev/shm): nothing half-written is left behind
+                with contextlib.suppress(OSError):
+                    os.unlink(path)
+                raise
             self._data = path
-            np.save(path, np.ascontiguousarray(result.data))
         self._handoff = path
         self._run = result
         self._names = list(names)

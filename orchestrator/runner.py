@@ -196,12 +196,16 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
     def write(folder: Path) -> None:
         from orchestrator.figure_pool import HANDOFF_BYTES, RUN_FIGURES
 
-        small = result.data.nbytes <= HANDOFF_BYTES
-        if pool is not None and plots and small:
-            pool.submit(result, RUN_FIGURES)  # first: the workers draw while this writes
+        handed = False  # whether the workers have their copy of the run
+        if pool is not None and plots and result.data.nbytes <= HANDOFF_BYTES:
+            try:  # first: the workers draw while this writes
+                pool.submit(result, RUN_FIGURES)
+                handed = True
+            except OSError:  # no room for the copy: they read the results file instead
+                pass
         result.write_parquet(folder / RESULTS_FILE)
         names.append(RESULTS_FILE)
-        if pool is not None and plots and not small:  # no second copy of a long run
+        if pool is not None and plots and not handed:  # a long run: no second copy of it
             pool.submit(result, RUN_FIGURES, written=folder / RESULTS_FILE)
         phase("results")
         if csv:

@@ -74,3 +74,18 @@ def test_a_long_run_reaches_the_workers_through_its_results_file(tmp_path: Path,
     for name in RUN_FIGURES:
         assert (tmp_path / "r" / f"{name}.png").read_bytes() == render_png(
             name, written, af, afs, s0), name
+
+
+def test_no_room_for_the_copy_hands_the_results_file_over(tmp_path: Path,
+                                                          monkeypatch: pytest.MonkeyPatch):
+    def full(*args: object, **kwargs: object) -> None:
+        raise OSError(28, "No space left on device")
+
+    monkeypatch.setattr(figure_pool.np, "save", full)
+    sc = prepare("hover_varying_orientation", duration=2.0)
+    run_scenario(sc, tmp_path / "r", timing=False, figure_workers=True)
+    written = RunResult.read(tmp_path / "r")
+    af, afs, s0 = figure_inputs(written)
+    assert (tmp_path / "r" / "tracking.png").read_bytes() == render_png(
+        "tracking", written, af, afs, s0)
+    assert not list(Path("/dev/shm").glob("fullpose-run-*.npy"))
