@@ -118,14 +118,28 @@ def test_cached_s0_is_the_airframes_s0(cache):
 
 
 def test_shipped_sets_are_fresh_for_every_shipped_airframe():
-    """Oracle: the sets computed now by controller.force_sets and controller.failures,
-    compared as sets (``python -m controller.shipped_sets --check``)."""
+    """Oracle: the sets computed now by controller.force_sets and controller.failures: each
+    shipped set bounds every attainable force found now and is within its approximation gap
+    of the fresh set (``python -m controller.shipped_sets --check``)."""
     from controller import shipped_sets
 
     for name in shipped_sets.list_airframes():
         af = load_airframe(name)
         assert polytope_cache.shipped(af) is not None, f"{name}: no shipped sets for its numbers"
         assert shipped_sets.check(af) == [], name
+
+
+def test_the_shipped_set_check_catches_a_set_too_small_or_too_loose():
+    """A set shrunk by 10 % leaves out forces the actuators produce; one pushed out by twice
+    its gap is looser than the algorithm certifies; the set itself passes."""
+    from controller import shipped_sets
+
+    poly = polytope_cache.compute_polytope("afs", load_airframe("paper_hexacopter"))
+    assert shipped_sets._valid("afs", poly.A, poly.b, poly, poly.gap) is None
+    small = shipped_sets._valid("afs", poly.A, 0.9 * poly.b, poly, poly.gap)
+    assert small is not None and "an attainable force found now" in small
+    loose = shipped_sets._valid("afs", poly.A, poly.b + 2 * poly.gap, poly, poly.gap)
+    assert loose is not None and "more than its approximation gap" in loose
 
 
 def test_shipped_sets_serve_only_the_shipped_numbers(cache):
