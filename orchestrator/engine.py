@@ -32,6 +32,7 @@ import ctypes
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -148,9 +149,12 @@ class Connections:
 
 class Recording:
     """The matrices of a run (``rows`` rows plus a spare one: Jacobi's u_{-1}) and typed
-    views of their blocks; ``columns`` / ``int_columns`` name every column."""
+    views of their blocks; ``columns`` / ``int_columns`` name every column.  With ``file``
+    the float matrix is that ``.npy`` file, mapped into memory: the OS writes the rows out
+    as the run goes and keeps in memory only what it has room for (a long run's recording
+    need not fit in memory); the caller removes the file."""
 
-    def __init__(self, conn: Connections, rows: int) -> None:
+    def __init__(self, conn: Connections, rows: int, file: Path | None = None) -> None:
         self.rows = rows
         names = (["time"], [f"ref.{v}" for v in conn.ref_names],
                  [f"plant.{v}" for v in conn.plant_out], [f"dist.{v}" for v in conn.dist_names],
@@ -167,7 +171,10 @@ class Recording:
             ("plant", "ctrl", "ctrl_bool"), iedges[:-1], iedges[1:], strict=True)}
         # one matrix with room for the integer outputs at the end of each row: the result
         # (``result_data``) is this matrix, not a copy of it
-        self._full = np.zeros((rows + 1, len(self.columns) + len(self.int_columns)))
+        shape = (rows + 1, len(self.columns) + len(self.int_columns))
+        self._full: np.ndarray = (np.zeros(shape) if file is None else
+                                  np.lib.format.open_memmap(file, mode="w+", dtype=np.float64,
+                                                             shape=shape))
         self.data = self._full[:, :len(self.columns)]
         self.ints = np.zeros((rows + 1, len(self.int_columns)), dtype=np.int32)
         self.n_commands = len(conn.commands)

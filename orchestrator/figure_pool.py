@@ -68,6 +68,7 @@ class _Job:
     columns: tuple[str, ...] = ()
     meta: dict[str, Any] | None = None
     integer: frozenset[str] = frozenset()
+    rows: int | None = None  # the run's rows of a .npy (None: all of them)
 
 
 def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
@@ -77,7 +78,8 @@ def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
     if job.data is not None:
         result = runs.get(job.data)
         if result is None and job.data.endswith(".npy"):
-            result = RunResult(list(job.columns), np.load(job.data, mmap_mode="r"),
+            result = RunResult(list(job.columns),
+                               np.load(job.data, mmap_mode="r")[:job.rows],
                                dict(job.meta or {}), job.integer)
         elif result is None:
             result = RunResult.read(job.data)
@@ -193,6 +195,7 @@ class FigurePool:
         self._results: dict[str, tuple[bytes | None, list[str], str | None]] = {}
         self._data: str | None = None  # the temporary file to remove
         self._handoff: str | None = None
+        self._rows: int | None = None  # the run's rows of the handed-over .npy
         self._run: RunResult | None = None
         self._names: list[str] = []
         self._zygote = ctx.Process(target=_zygote, args=(self._queues, self._done),
@@ -207,11 +210,17 @@ class FigurePool:
         self._queues[AFFINITY.get(job.name, 0) % len(self._queues)].put(job)
 
     def submit(self, result: RunResult, names: Sequence[str],
-               written: Path | None = None) -> None:
+               written: Path | None = None, recording: Path | None = None) -> None:
         """Queue the run figures ``names`` of ``result``; :meth:`collect` returns them.
-        ``written``: the run's results file, which the workers read instead of a copy of
-        the data (required above :data:`HANDOFF_BYTES`)."""
-        if written is not None:
+        The workers map a copy of the data, or without a copy: ``recording``, the ``.npy``
+        file whose first rows are ``result.data`` (a long run's recording,
+        ``master.SPILL_BYTES``); ``written``, the run's results file, which they read
+        (above :data:`HANDOFF_BYTES`)."""
+        self._rows = None
+        if recording is not None:
+            path = str(recording)
+            self._rows = len(result.data)
+        elif written is not None:
             path = str(written)
         else:
             if result.data.nbytes > HANDOFF_BYTES:
@@ -238,7 +247,8 @@ class FigurePool:
         r = self._run
         if r is None or self._handoff is None:
             return _Job(name, self._airframe, None)
-        return _Job(name, self._airframe, self._handoff, tuple(r.columns), r.meta, r.integer)
+        return _Job(name, self._airframe, self._handoff, tuple(r.columns), r.meta, r.integer,
+                    self._rows)
 
     def collect(self, timeout: float = 600.0) -> dict[str, bytes]:
         """The PNGs of the submitted run figures and of the force-set figure, by name.

@@ -3,9 +3,15 @@
 fmpy extracts, loads, instantiates and initializes both FMUs with the start values of
 ``orchestrator.start_values``; ``orchestrator.engine`` connects them, lays out the recording
 and steps them (the C kernel by default, the Python oracle with ``engine="python"``).  The
-references and disturbances of the whole run are sampled up front into their columns of the
-recording; the loop checks each chunk of 500 steps for a lost vehicle
+references and disturbances are sampled into their columns of the recording before the loop,
+a chunk of rows at a time; the loop checks each chunk of 500 steps for a lost vehicle
 (``orchestrator.outcome``) and stops there.
+
+Memory: a recording up to :data:`SPILL_BYTES` is held in memory; a larger one goes to the
+file the caller offers (``spill``; the results runner puts it beside the results folder),
+mapped into memory, so that a run of hours is limited by the disk, not by the memory
+(nothing else of the run grows with its length beyond a few columns).  Without such a file,
+a recording that would not fit in memory is refused before anything runs.
 
 Runs are deterministic: the same scenario gives bit-identical results (unless the FMUs'
 self-timing outputs are switched on).
@@ -15,11 +21,13 @@ from __future__ import annotations
 
 import ctypes
 import os
+import shutil
 import sys
 import time
 import weakref
 from collections.abc import Callable
 from dataclasses import replace
+from pathlib import Path
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -80,19 +88,42 @@ def available_memory() -> int | None:
         return None
 
 
+SPILL_BYTES = 256 * 2**20
+"""Recordings larger than this (about 7 minutes of the paper hexacopter at 500 Hz) go to the
+``spill`` file when the caller offers one."""
+FILL_ROWS = 65536
+"""Rows of references and disturbances sampled at a time before the loop."""
+
+
 def recording_bytes(rows: int, columns: int) -> int:
-    """Peak memory of a run's recording: the matrix, its copy with the integer columns
-    appended for the result, and the sampled references and disturbances (~48 columns)."""
-    return rows * 8 * (2 * columns + 48)
+    """Peak memory of a run's recording held in memory: the matrix and a few columns per row
+    of working space (the metrics' errors, the references of one fill)."""
+    return rows * 8 * (columns + 16)
 
 
-def check_memory(rows: int, columns: int, step: float = 0.002) -> None:
-    """Refuses, before anything runs, a recording that would not fit in memory."""
-    need = recording_bytes(rows, columns)
+def check_memory(rows: int, columns: int, step: float = 0.002,
+                 file: Path | None = None) -> None:
+    """Refuses, before anything runs, a recording that would not fit in memory, or (with
+    ``file``, where it is to be written) on the disk."""
+    if file is not None:
+        try:
+            free: int | None = shutil.disk_usage(file.parent).free
+        except OSError:
+            free = None
+        need = rows * 8 * columns
+        if free is not None and need > 0.9 * free:
+            raise RecordingTooLarge(
+                f"a run of {(rows - 1) * step:g} s records {rows:,} rows x {columns} columns "
+                f"into {file.parent} and needs about {need / 2**30:.1f} GiB of disk; "
+                f"{free / 2**30:.1f} GiB are free, enough for about "
+                f"{0.9 * free / (8 * columns) * step:.0f} s: shorten the duration "
+                "(--duration) or write the results elsewhere (--out)")
+    # in memory: the whole recording, or with a file a few columns of working space
+    need = recording_bytes(rows, columns) if file is None else recording_bytes(rows, 0)
     avail = available_memory()
     if avail is None or need <= 0.75 * avail:
         return
-    fits = 0.75 * avail / recording_bytes(1, columns) * step
+    fits = 0.75 * avail / (need / rows) * step
     raise RecordingTooLarge(
         f"a run of {(rows - 1) * step:g} s records {rows:,} rows x {columns} columns and "
         f"needs about {need / 2**30:.1f} GiB of memory; {avail / 2**30:.1f} GiB are "
@@ -142,7 +173,8 @@ class CoSimulation:
 
     def __init__(self, scenario: Scenario, *, timing: bool = False,
                  progress: bool | None = None, engine: str = "native",
-                 fmus: tuple[FmuInstance, FmuInstance] | None = None) -> None:
+                 fmus: tuple[FmuInstance, FmuInstance] | None = None,
+                 spill: Path | None = None, spill_above: int = SPILL_BYTES) -> None:
         if scenario.coupling not in COUPLINGS:
             raise ValueError(f"coupling must be one of {COUPLINGS}, got {scenario.coupling!r}")
         if engine not in ENGINES:
@@ -154,6 +186,10 @@ class CoSimulation:
         # (plant, controller) instantiated by the caller, freshly or after
         # FmuInstance.reset(): the run uses them and leaves them open (sweep workers)
         self.fmus = fmus
+        # a .npy file the recording is written to when larger than spill_above bytes; the
+        # caller removes it (it holds the returned result's data)
+        self.spill = None if spill is None else Path(spill)
+        self.spill_above = spill_above
 
     def run(self, on_chunk: Callable[[int, int], None] | None = None) -> RunResult:
         """The whole run; stops early, with ``meta["outcome"]`` saying so, when the vehicle
@@ -202,9 +238,12 @@ class CoSimulation:
         refs0["rotor_health"] = sc.health(np.zeros(1))
         start = self.start_values(refs0)
         conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors)
-        check_memory(planned_rows or rows, sum(conn.widths()))  # refuses too large first
-        engine = make_engine(self.engine, plant_inst, ctrl_inst, conn, Recording(conn, rows),
-                             sc.step, sc.coupling)
+        planned, columns = planned_rows or rows, sum(conn.widths())
+        file = (self.spill if self.spill is not None
+                and planned * 8 * columns > self.spill_above else None)
+        check_memory(planned, columns, sc.step, file)  # refuses too large first
+        engine = make_engine(self.engine, plant_inst, ctrl_inst, conn,
+                             Recording(conn, rows, file), sc.step, sc.coupling)
         engine.initialize(start.plant, start.controller,
                           _used_columns(refs0, REF_INPUTS, conn.ref)[0])
         return engine
@@ -216,14 +255,14 @@ class CoSimulation:
         rows = sc.n_steps + 1
         engine = self._setup(plant_inst, ctrl_inst, rows)
         rec = engine.rec
-        times = np.arange(rows, dtype=float) * h
-        refs = sc.references(times)
-        refs["rotor_health"] = sc.health(times)
-        dists = sc.disturbances(times)
-        rec.time[:rows] = times
-        rec.ref[:rows] = _used_columns(refs, REF_INPUTS, engine.conn.ref)
-        rec.dist[:rows] = _used_columns(dists, DIST_INPUTS, engine.conn.dist)
-        del refs, dists
+        for a in range(0, rows, FILL_ROWS):  # (signals of time alone: any chunking is exact)
+            b = min(a + FILL_ROWS, rows)
+            times = np.arange(a, b, dtype=float) * h
+            refs = sc.references(times)
+            refs["rotor_health"] = sc.health(times)
+            rec.time[a:b] = times
+            rec.ref[a:b] = _used_columns(refs, REF_INPUTS, engine.conn.ref)
+            rec.dist[a:b] = _used_columns(sc.disturbances(times), DIST_INPUTS, engine.conn.dist)
         wall, (lost, answered) = self._loop(engine, 0, rows - 1, 0.0, on_chunk)
         if lost is None:
             engine.controller_answer(rows - 1, (rows - 1) * h)
@@ -258,7 +297,7 @@ class CoSimulation:
             "omega_max": sc.airframe.omega_max,
             "step": sc.step,
             "duration": float(full[-1, 0]),
-            "planned_duration": float(times[-1]),
+            "planned_duration": float(sc.n_steps * h),
             "outcome": ({"outcome": "completed"} if lost is None else lost.summary()),
             "lost_criteria": sc.lost.summary(),
             "coupling": sc.coupling,
@@ -320,6 +359,9 @@ class CoSimulation:
 
 
 def run(scenario: Scenario, *, timing: bool = False, progress: bool | None = None,
-        engine: str = "native") -> RunResult:
-    """Run a scenario and return every exchanged signal at every step."""
-    return CoSimulation(scenario, timing=timing, progress=progress, engine=engine).run()
+        engine: str = "native", spill: Path | None = None,
+        spill_above: int = SPILL_BYTES) -> RunResult:
+    """Run a scenario and return every exchanged signal at every step (a recording larger
+    than ``spill_above`` bytes in the ``spill`` file, when given: :class:`CoSimulation`)."""
+    return CoSimulation(scenario, timing=timing, progress=progress, engine=engine,
+                        spill=spill, spill_above=spill_above).run()

@@ -115,16 +115,16 @@ def saturation_fractions(flags: np.ndarray, n_rotors: int) -> dict[str, float | 
                 ("any_motor", "any_alpha", "any_beta", "any", "motor", "alpha", "beta")}
     bits = np.rint(f).astype(np.int64)
     rotors = np.arange(n_rotors)
-    out: dict[str, float | None] = {}
-    sets = {}
-    for kind, shift in SAT_FLAG_SHIFT.items():
-        on = (bits[:, None] >> (rotors + shift)[None, :]) & 1  # (n, n_rotors)
-        sets[kind] = on
-        out[f"any_{kind}"] = float(np.mean(np.any(on, axis=1)))
-    out["any"] = float(np.mean(np.any(np.hstack(list(sets.values())), axis=1)))
-    for kind, on in sets.items():
-        out[kind] = float(np.mean(on)) if on.size else 0.0
-    return out
+    anywhere: dict[str, float | None] = {}
+    each: dict[str, float | None] = {}
+    hit_any = np.zeros(len(bits), dtype=bool)
+    for kind, shift in SAT_FLAG_SHIFT.items():  # one kind at a time: a long run's memory
+        on = ((bits[:, None] >> (rotors + shift)[None, :]) & 1).astype(bool)  # (n, n_rotors)
+        hit = np.any(on, axis=1)
+        hit_any |= hit
+        anywhere[f"any_{kind}"] = float(np.mean(hit))
+        each[kind] = float(np.mean(on)) if on.size else 0.0
+    return {**anywhere, "any": float(np.mean(hit_any)), **each}
 
 
 def _qp_stats(result: RunResult, prefix: str) -> dict[str, Any] | None:

@@ -17,18 +17,20 @@ results (no ``metrics.json``, not empty) is never replaced.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import shutil
 import tempfile
 import time
 import uuid
+import weakref
 from collections.abc import Callable, Iterable
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
-from orchestrator.master import run
+from orchestrator.master import SPILL_BYTES, run
 from orchestrator.metrics import compare_with_paper, compute_metrics
 from orchestrator.results import CSV_FILE, RESULTS_FILE, RunResult
 from orchestrator.scenario import Scenario, load_scenario, scenario_names
@@ -140,22 +142,55 @@ def paper_conditions(scenario: Scenario) -> str | None:
 
 def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: bool = True,
                  plots: bool = True, csv: bool = False, progress: bool | None = None,
-                 engine: str = "native", figure_workers: bool | None = None) -> RunOutput:
+                 engine: str = "native", figure_workers: bool | None = None,
+                 spill_above: int = SPILL_BYTES) -> RunOutput:
     """Run and, with an output directory, write results, metrics and figures (whole or not
     at all: :func:`publish`).  A lost vehicle is a completed call: ``metrics["outcome"]``
     says ``"lost"``, with the time and reason in ``metrics["lost"]``.  ``figure_workers``:
     draw the figures in worker processes started before the run (None: where
     :func:`orchestrator.figure_pool.available`)."""
+    spill = None
     if out_dir is not None:
         check_output_dir(out_dir)  # before the run, not after minutes of it
+        spill = _existing(Path(out_dir).absolute().parent) / (
+            f".{Path(out_dir).name}.{uuid.uuid4().hex[:12]}.recording.npy")
     draw = plots and out_dir is not None
     pool = _start_pool(scenario) if draw and figure_workers is not False else None
+    out = None
     try:
-        return _run_and_write(scenario, out_dir, pool, timing=timing, plots=draw, csv=csv,
-                              progress=progress, engine=engine)
+        out = _run_and_write(scenario, out_dir, pool, timing=timing, plots=draw, csv=csv,
+                             progress=progress, engine=engine, spill=spill,
+                             spill_above=spill_above)
+        return out
     finally:
         if pool is not None:
             pool.close()
+        if spill is not None:
+            _remove_spill(spill, out)
+
+
+def _existing(folder: Path) -> Path:
+    """The folder, or its nearest ancestor that exists (the results folder's parent may be
+    created only when the results are published)."""
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    return folder
+
+
+def _remove_spill(path: Path, out: RunOutput | None) -> None:
+    """Removes a long run's recording file (``master.SPILL_BYTES``) once it is written out.
+    The returned result still maps it: on POSIX a removed file stays readable while mapped;
+    where it cannot be removed while mapped (Windows), it goes when the result does."""
+    try:
+        path.unlink(missing_ok=True)
+    except OSError:
+        if out is not None:
+            weakref.finalize(out.result.data, _forget, path)
+
+
+def _forget(path: Path) -> None:
+    with contextlib.suppress(OSError):
+        path.unlink(missing_ok=True)
 
 
 def _start_pool(scenario: Scenario) -> FigurePool | None:
@@ -171,7 +206,8 @@ def _start_pool(scenario: Scenario) -> FigurePool | None:
 
 def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | None, *,
                    timing: bool, plots: bool, csv: bool, progress: bool | None,
-                   engine: str) -> RunOutput:
+                   engine: str, spill: Path | None = None,
+                   spill_above: int = SPILL_BYTES) -> RunOutput:
     timings: dict[str, float] = {}
     mark = time.perf_counter()
 
@@ -181,7 +217,9 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
         timings[name] = timings.get(name, 0.0) + now - mark
         mark = now
 
-    result = run(scenario, timing=timing, progress=progress, engine=engine)
+    result = run(scenario, timing=timing, progress=progress, engine=engine, spill=spill,
+                 spill_above=spill_above)
+    spilled = spill is not None and spill.exists()  # a long run: its recording is that file
     phase("setup")
     timings["loop"] = float(result.meta["wall_time"])
     timings["setup"] -= timings["loop"]
@@ -196,8 +234,11 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
     def write(folder: Path) -> None:
         from orchestrator.figure_pool import HANDOFF_BYTES, RUN_FIGURES
 
-        handed = False  # whether the workers have their copy of the run
-        if pool is not None and plots and result.data.nbytes <= HANDOFF_BYTES:
+        handed = False  # whether the workers have the run
+        if pool is not None and plots and spilled:  # they map the recording's file
+            pool.submit(result, RUN_FIGURES, recording=spill)
+            handed = True
+        elif pool is not None and plots and result.data.nbytes <= HANDOFF_BYTES:
             try:  # first: the workers draw while this writes
                 pool.submit(result, RUN_FIGURES)
                 handed = True
