@@ -6,9 +6,10 @@
 The header is fmu_src/controller/default_fail_polytopes.h: for the paper hexacopter and
 each rotor i, S(tau = 0) of the vehicle without rotor i (controller.failures), at most
 FAIL_FACETS facets each in canonical order, numbers printed with "%.17g" (deterministic
-computation).  ``--check`` compares like ``python -m controller.polytope_defaults --check``:
-the text outside the numbers must be the template's and each rotor's polytope the fresh one
-as a set (:func:`controller.force_sets.same_polytope`), never byte for byte.
+computation).  ``--check`` checks like ``python -m controller.polytope_defaults --check``:
+the text outside the numbers must be the template's and each rotor's facets at the offsets
+computed now for their normals (:func:`controller.force_sets.facet_problem`), never byte for
+byte nor against a fresh polytope (another platform can pick other normals by round-off).
 """
 
 from __future__ import annotations
@@ -20,11 +21,12 @@ from pathlib import Path
 
 import numpy as np
 
-from controller.failures import failure_polytopes, hover_possible
+from controller.failures import airframe_without, failure_polytopes, hover_possible
 from controller.fmu_parameters import FAIL_FACETS, MAX_ROTORS
-from controller.force_sets import Polytope, same_polytope
+from controller.force_sets import Polytope, facet_problem
 from controller.polytope_defaults import check_header, read_array, skeleton
 from plant import load_airframe
+from plant.airframe import Airframe
 
 AIRFRAME = "paper_hexacopter"
 COMMAND = "python -m controller.failure_defaults"
@@ -92,30 +94,36 @@ def parse(text: str) -> list[tuple[np.ndarray, np.ndarray]]:
     return [(A[r], b[r]) for r in rows]
 
 
-def compare(old: str, fresh: str) -> tuple[bool, str]:
-    """(same, reason): two header texts as generated data (each rotor's polytope as a set)."""
+def compare(old: str, fresh: str, airframe: Airframe | str = AIRFRAME) -> tuple[bool, str]:
+    """(same, reason): a header text against a fresh rendering's template, each rotor's
+    polytope against the airframe without that rotor, computed now (facet by facet)."""
+    af = load_airframe(airframe) if isinstance(airframe, str) else airframe
     try:
         if skeleton(old) != skeleton(fresh):
             return False, "its text is not the generator's (template changed or file edited)"
         problems = []
-        for i, ((A0, b0), (A1, b1)) in enumerate(zip(parse(old), parse(fresh), strict=True)):
-            if len(b0) == 0 or len(b1) == 0:  # an empty slot: no rotor, or an empty set
-                if len(b0) != len(b1):
-                    problems.append(f"rotor {i + 1}: {len(b0)} facets, a fresh {len(b1)}")
+        for i, (A0, b0) in enumerate(parse(old)):
+            if i >= af.n_rotors:
+                if len(b0):
+                    problems.append(f"rotor slot {i + 1}: {len(b0)} facets, no such rotor")
                 continue
-            same, why = same_polytope(A0, b0, A1, b1, names=("the file's set", "a fresh one"))
-            if not same:
-                problems.append(f"rotor {i + 1}: {why}")
+            why = facet_problem(airframe_without(af, [i]), A0, b0, np.zeros(3),
+                                what=f"rotor {i + 1}")
+            if why:
+                problems.append(why)
     except ValueError as exc:
         return False, f"it is not in the generated format ({exc})"
     if problems:
         return False, "; ".join(problems)
-    return True, "every rotor's polytope is the fresh one as a set"
+    return True, "every rotor's facets at the offsets computed now"
 
 
-def check(path: Path = HEADER, fresh: str | None = None) -> tuple[bool, str]:
-    """(up to date, message): the file against a fresh rendering (:func:`compare`)."""
-    return check_header(path, render() if fresh is None else fresh, compare, COMMAND)
+def check(path: Path = HEADER, fresh: str | None = None,
+          airframe: Airframe | str = AIRFRAME) -> tuple[bool, str]:
+    """(up to date, message): the file against a fresh rendering's template and the
+    airframe's failure sets computed now (:func:`compare`)."""
+    return check_header(path, render() if fresh is None else fresh,
+                        lambda old, new: compare(old, new, airframe), COMMAND)
 
 
 def main(argv: list[str] | None = None) -> int:

@@ -702,6 +702,47 @@ def same_polytope(A1: ArrayLike, b1: ArrayLike, A2: ArrayLike, b2: ArrayLike,
     return True, f"same set within {tol:.2g} N ({A1.shape[0]} and {A2.shape[0]} facets)"
 
 
+def facet_problem(airframe: Airframe | str | Path, A: ArrayLike, b: ArrayLike,
+                  torque: Sequence[float] | Array | None = None, grid: int = DEFAULT_GRID,
+                  what: str = "the set") -> str | None:
+    """Why {f : A f <= b} is not what this module computes for the airframe's AFS
+    (``torque`` None) or S(torque), whatever facet normals it was given (None: it is).
+
+    Each offset must be the outer bound computed here for its normal (within REL_TOL of the
+    set's size).  That makes the set valid (it holds every force of real actuator states)
+    and exactly as tight as computed, without asking for the same normals: the refinement
+    picks each next normal by the largest of several near-equal excesses, so another CPU or
+    library version can pick another one (the paper hexacopter's AFS of two machines
+    differs by 0.96 N where their offsets agree to 1e-13 N).  An empty set (no rows) must
+    be empty here too."""
+    af = _airframe(airframe)
+    tau = None if torque is None else np.ascontiguousarray(np.asarray(torque, dtype=float))
+    oracle = _make_oracle(af, tau, grid)
+    A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.asarray(b, dtype=float).ravel()
+    try:
+        oracle.support(np.array([0.0, 0.0, -1.0]))
+    except EmptyForceSetError:
+        return None if b.size == 0 else f"{what} has {b.size} facets but is empty here"
+    if b.size == 0:
+        return f"{what} is empty, but not here"
+    tol = REL_TOL * oracle.scale
+    worst, at, here = -1.0, -1, 0.0
+    for j, a in enumerate(A):
+        norm = float(np.linalg.norm(a))
+        if not norm > 0.0:
+            return f"{what}: facet {j} has no normal"
+        bound = oracle.outer_bound(np.ascontiguousarray(a / norm))
+        off = abs(b[j] / norm - bound)
+        if off > worst:
+            worst, at, here = off, j, bound
+    if worst > tol:
+        n = A[at] / np.linalg.norm(A[at])
+        return (f"{what}: facet {at} (normal [{', '.join(f'{x:.4f}' for x in n)}]) has "
+                f"offset {b[at] / np.linalg.norm(A[at]):.9g} N where the forces reach "
+                f"{here:.9g} N here (tolerance {tol:.2g} N)")
+    return None
+
+
 def reach_beyond(A: ArrayLike, b: ArrayLike, Ao: ArrayLike, bo: ArrayLike
                  ) -> tuple[float, int]:
     """How far {x : A x <= b} reaches beyond the facets of {x : Ao x <= bo}: the largest
@@ -765,6 +806,13 @@ def _frozen(a: Array) -> Array:
     out = np.array(a, dtype=float)
     out.setflags(write=False)
     return out
+
+
+def z_extremes(A: ArrayLike, b: ArrayLike) -> tuple[float, float]:
+    """(min, max) of f_z over {f : A f <= b} (N)."""
+    A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.asarray(b, dtype=float).ravel()
+    ez = np.array([0.0, 0.0, 1.0])
+    return _lp_extreme(A, b, ez, minimise=True), _lp_extreme(A, b, ez, minimise=False)
 
 
 def _airframe(airframe: Airframe | str | Path) -> Airframe:

@@ -7,13 +7,15 @@
 Each file, ``controller/airframe_sets/<airframe>.json``, holds the airframe's attainable force
 set and S(0) as whole polytopes and the controller's single-failure parameters, for the
 airframe numbers whose SHA-256 it records (``airframe_digest``): an airframe with any other
-number is never served them (``controller.polytope_cache``).  ``--check`` recomputes each set
-and asks whether the shipped one is a valid result for it (:func:`_valid`), not whether it is
-the same bytes or even the same polytope: the refinement picks each next facet by the largest
-of several near-equal excesses, so another library version or CPU can pick another facet
-(measured: the paper hexacopter's AFS of one machine reaches 0.96 N beyond the other's, within
-their 2.5 N approximation gaps).  The controller gets the shipped sets everywhere, so its
-results do not depend on where it runs.
+number is never served them (``controller.polytope_cache``).
+
+``--check`` asks, for each shipped facet, whether its offset is the one computed now for its
+normal (:func:`controller.force_sets.facet_problem`), not whether the polytope is the same:
+the refinement picks each next facet by the largest of several near-equal excesses, so
+another library version or CPU can pick other normals (measured: the paper hexacopter's AFS
+of one machine reaches 0.96 N beyond the other's, while the offsets of either's normals
+agree to 1e-13 N).  The controller gets the shipped sets everywhere, so its results do not
+depend on where it runs.
 """
 
 from __future__ import annotations
@@ -26,9 +28,9 @@ from typing import Any
 
 import numpy as np
 
-from controller.failures import failure_polytopes
+from controller.failures import airframe_without, failure_polytopes
 from controller.fmu_parameters import FAIL_FACETS, failure_parameters
-from controller.force_sets import REL_TOL, Polytope, beyond_facet, reach_beyond
+from controller.force_sets import facet_problem
 from controller.polytope_cache import (
     POLYTOPE_KINDS,
     airframe_digest,
@@ -52,68 +54,22 @@ def generate(af: Airframe) -> dict[str, Any]:
     return doc
 
 
-def _valid(what: str, A: np.ndarray, b: np.ndarray, fresh: Polytope, gap: float) -> str | None:
-    """Why the shipped set {A f <= b} is not a valid result of the algorithm for the set
-    computed now (None: it is).  The sandwich refinement's choice of facets can follow
-    round-off (another library version or CPU picks another of two near-equal facets), so
-    two valid results differ within their approximation gaps; what must hold exactly is:
-
-    * it bounds every force the actuators produce: each attainable force found now (the
-      fresh inner points) satisfies every shipped facet (within REL_TOL of the set's size);
-    * it is no looser than certified: it reaches at most ``gap`` (its Hausdorff distance to
-      the true set) beyond the fresh outer set, which contains the true set."""
-    tol = REL_TOL * fresh.scale
-    out = fresh.inner_points @ A.T - b
-    if out.size and float(out.max()) > tol:
-        k, j = np.unravel_index(int(np.argmax(out)), out.shape)
-        return (f"{what}: an attainable force found now, {np.round(fresh.inner_points[k], 4)}"
-                f" N, lies {out[k, j]:.3g} N beyond facet {j} of the shipped set "
-                f"(tolerance {tol:.2g} N)")
-    excess, at = reach_beyond(A, b, fresh.A, fresh.b)
-    if excess > gap + tol:
-        where = beyond_facet(excess, at, fresh.A, fresh.b, "the fresh one")
-        return f"{what}: the shipped set {where}, more than its approximation gap {gap:.3g} N"
-    return None
-
-
-def _failure_sets(params: dict[str, Any], n_rotors: int
-                  ) -> list[tuple[np.ndarray, np.ndarray] | None]:
-    """(A, b) of each rotor's failure set from the controller's parameters (None: empty)."""
-    out: list[tuple[np.ndarray, np.ndarray] | None] = []
+def _failure_sets(params: dict[str, Any], n_rotors: int) -> list[tuple[np.ndarray, np.ndarray]]:
+    """(A, b) of each rotor's failure set from the controller's parameters (no rows: empty)."""
+    out = []
     for i in range(n_rotors):
         n = int(params[f"fail_poly_n[{i + 1}]"])
         rows = range(i * FAIL_FACETS + 1, i * FAIL_FACETS + n + 1)
         A = np.array([[float(params[f"fail_poly_A[{r},{j}]"]) for j in (1, 2, 3)]
                       for r in rows]).reshape(-1, 3)
-        b = np.array([float(params[f"fail_poly_b[{r}]"]) for r in rows])
-        out.append((A, b) if n else None)
+        out.append((A, np.array([float(params[f"fail_poly_b[{r}]"]) for r in rows])))
     return out
 
 
-def _valid_failures(shipped: dict[str, Any], af: Airframe) -> str | None:
-    fresh = failure_polytopes(af)
-    if shipped.keys() != failure_parameters(fresh).keys():
-        return "failures: the parameter names differ"
-    try:
-        sets = _failure_sets(shipped, af.n_rotors)
-    except (KeyError, TypeError, ValueError) as e:
-        return f"failures: unreadable parameters ({e})"
-    for i, (mine, now) in enumerate(zip(sets, fresh, strict=True)):
-        what = f"failures: rotor {i + 1} lost"
-        if (mine is None) != (now is None):
-            return f"{what}: the shipped set is {'empty' if mine is None else 'not empty'}, " \
-                   f"the fresh one {'empty' if now is None else 'not empty'}"
-        if mine is not None and now is not None:
-            # (the parameters carry no gap: the fresh set's, from the same algorithm)
-            why = _valid(what, mine[0], mine[1], now, now.gap)
-            if why:
-                return why
-    return None
-
-
 def check(af: Airframe) -> list[str]:
-    """What is wrong with the shipped file of ``af`` against a fresh computation (empty:
-    valid): the airframe numbers it was made for, then each set as :func:`_valid` says."""
+    """What is wrong with the shipped file of ``af`` (empty: nothing): the airframe numbers it
+    was made for, then every set's facets against the offsets computed now for their normals
+    (:func:`controller.force_sets.facet_problem`)."""
     path = shipped_path(af.name)
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
@@ -124,13 +80,17 @@ def check(af: Airframe) -> list[str]:
     problems = []
     for kind in POLYTOPE_KINDS:
         shipped = polytope_from_doc(doc[kind])
-        why = _valid(kind, shipped.A, shipped.b, compute_polytope(kind, af), shipped.gap)
-        if why:
-            problems.append(f"{path}: {why}; run {COMMAND} {af.name}")
-    why = _valid_failures(doc["failures"], af)
-    if why:
-        problems.append(f"{path}: {why}; run {COMMAND} {af.name}")
-    return problems
+        problems.append(facet_problem(af, shipped.A, shipped.b,
+                                      None if kind == "afs" else np.zeros(3), what=kind))
+    try:
+        sets = _failure_sets(doc["failures"], af.n_rotors)
+    except (KeyError, TypeError, ValueError) as e:
+        sets = []
+        problems.append(f"failures: unreadable parameters ({e})")
+    for i, (A, b) in enumerate(sets):
+        problems.append(facet_problem(airframe_without(af, [i]), A, b, np.zeros(3),
+                                      what=f"failures: rotor {i + 1} lost"))
+    return [f"{path}: {p}; run {COMMAND} {af.name}" for p in problems if p]
 
 
 def main(argv: Sequence[str] | None = None) -> int:

@@ -428,40 +428,44 @@ def test_check_accepts_a_reordered_rounded_header(tmp_path):
 
 
 def test_check_rejects_an_edited_airframe(tmp_path):
-    """Rotors 1 % slower (thrust -2 %): the check fails and its message names a facet and by
-    how much the file's polytope crosses it, which an LP written here confirms."""
+    """Rotors 1 % slower (thrust -2 %): the check fails and names a facet, its offset and
+    the offset computed for the slower rotors.  Oracle: with omega_min = 0, S(0) scales with
+    the thrust, so the slower offset is (0.99)^2 = 0.9801 times the file's, exactly."""
     header = tmp_path / "default_polytope.h"
     header.write_text(SHIPPED_HEADER.read_text())
-    fresh = _slower_rotors_s0()
-    ok, message = polytope_defaults.check(header, polytope_defaults.render(fresh))
+    af = plant.load_airframe("paper_hexacopter")
+    assert af.omega_min == 0.0
+    slow = dataclasses.replace(af, omega_max=0.99 * af.omega_max)
+    ok, message = polytope_defaults.check(header, polytope_defaults.render(s0_of(
+        "paper_hexacopter")), airframe=slow)
     assert not ok and "stale" in message
-    m = re.search(r"the file's polytope reaches (\S+) N beyond facet (\d+) of a fresh one", message)
+    m = re.search(r"facet (\d+) \(normal [^)]*\) has offset (\S+) N where the forces reach "
+                  r"(\S+) N here", message)
     assert m is not None, message
-    excess, k = float(m.group(1)), int(m.group(2))
-    assert excess > 1e-3 * fresh.scale  # about the 2 % thrust change, not round-off
-    A, b = polytope_defaults.parse(SHIPPED_HEADER.read_text())
-    res = linprog(-fresh.A[k], A_ub=A, b_ub=b, bounds=(None, None), method="highs")
-    assert -res.fun - fresh.b[k] == pytest.approx(excess, rel=2e-3)  # message: 3 digits
+    k, file_b, slow_b = int(m.group(1)), float(m.group(2)), float(m.group(3))
+    _, b = polytope_defaults.parse(SHIPPED_HEADER.read_text())
+    assert file_b == pytest.approx(b[k], rel=1e-8)  # (9 digits in the message)
+    assert slow_b == pytest.approx(0.9801 * b[k], rel=1e-8)
 
 
 def test_check_rejects_another_poly_margin(tmp_path):
-    """The polytope shrunk about the hover force h like the controller's poly_margin m does
-    (b_i -> a_i . h + m (b_i - a_i . h)): the shipped one crosses facet i of the shrunk one
-    by exactly (1 - m)(b_i - a_i . h), largest where the set reaches farthest from hover."""
+    """A file holding the polytope shrunk about the hover force h like the controller's
+    poly_margin m does (b_i -> a_i . h + m (b_i - a_i . h)): the check names the facet moved
+    most, (1 - m)(b_i - a_i . h), with its offset and the one computed for its normal."""
     p = s0_of("paper_hexacopter")
     h, m = hover_force("paper_hexacopter"), 0.9
     shrunk = p.A @ h + m * (p.b - p.A @ h)
     header = tmp_path / "default_polytope.h"
-    header.write_text(SHIPPED_HEADER.read_text())
-    ok, message = polytope_defaults.check(header, polytope_defaults.render(
-        dataclasses.replace(p, b=shrunk)))
+    header.write_text(polytope_defaults.render(dataclasses.replace(p, b=shrunk)))
+    ok, message = polytope_defaults.check(header, polytope_defaults.render(p))
     assert not ok
-    got = re.search(r"the file's polytope reaches (\S+) N beyond facet (\d+) of a fresh", message)
+    got = re.search(r"facet (\d+) \(normal [^)]*\) has offset (\S+) N where the forces reach "
+                    r"(\S+) N here", message)
     assert got is not None, message
-    expected = (1 - m) * (p.b - p.A @ h)
-    excess, k = float(got.group(1)), int(got.group(2))
-    assert excess == pytest.approx(expected.max(), rel=2e-3)  # message: 3 digits
-    assert expected[k] == pytest.approx(expected.max(), rel=1e-9)  # symmetric facets tie
+    k, file_b, here = int(got.group(1)), float(got.group(2)), float(got.group(3))
+    moved = (1 - m) * (p.b - p.A @ h)
+    assert moved[k] == pytest.approx(moved.max(), rel=1e-9)  # symmetric facets tie
+    assert (file_b, here) == (pytest.approx(shrunk[k], rel=1e-8), pytest.approx(p.b[k], rel=1e-8))
 
 
 def test_check_command_detects_a_stale_file(tmp_path):
