@@ -25,7 +25,7 @@ Files (:meth:`RunResult.write`, :meth:`RunResult.read`):
     encoding for floats: ``time`` float64 (exact), Integer and Boolean outputs int32 (exact),
     every other signal float32, i.e. the recording rounded to the nearest float32 (relative
     6e-8: 0.2 um at 3 m, 1e-7 rad, far below any sensor, test bound or plot), which is what
-    makes a 100 s run ~10 MB instead of 57.  The run's metadata and the precision of each
+    makes a 100 s run 11 MB instead of 57.  The run's metadata and the precision of each
     column are in the file's key-value metadata (``fullpose.meta``, ``fullpose.format``).
     Written in row groups of :data:`ROW_GROUP` rows, so writing needs memory for one row
     group only.  Readable as is by pandas, polars, DuckDB, Arrow in every language, MATLAB's
@@ -56,7 +56,7 @@ PARQUET_FORMAT = 2
 """Version of the Parquet layout written here (``fullpose.format`` in the file)."""
 RESULTS_FILE = "results.parquet"
 CSV_FILE = "results.csv"
-ROW_GROUP = 16384
+ROW_GROUP = 65536
 """Rows per Parquet row group (and per CSV chunk): the memory a write needs beyond the data."""
 EXACT_FLOAT = frozenset({"time"})
 """Real columns stored in float64; every other real column is stored in float32."""
