@@ -18,6 +18,7 @@ results (no ``metrics.json``, not empty) is never replaced.
 from __future__ import annotations
 
 import contextlib
+import glob
 import json
 import os
 import shutil
@@ -152,8 +153,9 @@ def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: boo
     spill = None
     if out_dir is not None:
         check_output_dir(out_dir)  # before the run, not after minutes of it
-        spill = _existing(Path(out_dir).absolute().parent) / (
-            f".{Path(out_dir).name}.{uuid.uuid4().hex[:12]}.recording.npy")
+        here = _existing(Path(out_dir).absolute().parent)
+        _remove_stale_spills(here, Path(out_dir).name)
+        spill = here / f".{Path(out_dir).name}.{uuid.uuid4().hex[:12]}.recording.npy"
     draw = plots and out_dir is not None
     pool = _start_pool(scenario) if draw and figure_workers is not False else None
     out = None
@@ -175,6 +177,15 @@ def _existing(folder: Path) -> Path:
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
     return folder
+
+
+def _remove_stale_spills(folder: Path, name: str) -> None:
+    """Removes what a killed run of the same results folder left (a long run's recording
+    file).  Safe even while another run maps one: POSIX keeps a removed file for the process
+    that maps it, and Windows refuses to remove a file in use (the error is ignored)."""
+    for stale in folder.glob(f".{glob.escape(name)}.*.recording.npy"):
+        with contextlib.suppress(OSError):
+            stale.unlink()
 
 
 def _remove_spill(path: Path, out: RunOutput | None) -> None:

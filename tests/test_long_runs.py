@@ -67,6 +67,15 @@ def test_results_folder_of_a_filed_recording(tmp_path):
     assert np.array_equal(a.result.data, b.result.data)
 
 
+def test_a_killed_runs_recording_file_is_removed_by_the_next_run(tmp_path):
+    stale = tmp_path / ".res.0123456789ab.recording.npy"  # as a run killed by SIGKILL leaves
+    stale.write_bytes(b"\0" * 1024)
+    other = tmp_path / ".other.0123456789ab.recording.npy"  # another folder's: kept
+    other.write_bytes(b"")
+    run_scenario(_scenario(1.0), tmp_path / "res", plots=False)
+    assert not stale.exists() and other.exists()
+
+
 def test_the_disk_is_checked_before_the_run(tmp_path):
     with pytest.raises(RecordingTooLarge, match=r"GiB of disk.*shorten the duration"):
         check_memory(10**12, 143, file=tmp_path / "r.recording.npy")
