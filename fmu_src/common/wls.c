@@ -155,16 +155,27 @@ static int pick_drop(Ctx *c) {
     } else {
         for (j = 0; j < nv; j++) k->g[j] = 0.0;
         double an4[4];
-        for (i = 0; i < nr; i++) {
+        /* a diagonal tail's rows have one non-zero each: only its terms (the zero terms
+         * change no sum; each entry still sums over the rows in order) */
+        int dense = c->diag_tail ? c->m0 : nr;
+        for (i = 0; i < dense; i++) {
             const double *a = c->w->A + i * c->n;
             double ri = -2.0 * k->r[i], an;
-            if (i % 4 == 0) vnorm4(a, c->n, nr - i < 4 ? nr - i : 4, nv, an4);
+            if (i % 4 == 0) vnorm4(a, c->n, dense - i < 4 ? dense - i : 4, nv, an4);
             an = an4[i % 4];
             double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
             for (j = 0; j < nv; j++) {
                 k->g[j] += a[j] * ri;
                 gsj[j] += 2.0 * fabs(a[j]) * ei;
             }
+            gs += 2.0 * an * ei;
+        }
+        for (; i < nr; i++) {
+            const double *dj = c->w->A + i * c->n + (i - dense);
+            double an = vnorm(dj, 1); /* = vnorm of the row */
+            double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
+            k->g[i - dense] += *dj * (-2.0 * k->r[i]);
+            gsj[i - dense] += 2.0 * fabs(*dj) * ei;
             gs += 2.0 * an * ei;
         }
     }

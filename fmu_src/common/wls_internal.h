@@ -111,7 +111,12 @@ static inline void residual(Ctx *c) {
         k->r[0] = -k->x[n];
         return;
     }
-    for (i = 0; i + 4 <= c->w->n_rows; i += 4) { /* four rows side by side */
+    /* a diagonal tail (rows m0 + j = d_j e_j'): its rows' one non-zero term each (the zero
+     * terms change no non-zero sum) */
+    int dense = c->diag_tail ? c->m0 : c->w->n_rows;
+    for (i = dense; i < c->w->n_rows; i++)
+        k->r[i] = c->w->b[i] - c->w->A[i * n + (i - dense)] * k->x[i - dense];
+    for (i = 0; i + 4 <= dense; i += 4) { /* four rows side by side */
         const double *a0 = c->w->A + i * n, *a1 = a0 + n, *a2 = a1 + n, *a3 = a2 + n;
         double s0 = c->w->b[i], s1 = c->w->b[i + 1], s2 = c->w->b[i + 2], s3 = c->w->b[i + 3];
         for (j = 0; j < n; j++) {
@@ -123,7 +128,7 @@ static inline void residual(Ctx *c) {
         }
         k->r[i] = s0, k->r[i + 1] = s1, k->r[i + 2] = s2, k->r[i + 3] = s3;
     }
-    for (; i < c->w->n_rows; i++) {
+    for (; i < dense; i++) {
         const double *a = c->w->A + i * n;
         double s = c->w->b[i];
         for (j = 0; j < n; j++) s -= a[j] * k->x[j];
