@@ -271,25 +271,54 @@ static int none_big(const double *v, int len) {
     return top <= limit;
 }
 
-/* Also the sum of squares of each row of C into csq (the row norms start from it): a row
- * whose sum is at most BIG^2 has no entry above BIG, the others are checked entry by
- * entry (a NaN fails the comparison). */
-static int data_ok(const FpWls *w, double *csq) {
-    int i, j, n = w->n_vars;
-    if (!none_big(w->A, w->n_rows * n) || !none_big(w->b, w->n_rows)) return 0;
-    for (i = 0; i < w->n_cons; i++) {
-        const double *row = w->C + i * n;
-        double sq = 0.0;
-        for (j = 0; j < n; j++) sq += row[j] * row[j];
-        csq[i] = sq;
-        if (!(sq <= BIG * BIG) && !none_big(row, n)) return 0;
+/* The |bits| of a[j0..j1) OR'ed into *off, their squares added to colsq[j0..j1). */
+static void tail_piece(const double *a, int j0, int j1, double *colsq, uint64_t *off) {
+    uint64_t o = *off;
+    int j;
+    for (j = j0; j < j1; j++) {
+        uint64_t u;
+        memcpy(&u, a + j, sizeof u);
+        o |= u & UINT64_C(0x7FFFFFFFFFFFFFFF); /* non-zero exactly when a[j] != 0.0 */
+        colsq[j] += a[j] * a[j];
     }
+    *off = o;
+}
+
+/* One pass over A: the squared column norms into colsq (each column summed in row order),
+ * whether A ends in a diagonal tail with non-zero diagonal (rows m0 + j = d_j e_j', m0 >= 0)
+ * into *diag_tail, and the bad-input check: no entry big (or NaN).  A column whose sum of
+ * squares is below BIG^2 / 2 has no entry of magnitude BIG or more; otherwise (also inf and
+ * NaN sums) every entry is checked (none_big).  Returns 0 on a big entry. */
+static int a_pass(const FpWls *w, int m0, double *colsq, int *diag_tail) {
+    int i, j, n = w->n_vars, ok = m0 >= 0, dense = m0 >= 0 ? m0 : w->n_rows, small = 1;
+    for (j = 0; j < n; j++) colsq[j] = 0.0;
+    for (i = 0; i < dense; i++) {
+        const double *a = w->A + i * n;
+        for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
+    }
+    for (; i < w->n_rows; i++) { /* the tail's rows (m0 >= 0): also the diagonal test */
+        const double *a = w->A + i * n;
+        uint64_t off = 0, diag;
+        int dj = i - m0;
+        tail_piece(a, 0, dj, colsq, &off);
+        tail_piece(a, dj + 1, n, colsq, &off);
+        memcpy(&diag, a + dj, sizeof diag);
+        colsq[dj] += a[dj] * a[dj];
+        ok &= off == 0 && (diag & UINT64_C(0x7FFFFFFFFFFFFFFF)) != 0;
+    }
+    *diag_tail = ok;
+    for (j = 0; j < n; j++) small &= colsq[j] < 0.5 * BIG * BIG;
+    return small || none_big(w->A, w->n_rows * n);
+}
+
+/* The checks of b and of the bounds (A: a_pass; C and d: in the row loop of solve). */
+static int b_bounds_ok(const FpWls *w) {
+    int i, n = w->n_vars;
+    if (!none_big(w->b, w->n_rows)) return 0;
     for (i = 0; i < n; i++) {
         if (w->lb[i] != -INFINITY && big(w->lb[i])) return 0;
         if (w->ub[i] != INFINITY && big(w->ub[i])) return 0;
     }
-    for (i = 0; i < w->n_cons; i++)
-        if (w->d[i] != INFINITY && big(w->d[i])) return 0;
     return 1;
 }
 
@@ -472,7 +501,8 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     FpWlsWork *k;
     Ctx ctx, *c = &ctx;
     int n, i, j, iter = 0, it1 = 0, warm = 0, crossed = 0, zero_row_infeasible = 0, rc;
-    double fscale, csq[FP_WLS_MAX_CONS];
+    double fscale = 1.0, colsq[FP_WLS_MAX_VARS];
+    int diag_tail = 0, m0;
 
     if (w == NULL) return FP_ERROR;
     if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
@@ -485,50 +515,22 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     k = &w->work;
     for (j = 0; j < n; j++)
         if (!isfinite(w->x[j])) w->x[j] = 0.0;
-    if (max_iter < 1 || !data_ok(w, csq)) return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
-
-    for (j = 0; j < n; j++)
-        if (w->lb[j] > w->ub[j]) crossed = 1;
-    if (crossed) {
-        for (j = 0; j < n; j++) {
-            double lo = fmin(w->lb[j], w->ub[j]), hi = fmax(w->lb[j], w->ub[j]);
-            w->x[j] = fmin(fmax(w->x[j], lo), hi);
-        }
-        return finish_stats(w, FP_WLS_INFEASIBLE, 0, 0, 0, out, stats);
-    }
-
-    memset(c, 0, sizeof *c);
-    c->w = w;
-    c->k = k;
-    c->n = n;
-    c->nv = n;
-    {
-        /* column norms row by row: each column still sums in row order, but the columns'
-         * sums proceed side by side */
-        double colsq[FP_WLS_MAX_VARS];
-        for (j = 0; j < n; j++) colsq[j] = 0.0;
-        for (i = 0; i < w->n_rows; i++) {
-            const double *a = w->A + i * n;
-            for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
-        }
-        for (j = 0; j < n; j++)
-            if (colsq[j] > c->anorm) c->anorm = colsq[j];
-    }
-    c->anorm = sqrt(c->anorm);
-    c->m0 = w->n_rows - n;
-    c->diag_tail = c->m0 >= 0;
-    for (i = c->m0; i < w->n_rows && c->diag_tail; i++) {
-        const double *a = w->A + i * n;
-        int ok = 1; /* without a branch per element */
-        for (j = 0; j < n; j++) ok &= (j == i - c->m0) == (a[j] != 0.0);
-        c->diag_tail = ok;
-    }
-    fscale = 1.0;
+    m0 = w->n_rows - n;
+    if (max_iter < 1 || !a_pass(w, m0, colsq, &diag_tail) || !b_bounds_ok(w))
+        return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
+    /* The rows of C: the bad-input check (an entry or d big), their norms and scales.  A row
+     * whose sum of squares is at most BIG^2 has no entry above BIG, the others are checked
+     * entry by entry (a NaN fails the comparison).  The norm, its square root and 1 / norm
+     * are taken from the last solve when the row's sum of squares is the same (a constant
+     * force set), as vnorm would give them. */
     for (i = 0; i < w->n_cons; i++) {
-        /* vnorm of the row, its square root and 1 / norm taken from the last solve when
-         * the row's sum of squares is the same (a constant force set), as vnorm would */
         const double *row = w->C + i * n;
-        double sq = csq[i], cn;
+        double sq = 0.0, cn;
+        for (j = 0; j < n; j++) sq += row[j] * row[j];
+        if (!(sq <= BIG * BIG) && !none_big(row, n))
+            return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
+        if (w->d[i] != INFINITY && big(w->d[i]))
+            return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
         k->use[i] = 0;
         if (sq >= DBL_MIN && sq < HUGE_VAL && sq == k->csq[i] && k->cnorm[i] > 0.0) {
             cn = k->cnorm[i];
@@ -552,6 +554,27 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
         k->use[i] = 1;
         if (fabs(w->d[i]) / cn > fscale) fscale = fabs(w->d[i]) / cn;
     }
+
+    for (j = 0; j < n; j++)
+        if (w->lb[j] > w->ub[j]) crossed = 1;
+    if (crossed) {
+        for (j = 0; j < n; j++) {
+            double lo = fmin(w->lb[j], w->ub[j]), hi = fmax(w->lb[j], w->ub[j]);
+            w->x[j] = fmin(fmax(w->x[j], lo), hi);
+        }
+        return finish_stats(w, FP_WLS_INFEASIBLE, 0, 0, 0, out, stats);
+    }
+
+    memset(c, 0, sizeof *c);
+    c->w = w;
+    c->k = k;
+    c->n = n;
+    c->nv = n;
+    for (j = 0; j < n; j++)
+        if (colsq[j] > c->anorm) c->anorm = colsq[j];
+    c->anorm = sqrt(c->anorm);
+    c->m0 = m0;
+    c->diag_tail = diag_tail;
 
     /* A start point far outside the problem's own scale (the constraint offsets and finite
      * bounds) is a stale or corrupt warm start; it would also set the feasibility
