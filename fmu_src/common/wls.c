@@ -59,7 +59,7 @@ static int ratio_step(Ctx *c, int *moved) {
     FpWlsWork *k = c->k;
     int q, i, blk = -1, nv = c->nv;
     double pn = vnorm(k->p, nv), amin = 1.0, alpha_blk = 2.0, rate_blk = 0.0;
-    double xinf = inf_norm(k->x, nv), pinf = inf_norm(k->p, nv);
+    double xinf = inf_norm(k->x, nv), pinf = inf_norm(k->p, nv), cp4[4], cx4[4];
     /* ties are judged as distances along the step: with a huge face step (an
      * ill-conditioned face) a fixed 1e-12 in step fraction is O(1) in x, and snapping
      * x onto the tied constraint's bound would leave another one violated */
@@ -90,11 +90,17 @@ static int ratio_step(Ctx *c, int *moved) {
         }
     }
     for (i = 0; i < c->w->n_cons; i++) {
-        double cp = 0.0, s, ratio, rate;
+        /* c'p over the free variables in index order: crow_dot(p), p being zero on the
+         * fixed ones (their zero terms change no non-zero sum); four rows at a time */
+        double cp, s, ratio, rate;
+        if (i % 4 == 0) {
+            crow_dots(c, i, k->p, cp4);
+            crow_dots(c, i, k->x, cx4);
+        }
         if (!k->use[i] || k->act[i]) continue;
-        for (q = 0; q < c->nf; q++) cp += cval(c, i, k->free_idx[q]) * k->p[k->free_idx[q]];
+        cp = cp4[i % 4];
         if (!(cp > TOL_BLOCK * pn)) continue;
-        s = dval(c, i) - crow_dot(c, i, k->x);
+        s = dval(c, i) - cx4[i % 4];
         rate = cp / pn;
         ratio = (s > 0.0 ? s : 0.0) / cp;
         if (ratio < amin) amin = ratio;

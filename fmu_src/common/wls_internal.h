@@ -101,6 +101,16 @@ static inline void crow_dot4(const Ctx *c, int i, const double *x, double s[4]) 
     s[0] = s0, s[1] = s1, s[2] = s2, s[3] = s3;
 }
 
+/* crow_dot of the rows i..i+3 that exist (fewer at the end of C) into s. */
+static inline void crow_dots(const Ctx *c, int i, const double *x, double s[4]) {
+    int r;
+    if (i + 4 <= c->w->n_cons) {
+        crow_dot4(c, i, x, s);
+        return;
+    }
+    for (r = 0; i + r < c->w->n_cons; r++) s[r] = crow_dot(c, i + r, x);
+}
+
 static inline int nrows(const Ctx *c) { return c->ph1 ? 1 : c->w->n_rows; }
 
 /* r = b - A x over the rows of the current objective. */
