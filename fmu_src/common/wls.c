@@ -277,44 +277,76 @@ static int none_big(const double *v, int len) {
     return top <= limit;
 }
 
-/* The |bits| of a[j0..j1) OR'ed into *off, their squares added to colsq[j0..j1). */
-static void tail_piece(const double *a, int j0, int j1, double *colsq, uint64_t *off) {
-    uint64_t o = *off;
-    int j;
-    for (j = j0; j < j1; j++) {
-        uint64_t u;
-        memcpy(&u, a + j, sizeof u);
-        o |= u & UINT64_C(0x7FFFFFFFFFFFFFFF); /* non-zero exactly when a[j] != 0.0 */
-        colsq[j] += a[j] * a[j];
+/* 1 if the n x n block t (row-major, contiguous) is diagonal with a non-zero diagonal, by
+ * the bits of its entries (|bits| != 0 exactly when the entry != 0.0, NaN included): the
+ * off-diagonal entries are the n - 1 runs of n between consecutive diagonal entries. */
+static int diagonal_block(const double *t, int n) {
+    uint64_t off = 0, u;
+    int r, q, nonzero = 1;
+    for (r = 0; r + 1 < n; r++) {
+        const double *run = t + r * (n + 1) + 1;
+        for (q = 0; q < n; q++) {
+            memcpy(&u, run + q, sizeof u);
+            off |= u;
+        }
     }
-    *off = o;
+    for (r = 0; r < n; r++) {
+        memcpy(&u, t + r * (n + 1), sizeof u);
+        nonzero &= (u & UINT64_C(0x7FFFFFFFFFFFFFFF)) != 0;
+    }
+    return (off & UINT64_C(0x7FFFFFFFFFFFFFFF)) == 0 && nonzero;
 }
 
 /* One pass over A: the squared column norms into colsq (each column summed in row order),
  * whether A ends in a diagonal tail with non-zero diagonal (rows m0 + j = d_j e_j', m0 >= 0)
  * into *diag_tail, and the bad-input check: no entry big (or NaN).  A column whose sum of
  * squares is below BIG^2 / 2 has no entry of magnitude BIG or more; otherwise (also inf and
- * NaN sums) every entry is checked (none_big).  Returns 0 on a big entry. */
+ * NaN sums) every entry is checked (none_big).  Returns 0 on a big entry.  On a diagonal
+ * tail a column's sum gets only its diagonal entry's square from the tail (the zeros add
+ * nothing). */
 static int a_pass(const FpWls *w, int m0, double *colsq, int *diag_tail) {
-    int i, j, n = w->n_vars, ok = m0 >= 0, dense = m0 >= 0 ? m0 : w->n_rows, small = 1;
+    int i, j, n = w->n_vars, ok, dense = m0 >= 0 ? m0 : w->n_rows, small = 1;
     for (j = 0; j < n; j++) colsq[j] = 0.0;
     for (i = 0; i < dense; i++) {
         const double *a = w->A + i * n;
         for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
     }
-    for (; i < w->n_rows; i++) { /* the tail's rows (m0 >= 0): also the diagonal test */
-        const double *a = w->A + i * n;
-        uint64_t off = 0, diag;
-        int dj = i - m0;
-        tail_piece(a, 0, dj, colsq, &off);
-        tail_piece(a, dj + 1, n, colsq, &off);
-        memcpy(&diag, a + dj, sizeof diag);
-        colsq[dj] += a[dj] * a[dj];
-        ok &= off == 0 && (diag & UINT64_C(0x7FFFFFFFFFFFFFFF)) != 0;
+    ok = m0 >= 0 && diagonal_block(w->A + m0 * n, n);
+    if (ok) {
+        const double *t = w->A + m0 * n;
+        for (j = 0; j < n; j++) colsq[j] += t[j * (n + 1)] * t[j * (n + 1)];
+    } else {
+        for (; i < w->n_rows; i++) {
+            const double *a = w->A + i * n;
+            for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
+        }
     }
     *diag_tail = ok;
     for (j = 0; j < n; j++) small &= colsq[j] < 0.5 * BIG * BIG;
     return small || none_big(w->A, w->n_rows * n);
+}
+
+/* The sums of squares of rows (<= 4) of length n, n apart, side by side (each summed in
+ * index order). */
+static void row_sq4(const double *x, int n, int rows, double out[4]) {
+    const double *x0 = x, *x1 = x + n, *x2 = x + 2 * n, *x3 = x + 3 * n;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int i, r;
+    if (rows < 4) {
+        for (r = 0; r < rows; r++) {
+            double s = 0.0;
+            for (i = 0; i < n; i++) s += x[r * n + i] * x[r * n + i];
+            out[r] = s;
+        }
+        return;
+    }
+    for (i = 0; i < n; i++) {
+        s0 += x0[i] * x0[i];
+        s1 += x1[i] * x1[i];
+        s2 += x2[i] * x2[i];
+        s3 += x3[i] * x3[i];
+    }
+    out[0] = s0, out[1] = s1, out[2] = s2, out[3] = s3;
 }
 
 /* The checks of b and of the bounds (A: a_pass; C and d: in the row loop of solve). */
@@ -507,7 +539,7 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     FpWlsWork *k;
     Ctx ctx, *c = &ctx;
     int n, i, j, iter = 0, it1 = 0, warm = 0, crossed = 0, zero_row_infeasible = 0, rc;
-    double fscale = 1.0, colsq[FP_WLS_MAX_VARS];
+    double fscale = 1.0, colsq[FP_WLS_MAX_VARS], sq4[4];
     int diag_tail = 0, m0;
 
     if (w == NULL) return FP_ERROR;
@@ -531,8 +563,9 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
      * force set), as vnorm would give them. */
     for (i = 0; i < w->n_cons; i++) {
         const double *row = w->C + i * n;
-        double sq = 0.0, cn;
-        for (j = 0; j < n; j++) sq += row[j] * row[j];
+        double sq, cn;
+        if (i % 4 == 0) row_sq4(row, n, w->n_cons - i < 4 ? w->n_cons - i : 4, sq4);
+        sq = sq4[i % 4];
         if (!(sq <= BIG * BIG) && !none_big(row, n))
             return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
         if (w->d[i] != INFINITY && big(w->d[i]))
