@@ -56,7 +56,8 @@
  * A (minimum-norm step), so weight ratios of 1e7 and more are fine.  When A ends
  * in a diagonal block with non-zero diagonal (rows n_rows - n_vars + j = d_j e_j',
  * e.g. regularisation or preference rows) and no row of C is active, the face
- * has full rank and its QR works on the other rows plus one (wls_qr.c).  A feasible
+ * has full rank and its step comes from the dual form, a QR with one reflector per
+ * other row of A instead of one per free variable (wls_qr.c).  A feasible
  * start comes from projecting onto the constraints with the Goldfarb-Idnani
  * dual method; degenerate vertices are handled with Bland's rule.  See wls.c.
  * An iteration is one factorisation of the working set: O(n^2 (n + rows)) flops.
