@@ -30,6 +30,9 @@
 #define TOL_FEAS 1e-11     /* feasibility, relative to max(1, |d|, |x|) */
 #define START_RANGE 1e6    /* a start point beyond START_RANGE x the data's scale is dropped */
 #define TOL_GI 1e-10       /* projection phase: a normal this close to the span is dependent */
+#ifndef DUAL_E2_MAX
+#define DUAL_E2_MAX 1e6    /* the diagonal tail's dual step only for ||M_F D_F^-1||_F^2 <= this */
+#endif
 
 /* Magnitudes above this are bad input (their squares would overflow). */
 #define BIG 1e150

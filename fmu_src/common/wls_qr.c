@@ -233,6 +233,80 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
     return kr;
 }
 
+/* The primal form of the face step below (diag_tail_step), for an E too large for the dual
+ * form: min ||A_F y - r|| with A_F = [M_F; D_F], M_F the m0 dense rows, D_F the free variables'
+ * diagonal rows (the fixed variables' rows are constant over F).  Householder QR of
+ * [D_F; M_F]: reflector q acts on D_F's row q and the m0 rows of M_F only (D_F's other rows
+ * are zero in column q and stay so), so it costs O(nf^2 m0) instead of O(nf^2 nr), and
+ * A_F has full rank (|R_qq| >= |d_q| > 0): no pivoting.  Returns 0 (the caller takes the
+ * general path) when some |d_q| is at the general path's rank cut-off. */
+static int diag_tail_primal(Ctx *c, double *y) {
+    FpWlsWork *k = c->k;
+    const FpWls *w = c->w;
+    int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
+    double *r = k->r, *rt = &AZ(0, nf), tmp[FP_WLS_MAX_ROWS + 1]; /* rt: column nf */
+    for (q = 0; q < nf; q++) {
+        int v = k->free_idx[q];
+        double dq = w->A[(m0 + v) * n + v];
+        if (!(fabs(dq) > TOL_RANK * c->anorm)) return 0;
+    }
+    /* AZ rows 0..nf-1: D_F (R grows there), rows nf..nf+m0-1: M_F; rt likewise */
+    for (j = 0; j < nf; j++) {
+        int v = k->free_idx[j];
+        double *col = &AZ(0, j);
+        for (q = 0; q < nf; q++) col[q] = 0.0;
+        col[j] = w->A[(m0 + v) * n + v];
+        for (i = 0; i < m0; i++) col[nf + i] = w->A[i * n + v];
+        rt[j] = r[m0 + v];
+    }
+    for (i = 0; i < m0; i++) rt[nf + i] = r[i];
+    for (q = 0; q < nf; q++) {
+        double *cq = &AZ(0, q), *vt = cq + nf, tau;
+        tmp[0] = cq[q];
+        for (i = 0; i < m0; i++) tmp[1 + i] = vt[i];
+        house_make(tmp, m0 + 1, &tau);
+        cq[q] = tmp[0];
+        for (i = 0; i < m0; i++) vt[i] = tmp[1 + i];
+        if (tau == 0.0) continue;
+        /* columns q+1..nf (nf: rt): y[q] and y[nf..] through H = I - tau v v', v = [1; vt] */
+        j = q + 1;
+        for (; j + 4 <= nf + 1; j += 4) {
+            double *y0 = &AZ(0, j), *y1 = y0 + LDA, *y2 = y1 + LDA, *y3 = y2 + LDA;
+            double s0 = y0[q], s1 = y1[q], s2 = y2[q], s3 = y3[q];
+            for (i = 0; i < m0; i++) {
+                double v = vt[i];
+                s0 += v * y0[nf + i];
+                s1 += v * y1[nf + i];
+                s2 += v * y2[nf + i];
+                s3 += v * y3[nf + i];
+            }
+            s0 *= tau, s1 *= tau, s2 *= tau, s3 *= tau;
+            y0[q] -= s0, y1[q] -= s1, y2[q] -= s2, y3[q] -= s3;
+            for (i = 0; i < m0; i++) {
+                double v = vt[i];
+                y0[nf + i] -= s0 * v;
+                y1[nf + i] -= s1 * v;
+                y2[nf + i] -= s2 * v;
+                y3[nf + i] -= s3 * v;
+            }
+        }
+        for (; j <= nf; j++) {
+            double *yj = &AZ(0, j), s = yj[q];
+            for (i = 0; i < m0; i++) s += vt[i] * yj[nf + i];
+            s *= tau;
+            yj[q] -= s;
+            for (i = 0; i < m0; i++) yj[nf + i] -= s * vt[i];
+        }
+    }
+    for (j = nf - 1; j >= 0; j--) { /* R y = (Q' r)[0:nf], by columns (no serial chain) */
+        const double *rj = &AZ(0, j);
+        double yj = rt[j] / rj[j];
+        y[j] = yj;
+        for (q = 0; q < j; q++) rt[q] -= rj[q] * yj;
+    }
+    return 1;
+}
+
 /* The face step when A ends in a diagonal block (Ctx.diag_tail) and no row of C is active:
  * min ||M_F y - r_M||^2 + ||D_F y - r_D||^2, M_F the m0 dense rows on the free variables,
  * D_F their diagonal rows (the fixed variables' rows are constant over F).  With z = D_F y
@@ -243,15 +317,18 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
  * Householder QR has m0 reflectors instead of nf (6 against up to 18 in the allocation):
  * column j below the diagonal is non-zero only in rows j..nf+j (E' rows j.., identity rows
  * 0..j, the later identity rows untouched so far), so each reflector spans nf + 1 rows; and
- * [E'; I] has full column rank whatever E is (no pivoting).  No normal equations are formed.
- * Returns 0 (the caller takes the general path) when some |d_q| is at the general path's
- * rank cut-off. */
-static int diag_tail_step(Ctx *c, double *y) {
+ * [E'; I] has full column rank whatever E is (no pivoting).  No normal equations are formed,
+ * but the dual problem's residual is z itself, so the error in z grows like eps ||E||^2 (as
+ * in the normal equations) when the dense rows are nearly met: the dual form is taken only
+ * for ||E||_F^2 <= DUAL_E2_MAX (the allocation's E is ~400, the guidance's ~5e3), else
+ * diag_tail_primal.  Returns 1 (y set), 0 (the caller takes the general path) when some
+ * |d_q| is at the general path's rank cut-off, -1 when E is too large. */
+static int diag_tail_dual(Ctx *c, double *y) {
     FpWlsWork *k = c->k;
     const FpWls *w = c->w;
     int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
-    double *r = k->r, *rt, dinv[NV1];
-    if (m0 + 1 > NV1) return 0; /* AZ holds NV1 columns: [E'; I] and the right-hand side */
+    double *r = k->r, *rt, dinv[NV1], e2 = 0.0;
+    if (m0 + 1 > NV1) return -1; /* AZ holds NV1 columns: [E'; I] and the right-hand side */
     rt = &AZ(0, m0);            /* the right-hand side, column m0 */
     for (q = 0; q < nf; q++) {
         int v = k->free_idx[q];
@@ -263,10 +340,14 @@ static int diag_tail_step(Ctx *c, double *y) {
     for (i = 0; i < m0; i++) {
         const double *a = w->A + i * n;
         double *col = &AZ(0, i);
-        for (q = 0; q < nf; q++) col[q] = a[k->free_idx[q]] * dinv[q];
+        for (q = 0; q < nf; q++) {
+            col[q] = a[k->free_idx[q]] * dinv[q];
+            e2 += col[q] * col[q];
+        }
         for (q = 0; q < m0; q++) col[nf + q] = q == i ? 1.0 : 0.0;
         rt[nf + i] = r[i];
     }
+    if (!(e2 <= DUAL_E2_MAX)) return -1;
     for (q = 0; q < nf; q++) rt[q] = -r[m0 + k->free_idx[q]];
     for (j = 0; j < m0; j++) {
         double tau;
@@ -287,6 +368,14 @@ static int diag_tail_step(Ctx *c, double *y) {
         y[q] = (r[m0 + v] + s * dinv[q]) * dinv[q];
     }
     return 1;
+}
+
+/* The face step when A ends in a diagonal block (Ctx.diag_tail) and no row of C is active,
+ * in the dual form when E is small enough for it, else in the primal form.  Returns 0 (the
+ * caller takes the general path) when some |d_q| is at the general path's rank cut-off. */
+static int diag_tail_step(Ctx *c, double *y) {
+    int rc = diag_tail_dual(c, y);
+    return rc >= 0 ? rc : diag_tail_primal(c, y);
 }
 
 /* Step p (full length nv, zero on fixed variables) to the face minimiser.
