@@ -53,8 +53,9 @@ typedef struct {
     double tol_feas;
     /* A ends in a diagonal block: rows m0 + j (j < n) are d_j e_j', every d_j != 0 (the
      * regularisation rows of an allocation, the W_u rows of the guidance).  Then a face
-     * without active rows of C has a full-rank A_F and its step comes from the dual form,
-     * a QR of m0 columns (wls_qr.c).  m0 = n_rows - n; diag_tail 0: not so. */
+     * without active rows of C has a full-rank A_F and its step comes from a QR of m0
+     * columns (dual form) or of one reflector per free variable on 1 + m0 rows (primal
+     * form, for a large M_F D_F^-1) (wls_qr.c).  m0 = n_rows - n; diag_tail 0: not so. */
     int diag_tail, m0;
 } Ctx;
 
