@@ -22,10 +22,11 @@ Per infeasible problem: our status "infeasible", piqp's PIQP_PRIMAL_INFEASIBLE,
 x finite, within the bounds and minimising the largest row-normalised
 violation (checked against a scipy HiGHS LP).
 
-Categories (counts in CATEGORIES, 10,300 problems): well-posed, rank-deficient
+Categories (counts in CATEGORIES, 11,800 problems): well-posed, rank-deficient
 A, redundant / degenerate rows, equal bounds, infeasible sets, 1e7 weight
 ratios, the paper's guidance QP (eq. 17-23, polygon or polytope force
-constraints) and the inner allocation (24 actuator increments, 6 + 24 rows).
+constraints), the inner allocation (24 actuator increments, 6 + 24 rows) and
+A ending in a diagonal block with dense rows scaled over seven decades.
 Further tests: the iteration cap, bad input, special infeasible sets, the
 size caps, warm against cold start, the early exit, arbitrary working sets.
 """
@@ -441,6 +442,23 @@ def gen_allocation(rng):
     return _problem(A, b, lb, ub, None, None)
 
 
+def gen_diagonal_tail(rng):
+    """A = [M; D], D diagonal (preference or regularisation rows), M dense and scaled so
+    that ||M D^-1|| spans 1 .. ~1e7: the solver's diagonal-tail step (dual form for small
+    ||M D^-1||, primal beyond).  Fewer dense rows than variables (the dense rows can be met
+    exactly: the dual form's hard case) or more; a few rows of C on some problems."""
+    n = int(rng.integers(2, 21))
+    m0 = int(rng.integers(1, min(9, 48 - n) + 1))
+    x_f = rng.standard_normal(n)
+    M = rng.standard_normal((m0, n)) * 10.0 ** rng.uniform(-1.0, 6.0)
+    dg = rng.uniform(0.01, 1.0, n) * rng.choice([-1.0, 1.0], n)
+    A = np.vstack([M, np.diag(dg)])
+    lb, ub = _bounds(rng, x_f, p_eq=0.05)
+    p = int(rng.integers(0, 4)) if rng.random() < 0.3 else 0
+    C, d = _cons(rng, x_f, p) if p else (None, None)
+    return _problem(A, _rhs(rng, A, x_f), lb, ub, C, d)
+
+
 CATEGORIES = {
     "well_posed": (gen_well_posed, 2000),
     "rank_deficient": (gen_rank_deficient, 1500),
@@ -450,6 +468,7 @@ CATEGORIES = {
     "weights_1e7": (gen_weights_1e7, 1000),
     "guidance": (gen_guidance, 1500),
     "allocation": (gen_allocation, 800),
+    "diagonal_tail": (gen_diagonal_tail, 1500),
 }
 SEEDS = {name: 1000 + i for i, name in enumerate(CATEGORIES)}
 

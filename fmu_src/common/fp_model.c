@@ -129,16 +129,6 @@ const FpVar *fp_var_find(const FpVar *vars, size_t n_vars, const char *name) {
     return NULL;
 }
 
-int fp_range_contains(const FpRange *r, double v) {
-    if (r->flags & FP_RANGE_LO) {
-        if ((r->flags & FP_RANGE_LO_OPEN) ? !(v > r->lo) : !(v >= r->lo)) return 0;
-    }
-    if (r->flags & FP_RANGE_HI) {
-        if ((r->flags & FP_RANGE_HI_OPEN) ? !(v < r->hi) : !(v <= r->hi)) return 0;
-    }
-    return 1;
-}
-
 /* A bound as a message shows it: the servo limits read "pi/2", not 1.5707963267948966. */
 static const char *bound_text(char *buf, double x, int integer) {
     static const double quarter_pi = 0.78539816339744830962;

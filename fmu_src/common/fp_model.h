@@ -97,8 +97,17 @@ typedef struct {
     {(a), (b), FP_RANGE_LO | FP_RANGE_HI | FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN} /* (a, b) */
 #define FP_IN_LOPEN(a, b) {(a), (b), FP_RANGE_LO | FP_RANGE_HI | FP_RANGE_LO_OPEN} /* (a, b] */
 
-/* 1 if v lies in r (NaN lies in no bounded range). */
-int fp_range_contains(const FpRange *r, double v);
+/* 1 if v lies in r (NaN lies in no bounded range).  Inline: the controller checks every
+ * input against its range every sample. */
+static inline int fp_range_contains(const FpRange *r, double v) {
+    if (r->flags & FP_RANGE_LO) {
+        if ((r->flags & FP_RANGE_LO_OPEN) ? !(v > r->lo) : !(v >= r->lo)) return 0;
+    }
+    if (r->flags & FP_RANGE_HI) {
+        if ((r->flags & FP_RANGE_HI_OPEN) ? !(v < r->hi) : !(v <= r->hi)) return 0;
+    }
+    return 1;
+}
 
 /* r as an interval, "[0, 1]", "(0, inf)", "1..8" (integer), with multiples of pi/4 written
  * as such ("[-pi/2, pi/2]"). */

@@ -59,7 +59,7 @@ static int ratio_step(Ctx *c, int *moved) {
     FpWlsWork *k = c->k;
     int q, i, blk = -1, nv = c->nv;
     double pn = vnorm(k->p, nv), amin = 1.0, alpha_blk = 2.0, rate_blk = 0.0;
-    double xinf = inf_norm(k->x, nv), pinf = inf_norm(k->p, nv);
+    double xinf = inf_norm(k->x, nv), pinf = inf_norm(k->p, nv), cp4[4], cx4[4];
     /* ties are judged as distances along the step: with a huge face step (an
      * ill-conditioned face) a fixed 1e-12 in step fraction is O(1) in x, and snapping
      * x onto the tied constraint's bound would leave another one violated */
@@ -90,11 +90,17 @@ static int ratio_step(Ctx *c, int *moved) {
         }
     }
     for (i = 0; i < c->w->n_cons; i++) {
-        double cp = 0.0, s, ratio, rate;
+        /* c'p over the free variables in index order: crow_dot(p), p being zero on the
+         * fixed ones (their zero terms change no non-zero sum); four rows at a time */
+        double cp, s, ratio, rate;
+        if (i % 4 == 0) {
+            crow_dots(c, i, k->p, cp4);
+            crow_dots(c, i, k->x, cx4);
+        }
         if (!k->use[i] || k->act[i]) continue;
-        for (q = 0; q < c->nf; q++) cp += cval(c, i, k->free_idx[q]) * k->p[k->free_idx[q]];
+        cp = cp4[i % 4];
         if (!(cp > TOL_BLOCK * pn)) continue;
-        s = dval(c, i) - crow_dot(c, i, k->x);
+        s = dval(c, i) - cx4[i % 4];
         rate = cp / pn;
         ratio = (s > 0.0 ? s : 0.0) / cp;
         if (ratio < amin) amin = ratio;
@@ -155,16 +161,27 @@ static int pick_drop(Ctx *c) {
     } else {
         for (j = 0; j < nv; j++) k->g[j] = 0.0;
         double an4[4];
-        for (i = 0; i < nr; i++) {
+        /* a diagonal tail's rows have one non-zero each: only its terms (the zero terms
+         * change no sum; each entry still sums over the rows in order) */
+        int dense = c->diag_tail ? c->m0 : nr;
+        for (i = 0; i < dense; i++) {
             const double *a = c->w->A + i * c->n;
             double ri = -2.0 * k->r[i], an;
-            if (i % 4 == 0) vnorm4(a, c->n, nr - i < 4 ? nr - i : 4, nv, an4);
+            if (i % 4 == 0) vnorm4(a, c->n, dense - i < 4 ? dense - i : 4, nv, an4);
             an = an4[i % 4];
             double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
             for (j = 0; j < nv; j++) {
                 k->g[j] += a[j] * ri;
                 gsj[j] += 2.0 * fabs(a[j]) * ei;
             }
+            gs += 2.0 * an * ei;
+        }
+        for (; i < nr; i++) {
+            const double *dj = c->w->A + i * c->n + (i - dense);
+            double an = vnorm(dj, 1); /* = vnorm of the row */
+            double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
+            k->g[i - dense] += *dj * (-2.0 * k->r[i]);
+            gsj[i - dense] += 2.0 * fabs(*dj) * ei;
             gs += 2.0 * an * ei;
         }
     }
@@ -260,25 +277,86 @@ static int none_big(const double *v, int len) {
     return top <= limit;
 }
 
-/* Also the sum of squares of each row of C into csq (the row norms start from it): a row
- * whose sum is at most BIG^2 has no entry above BIG, the others are checked entry by
- * entry (a NaN fails the comparison). */
-static int data_ok(const FpWls *w, double *csq) {
-    int i, j, n = w->n_vars;
-    if (!none_big(w->A, w->n_rows * n) || !none_big(w->b, w->n_rows)) return 0;
-    for (i = 0; i < w->n_cons; i++) {
-        const double *row = w->C + i * n;
-        double sq = 0.0;
-        for (j = 0; j < n; j++) sq += row[j] * row[j];
-        csq[i] = sq;
-        if (!(sq <= BIG * BIG) && !none_big(row, n)) return 0;
+/* 1 if the n x n block t (row-major, contiguous) is diagonal with a non-zero diagonal, by
+ * the bits of its entries (|bits| != 0 exactly when the entry != 0.0, NaN included): the
+ * off-diagonal entries are the n - 1 runs of n between consecutive diagonal entries. */
+static int diagonal_block(const double *t, int n) {
+    uint64_t off = 0, u;
+    int r, q, nonzero = 1;
+    for (r = 0; r + 1 < n; r++) {
+        const double *run = t + r * (n + 1) + 1;
+        for (q = 0; q < n; q++) {
+            memcpy(&u, run + q, sizeof u);
+            off |= u;
+        }
     }
+    for (r = 0; r < n; r++) {
+        memcpy(&u, t + r * (n + 1), sizeof u);
+        nonzero &= (u & UINT64_C(0x7FFFFFFFFFFFFFFF)) != 0;
+    }
+    return (off & UINT64_C(0x7FFFFFFFFFFFFFFF)) == 0 && nonzero;
+}
+
+/* One pass over A: the squared column norms into colsq (each column summed in row order),
+ * whether A ends in a diagonal tail with non-zero diagonal (rows m0 + j = d_j e_j', m0 >= 0)
+ * into *diag_tail, and the bad-input check: no entry big (or NaN).  A column whose sum of
+ * squares is below BIG^2 / 2 has no entry of magnitude BIG or more; otherwise (also inf and
+ * NaN sums) every entry is checked (none_big).  Returns 0 on a big entry.  On a diagonal
+ * tail a column's sum gets only its diagonal entry's square from the tail (the zeros add
+ * nothing). */
+static int a_pass(const FpWls *w, int m0, double *colsq, int *diag_tail) {
+    int i, j, n = w->n_vars, ok, dense = m0 >= 0 ? m0 : w->n_rows, small = 1;
+    for (j = 0; j < n; j++) colsq[j] = 0.0;
+    for (i = 0; i < dense; i++) {
+        const double *a = w->A + i * n;
+        for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
+    }
+    ok = m0 >= 0 && diagonal_block(w->A + m0 * n, n);
+    if (ok) {
+        const double *t = w->A + m0 * n;
+        for (j = 0; j < n; j++) colsq[j] += t[j * (n + 1)] * t[j * (n + 1)];
+    } else {
+        for (; i < w->n_rows; i++) {
+            const double *a = w->A + i * n;
+            for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
+        }
+    }
+    *diag_tail = ok;
+    for (j = 0; j < n; j++) small &= colsq[j] < 0.5 * BIG * BIG;
+    return small || none_big(w->A, w->n_rows * n);
+}
+
+/* The sums of squares of rows (<= 4) of length n, n apart, side by side (each summed in
+ * index order). */
+static void row_sq4(const double *x, int n, int rows, double out[4]) {
+    const double *x0 = x, *x1 = x + n, *x2 = x + 2 * n, *x3 = x + 3 * n;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int i, r;
+    if (rows < 4) {
+        for (r = 0; r < rows; r++) {
+            double s = 0.0;
+            for (i = 0; i < n; i++) s += x[r * n + i] * x[r * n + i];
+            out[r] = s;
+        }
+        return;
+    }
+    for (i = 0; i < n; i++) {
+        s0 += x0[i] * x0[i];
+        s1 += x1[i] * x1[i];
+        s2 += x2[i] * x2[i];
+        s3 += x3[i] * x3[i];
+    }
+    out[0] = s0, out[1] = s1, out[2] = s2, out[3] = s3;
+}
+
+/* The checks of b and of the bounds (A: a_pass; C and d: in the row loop of solve). */
+static int b_bounds_ok(const FpWls *w) {
+    int i, n = w->n_vars;
+    if (!none_big(w->b, w->n_rows)) return 0;
     for (i = 0; i < n; i++) {
         if (w->lb[i] != -INFINITY && big(w->lb[i])) return 0;
         if (w->ub[i] != INFINITY && big(w->ub[i])) return 0;
     }
-    for (i = 0; i < w->n_cons; i++)
-        if (w->d[i] != INFINITY && big(w->d[i])) return 0;
     return 1;
 }
 
@@ -461,7 +539,8 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     FpWlsWork *k;
     Ctx ctx, *c = &ctx;
     int n, i, j, iter = 0, it1 = 0, warm = 0, crossed = 0, zero_row_infeasible = 0, rc;
-    double fscale, csq[FP_WLS_MAX_CONS];
+    double fscale = 1.0, colsq[FP_WLS_MAX_VARS], sq4[4];
+    int diag_tail = 0, m0;
 
     if (w == NULL) return FP_ERROR;
     if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
@@ -474,50 +553,23 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     k = &w->work;
     for (j = 0; j < n; j++)
         if (!isfinite(w->x[j])) w->x[j] = 0.0;
-    if (max_iter < 1 || !data_ok(w, csq)) return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
-
-    for (j = 0; j < n; j++)
-        if (w->lb[j] > w->ub[j]) crossed = 1;
-    if (crossed) {
-        for (j = 0; j < n; j++) {
-            double lo = fmin(w->lb[j], w->ub[j]), hi = fmax(w->lb[j], w->ub[j]);
-            w->x[j] = fmin(fmax(w->x[j], lo), hi);
-        }
-        return finish_stats(w, FP_WLS_INFEASIBLE, 0, 0, 0, out, stats);
-    }
-
-    memset(c, 0, sizeof *c);
-    c->w = w;
-    c->k = k;
-    c->n = n;
-    c->nv = n;
-    {
-        /* column norms row by row: each column still sums in row order, but the columns'
-         * sums proceed side by side */
-        double colsq[FP_WLS_MAX_VARS];
-        for (j = 0; j < n; j++) colsq[j] = 0.0;
-        for (i = 0; i < w->n_rows; i++) {
-            const double *a = w->A + i * n;
-            for (j = 0; j < n; j++) colsq[j] += a[j] * a[j];
-        }
-        for (j = 0; j < n; j++)
-            if (colsq[j] > c->anorm) c->anorm = colsq[j];
-    }
-    c->anorm = sqrt(c->anorm);
-    c->m0 = w->n_rows - n;
-    c->diag_tail = c->m0 >= 0;
-    for (i = c->m0; i < w->n_rows && c->diag_tail; i++) {
-        const double *a = w->A + i * n;
-        int ok = 1; /* without a branch per element */
-        for (j = 0; j < n; j++) ok &= (j == i - c->m0) == (a[j] != 0.0);
-        c->diag_tail = ok;
-    }
-    fscale = 1.0;
+    m0 = w->n_rows - n;
+    if (max_iter < 1 || !a_pass(w, m0, colsq, &diag_tail) || !b_bounds_ok(w))
+        return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
+    /* The rows of C: the bad-input check (an entry or d big), their norms and scales.  A row
+     * whose sum of squares is at most BIG^2 has no entry above BIG, the others are checked
+     * entry by entry (a NaN fails the comparison).  The norm, its square root and 1 / norm
+     * are taken from the last solve when the row's sum of squares is the same (a constant
+     * force set), as vnorm would give them. */
     for (i = 0; i < w->n_cons; i++) {
-        /* vnorm of the row, its square root and 1 / norm taken from the last solve when
-         * the row's sum of squares is the same (a constant force set), as vnorm would */
         const double *row = w->C + i * n;
-        double sq = csq[i], cn;
+        double sq, cn;
+        if (i % 4 == 0) row_sq4(row, n, w->n_cons - i < 4 ? w->n_cons - i : 4, sq4);
+        sq = sq4[i % 4];
+        if (!(sq <= BIG * BIG) && !none_big(row, n))
+            return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
+        if (w->d[i] != INFINITY && big(w->d[i]))
+            return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);
         k->use[i] = 0;
         if (sq >= DBL_MIN && sq < HUGE_VAL && sq == k->csq[i] && k->cnorm[i] > 0.0) {
             cn = k->cnorm[i];
@@ -541,6 +593,27 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
         k->use[i] = 1;
         if (fabs(w->d[i]) / cn > fscale) fscale = fabs(w->d[i]) / cn;
     }
+
+    for (j = 0; j < n; j++)
+        if (w->lb[j] > w->ub[j]) crossed = 1;
+    if (crossed) {
+        for (j = 0; j < n; j++) {
+            double lo = fmin(w->lb[j], w->ub[j]), hi = fmax(w->lb[j], w->ub[j]);
+            w->x[j] = fmin(fmax(w->x[j], lo), hi);
+        }
+        return finish_stats(w, FP_WLS_INFEASIBLE, 0, 0, 0, out, stats);
+    }
+
+    memset(c, 0, sizeof *c);
+    c->w = w;
+    c->k = k;
+    c->n = n;
+    c->nv = n;
+    for (j = 0; j < n; j++)
+        if (colsq[j] > c->anorm) c->anorm = colsq[j];
+    c->anorm = sqrt(c->anorm);
+    c->m0 = m0;
+    c->diag_tail = diag_tail;
 
     /* A start point far outside the problem's own scale (the constraint offsets and finite
      * bounds) is a stale or corrupt warm start; it would also set the feasibility

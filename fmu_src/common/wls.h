@@ -56,9 +56,11 @@
  * A (minimum-norm step), so weight ratios of 1e7 and more are fine.  When A ends
  * in a diagonal block with non-zero diagonal (rows n_rows - n_vars + j = d_j e_j',
  * e.g. regularisation or preference rows) and no row of C is active, the face
- * has full rank and its QR works on the other rows plus one (wls_qr.c).  A feasible
- * start comes from projecting onto the constraints with the Goldfarb-Idnani
- * dual method; degenerate vertices are handled with Bland's rule.  See wls.c.
+ * has full rank and its step comes from a QR that exploits the block: in dual form (one
+ * reflector per other row of A) while ||M_F D_F^-1|| is small enough for it, else in
+ * primal form (one reflector per free variable, on the other rows plus one) (wls_qr.c).
+ * A feasible start comes from projecting onto the constraints with the
+ * Goldfarb-Idnani dual method; degenerate vertices are handled with Bland's rule.  See wls.c.
  * An iteration is one factorisation of the working set: O(n^2 (n + rows)) flops.
  *
  * Known limit: with A scaled by 1e-12 .. 1e12 against bounds and rows of C near unit

@@ -30,6 +30,9 @@
 #define TOL_FEAS 1e-11     /* feasibility, relative to max(1, |d|, |x|) */
 #define START_RANGE 1e6    /* a start point beyond START_RANGE x the data's scale is dropped */
 #define TOL_GI 1e-10       /* projection phase: a normal this close to the span is dependent */
+#ifndef DUAL_E2_MAX
+#define DUAL_E2_MAX 1e6    /* the diagonal tail's dual step only for ||M_F D_F^-1||_F^2 <= this */
+#endif
 
 /* Magnitudes above this are bad input (their squares would overflow). */
 #define BIG 1e150
@@ -50,8 +53,9 @@ typedef struct {
     double tol_feas;
     /* A ends in a diagonal block: rows m0 + j (j < n) are d_j e_j', every d_j != 0 (the
      * regularisation rows of an allocation, the W_u rows of the guidance).  Then a face
-     * without active rows of C has a full-rank A_F and its step comes from a QR that works
-     * on 1 + m0 rows per column (wls_qr.c).  m0 = n_rows - n; diag_tail 0: not so. */
+     * without active rows of C has a full-rank A_F and its step comes from a QR of m0
+     * columns (dual form) or of one reflector per free variable on 1 + m0 rows (primal
+     * form, for a large M_F D_F^-1) (wls_qr.c).  m0 = n_rows - n; diag_tail 0: not so. */
     int diag_tail, m0;
 } Ctx;
 
@@ -101,6 +105,16 @@ static inline void crow_dot4(const Ctx *c, int i, const double *x, double s[4]) 
     s[0] = s0, s[1] = s1, s[2] = s2, s[3] = s3;
 }
 
+/* crow_dot of the rows i..i+3 that exist (fewer at the end of C) into s. */
+static inline void crow_dots(const Ctx *c, int i, const double *x, double s[4]) {
+    int r;
+    if (i + 4 <= c->w->n_cons) {
+        crow_dot4(c, i, x, s);
+        return;
+    }
+    for (r = 0; i + r < c->w->n_cons; r++) s[r] = crow_dot(c, i + r, x);
+}
+
 static inline int nrows(const Ctx *c) { return c->ph1 ? 1 : c->w->n_rows; }
 
 /* r = b - A x over the rows of the current objective. */
@@ -111,7 +125,12 @@ static inline void residual(Ctx *c) {
         k->r[0] = -k->x[n];
         return;
     }
-    for (i = 0; i + 4 <= c->w->n_rows; i += 4) { /* four rows side by side */
+    /* a diagonal tail (rows m0 + j = d_j e_j'): its rows' one non-zero term each (the zero
+     * terms change no non-zero sum) */
+    int dense = c->diag_tail ? c->m0 : c->w->n_rows;
+    for (i = dense; i < c->w->n_rows; i++)
+        k->r[i] = c->w->b[i] - c->w->A[i * n + (i - dense)] * k->x[i - dense];
+    for (i = 0; i + 4 <= dense; i += 4) { /* four rows side by side */
         const double *a0 = c->w->A + i * n, *a1 = a0 + n, *a2 = a1 + n, *a3 = a2 + n;
         double s0 = c->w->b[i], s1 = c->w->b[i + 1], s2 = c->w->b[i + 2], s3 = c->w->b[i + 3];
         for (j = 0; j < n; j++) {
@@ -123,7 +142,7 @@ static inline void residual(Ctx *c) {
         }
         k->r[i] = s0, k->r[i + 1] = s1, k->r[i + 2] = s2, k->r[i + 3] = s3;
     }
-    for (; i < c->w->n_rows; i++) {
+    for (; i < dense; i++) {
         const double *a = c->w->A + i * n;
         double s = c->w->b[i];
         for (j = 0; j < n; j++) s -= a[j] * k->x[j];

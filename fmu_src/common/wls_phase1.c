@@ -11,10 +11,12 @@ static double row_violation(Ctx *c, int *arg) {
     double v = -INFINITY;
     int i;
     *arg = -1;
+    double cx4[4];
     for (i = 0; i < c->w->n_cons; i++) {
         double s;
+        if (i % 4 == 0) crow_dots(c, i, k->x, cx4);
         if (!k->use[i]) continue;
-        s = crow_dot(c, i, k->x) - dval(c, i);
+        s = cx4[i % 4] - dval(c, i);
         if (s > v) {
             v = s;
             *arg = i;
@@ -51,35 +53,43 @@ static int phase1_minimax(Ctx *c, double t0, int arg, int max_iter, int *iter) {
  * needs no feasible start, adds the most violated constraint at a time and
  * ends at a feasible point whose working set is tight and independent, or
  * with a proof of infeasibility (a violated constraint whose normal is a
- * non-positive combination of the active ones). */
-static int phase1_project(Ctx *c, int max_iter, int *iter) {
+ * non-positive combination of the active ones).  first >= 0: the first constraint to add
+ * is row first of C (the caller found it by the same scan at this point). */
+static int phase1_project(Ctx *c, int first, int max_iter, int *iter) {
     FpWlsWork *k = c->k;
     FpWls *w = c->w;
     int n = c->n, i, j, q;
+    double cx4[4];
     for (j = 0; j < NV1; j++) k->mub[j] = 0.0;
     for (i = 0; i < w->n_cons; i++) k->mur[i] = 0.0;
     for (;;) {
         int pidx = -1, psign = 0;
         double pv = c->tol_feas, up = 0.0;
-        for (j = 0; j < n; j++) {
-            if (k->state[j] != ST_FREE) continue;
-            if (w->lb[j] - k->x[j] > pv) {
-                pv = w->lb[j] - k->x[j];
-                pidx = j;
-                psign = -1;
-            } else if (k->x[j] - w->ub[j] > pv) {
-                pv = k->x[j] - w->ub[j];
-                pidx = j;
-                psign = 1;
+        if (first >= 0) { /* the caller's scan of this very point found it */
+            pidx = n + first;
+            first = -1;
+        } else {
+            for (j = 0; j < n; j++) {
+                if (k->state[j] != ST_FREE) continue;
+                if (w->lb[j] - k->x[j] > pv) {
+                    pv = w->lb[j] - k->x[j];
+                    pidx = j;
+                    psign = -1;
+                } else if (k->x[j] - w->ub[j] > pv) {
+                    pv = k->x[j] - w->ub[j];
+                    pidx = j;
+                    psign = 1;
+                }
             }
-        }
-        for (i = 0; i < w->n_cons; i++) {
-            double v;
-            if (!k->use[i] || k->act[i]) continue;
-            v = crow_dot(c, i, k->x) - dval(c, i);
-            if (v > pv) {
-                pv = v;
-                pidx = n + i;
+            for (i = 0; i < w->n_cons; i++) {
+                double v;
+                if (i % 4 == 0) crow_dots(c, i, k->x, cx4);
+                if (!k->use[i] || k->act[i]) continue;
+                v = cx4[i % 4] - dval(c, i);
+                if (v > pv) {
+                    pv = v;
+                    pidx = n + i;
+                }
             }
         }
         if (pidx < 0) return RUN_FEASIBLE;
@@ -194,8 +204,10 @@ int wls_find_feasible(Ctx *c, int max_iter, int *iter) {
     clamp_start(c, 1);
     viol = row_violation(c, &arg);
     if (viol <= c->tol_feas) return RUN_FEASIBLE;
+    /* x is within the bounds and every row inactive: the projection's first scan would find
+     * row arg (the first of the largest violations, above tol_feas) */
     clamp_start(c, 0);
-    rc = phase1_project(c, max_iter, iter);
+    rc = phase1_project(c, arg, max_iter, iter);
     if (rc == RUN_CAP) clamp_start(c, 0);
     if (rc != RUN_INFEASIBLE) return rc;
     /* Infeasible: the point of least largest violation, within the bounds. */

@@ -233,14 +233,14 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
     return kr;
 }
 
-/* The face step when A ends in a diagonal block (Ctx.diag_tail) and no row of C is active:
- * min ||A_F y - r|| with A_F = [M_F; D_F], M_F the m0 dense rows, D_F the free variables'
+/* The primal form of the face step below (diag_tail_step), for an E too large for the dual
+ * form: min ||A_F y - r|| with A_F = [M_F; D_F], M_F the m0 dense rows, D_F the free variables'
  * diagonal rows (the fixed variables' rows are constant over F).  Householder QR of
  * [D_F; M_F]: reflector q acts on D_F's row q and the m0 rows of M_F only (D_F's other rows
  * are zero in column q and stay so), so it costs O(nf^2 m0) instead of O(nf^2 nr), and
  * A_F has full rank (|R_qq| >= |d_q| > 0): no pivoting.  Returns 0 (the caller takes the
  * general path) when some |d_q| is at the general path's rank cut-off. */
-static int diag_tail_step(Ctx *c, double *y) {
+static int diag_tail_primal(Ctx *c, double *y) {
     FpWlsWork *k = c->k;
     const FpWls *w = c->w;
     int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
@@ -305,6 +305,77 @@ static int diag_tail_step(Ctx *c, double *y) {
         for (q = 0; q < j; q++) rt[q] -= rj[q] * yj;
     }
     return 1;
+}
+
+/* The face step when A ends in a diagonal block (Ctx.diag_tail) and no row of C is active:
+ * min ||M_F y - r_M||^2 + ||D_F y - r_D||^2, M_F the m0 dense rows on the free variables,
+ * D_F their diagonal rows (the fixed variables' rows are constant over F).  With z = D_F y
+ * and E = M_F D_F^-1 the minimiser is z = r_D + E' lam, where lam = r_M - E z (the dense
+ * rows' residual) solves the m0-column least-squares problem
+ *     min || [E'; I] lam - [-r_D; r_M] ||
+ * (its normal equations are (I + E E') lam = r_M - E r_D, the optimality condition).  Its
+ * Householder QR has m0 reflectors instead of nf (6 against up to 18 in the allocation):
+ * column j below the diagonal is non-zero only in rows j..nf+j (E' rows j.., identity rows
+ * 0..j, the later identity rows untouched so far), so each reflector spans nf + 1 rows; and
+ * [E'; I] has full column rank whatever E is (no pivoting).  No normal equations are formed,
+ * but the dual problem's residual is z itself, so the error in z grows like eps ||E||^2 (as
+ * in the normal equations) when the dense rows are nearly met: the dual form is taken only
+ * for ||E||_F^2 <= DUAL_E2_MAX (the allocation's E is ~400, the guidance's ~5e3), else
+ * diag_tail_primal.  Returns 1 (y set), 0 (the caller takes the general path) when some
+ * |d_q| is at the general path's rank cut-off, -1 when E is too large. */
+static int diag_tail_dual(Ctx *c, double *y) {
+    FpWlsWork *k = c->k;
+    const FpWls *w = c->w;
+    int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
+    double *r = k->r, *rt, dinv[NV1], e2 = 0.0;
+    if (m0 + 1 > NV1) return -1; /* AZ holds NV1 columns: [E'; I] and the right-hand side */
+    rt = &AZ(0, m0);            /* the right-hand side, column m0 */
+    for (q = 0; q < nf; q++) {
+        int v = k->free_idx[q];
+        double dq = w->A[(m0 + v) * n + v];
+        if (!(fabs(dq) > TOL_RANK * c->anorm)) return 0;
+        dinv[q] = 1.0 / dq;
+    }
+    /* AZ rows 0..nf-1: E' (free variable q in row q), rows nf..nf+m0-1: the identity */
+    for (i = 0; i < m0; i++) {
+        const double *a = w->A + i * n;
+        double *col = &AZ(0, i);
+        for (q = 0; q < nf; q++) {
+            col[q] = a[k->free_idx[q]] * dinv[q];
+            e2 += col[q] * col[q];
+        }
+        for (q = 0; q < m0; q++) col[nf + q] = q == i ? 1.0 : 0.0;
+        rt[nf + i] = r[i];
+    }
+    if (!(e2 <= DUAL_E2_MAX)) return -1;
+    for (q = 0; q < nf; q++) rt[q] = -r[m0 + k->free_idx[q]];
+    for (j = 0; j < m0; j++) {
+        double tau;
+        house_make(&AZ(j, j), nf + 1, &tau);
+        house_apply_cols(&AZ(j + 1, j), nf + 1, tau, &AZ(j, j + 1), m0 - j, LDA);
+    }
+    for (j = m0 - 1; j >= 0; j--) { /* R lam = (Q' t)[0:m0], by columns; lam into rt */
+        const double *rj = &AZ(0, j);
+        double lj = rt[j] / rj[j];
+        rt[j] = lj;
+        for (q = 0; q < j; q++) rt[q] -= rj[q] * lj;
+    }
+    /* y = D_F^-1 (r_D + M_F' lam D_F^-1) */
+    for (q = 0; q < nf; q++) {
+        int v = k->free_idx[q];
+        double s = 0.0;
+        for (i = 0; i < m0; i++) s += w->A[i * n + v] * rt[i];
+        y[q] = (r[m0 + v] + s * dinv[q]) * dinv[q];
+    }
+    return 1;
+}
+
+/* The face step when A ends in a diagonal block (Ctx.diag_tail) and no row of C is active,
+ * in the dual form when E is small enough for it, else in the primal form.  Returns 0 (the
+ * caller takes the general path) when some |d_q| is at the general path's rank cut-off. */
+static int diag_tail_step(Ctx *c, double *y) {
+    int rc = diag_tail_dual(c, y);
+    return rc >= 0 ? rc : diag_tail_primal(c, y);
 }
 
 /* Step p (full length nv, zero on fixed variables) to the face minimiser.

@@ -135,7 +135,10 @@ static int32_t active_constraints(const FpWls *w) {
     for (k = 0; k < w->n_cons; k++) {
         double v = -w->d[k];
         for (j = 0; j < NV; j++) v += w->C[k * NV + j] * x[j];
-        if (v > -1e-9 * (1.0 + fabs(w->d[k]))) flags |= 1;
+        if (v > -1e-9 * (1.0 + fabs(w->d[k]))) {
+            flags |= 1;
+            break; /* one is enough */
+        }
     }
     if (x[3] <= w->lb[3] + 1e-12 || x[3] >= w->ub[3] - 1e-12) flags |= 2;
     if (x[4] <= w->lb[4] + 1e-12 || x[4] >= w->ub[4] - 1e-12) flags |= 4;
