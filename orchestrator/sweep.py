@@ -90,6 +90,13 @@ DASK_CONFIG: dict[str, Any] = {
     "distributed.worker.memory.monitor-interval": "1s",  # (100 ms)
     "distributed.admin.system-monitor.interval": "2s",  # (500 ms)
     "distributed.scheduler.work-stealing": False,  # uniform tasks, handed out in order
+    # Dask's nanny gives its workers MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's
+    # mmap threshold at 128 KiB: every run's arrays then come as fresh zeroed pages (1,193
+    # page faults and 1.6 ms of kernel time per 6 s run, measured).  glibc's own behaviour
+    # for arrays below 32 MiB; the BLAS thread pins as Dask sets them.
+    "distributed.nanny.pre-spawn-environ": {
+        "MALLOC_TRIM_THRESHOLD_": 2**30, "MALLOC_MMAP_THRESHOLD_": 2**25,
+        "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
 }
 """Dask settings for a cluster that runs sweeps: ``with dask.config.set(DASK_CONFIG):`` around
 creating a LocalCluster, or the matching ``DASK_DISTRIBUTED__...`` environment variables for
