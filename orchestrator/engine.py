@@ -65,9 +65,16 @@ def rotor_used(name: str, n_rotors: int) -> bool:
     return base not in ROTOR_SIGNALS or int(index.rstrip("]").split(",")[0]) <= n_rotors
 
 
-def _outputs(inst: FmuInstance, kind: str, n_rotors: int) -> list[str]:
+TRUTH_SUFFIX = "_true"
+"""The plant's true-state outputs (``pos_true``, ...): the measured ones without sensor
+noise, recorded only when ``truth`` is asked for (a run with noise); without noise they would
+be copies of the measured columns."""
+
+
+def _outputs(inst: FmuInstance, kind: str, n_rotors: int, truth: bool = True) -> list[str]:
     return [v.name for v in inst.md.modelVariables
-            if v.causality == "output" and v.type == kind and rotor_used(v.name, n_rotors)]
+            if v.causality == "output" and v.type == kind and rotor_used(v.name, n_rotors)
+            and (truth or not v.name.split("[")[0].endswith(TRUTH_SUFFIX))]
 
 
 def _inputs(inst: FmuInstance, n_rotors: int) -> list[str]:
@@ -110,10 +117,11 @@ class Connections:
 
     @staticmethod
     def closed_loop(plant: FmuInstance, ctrl: FmuInstance,
-                    n_rotors: int = MAX_ROTORS) -> Connections:
-        """Plant and controller connected by matching names; every input must be fed."""
+                    n_rotors: int = MAX_ROTORS, truth: bool = False) -> Connections:
+        """Plant and controller connected by matching names; every input must be fed.
+        ``truth``: record the plant's true-state outputs too (:data:`TRUTH_SUFFIX`)."""
         n = n_rotors
-        p_out, c_out = _outputs(plant, "Real", n), _outputs(ctrl, "Real", n)
+        p_out, c_out = _outputs(plant, "Real", n, truth), _outputs(ctrl, "Real", n)
         c_in, p_in = _inputs(ctrl, n), _inputs(plant, n)
         measured = [v for v in c_in if v in set(p_out)]
         commands = [v for v in p_in if v in set(c_out)]
@@ -142,7 +150,8 @@ class Connections:
         cmd = [v for g in commands for v in plant.expand(g) if rotor_used(v, n)]
         return Connections(
             n_rotors=n, ref=(), dist=tuple(tuple(g) for g in _expand(plant, DIST_INPUTS, n)),
-            measured=(), commands=tuple(cmd), plant_out=tuple(_outputs(plant, "Real", n)),
+            measured=(), commands=tuple(cmd),
+            plant_out=tuple(_outputs(plant, "Real", n, truth=False)),
             ctrl_out=tuple(cmd), plant_int=tuple(_outputs(plant, "Integer", n)),
             ctrl_int=(), ctrl_bool=())
 

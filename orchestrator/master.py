@@ -153,19 +153,27 @@ def lost_in(engine: Engine, first: int, last: int, criteria: LostCriteria) -> Lo
     return replace(found, row=found.row + first)
 
 
-_CONNECTIONS: weakref.WeakKeyDictionary[FmuInstance, tuple[FmuInstance, int, Connections]] = (
-    weakref.WeakKeyDictionary())
+_Found = tuple[FmuInstance, tuple[int, bool], Connections]  # (controller, (rotors, truth), ...)
+_CONNECTIONS: weakref.WeakKeyDictionary[FmuInstance, _Found] = weakref.WeakKeyDictionary()
 
 
-def connections(plant: FmuInstance, ctrl: FmuInstance, n_rotors: int) -> Connections:
-    """``Connections.closed_loop``, found once per pair of instances and rotor count (a
-    reused pair, as in sweep workers, finds them at its first run only)."""
+def connections(plant: FmuInstance, ctrl: FmuInstance, n_rotors: int,
+                truth: bool = False) -> Connections:
+    """``Connections.closed_loop``, found once per pair of instances, rotor count and
+    ``truth`` (a reused pair, as in sweep workers, finds them at its first run only)."""
     found = _CONNECTIONS.get(plant)
-    if found is not None and found[0] is ctrl and found[1] == n_rotors:
+    if found is not None and found[0] is ctrl and found[1] == (n_rotors, truth):
         return found[2]
-    conn = Connections.closed_loop(plant, ctrl, n_rotors)
-    _CONNECTIONS[plant] = (ctrl, n_rotors, conn)
+    conn = Connections.closed_loop(plant, ctrl, n_rotors, truth)
+    _CONNECTIONS[plant] = (ctrl, (n_rotors, truth), conn)
     return conn
+
+
+def sensor_noise(scenario: Scenario) -> bool:
+    """Whether the scenario's plant adds sensor noise (then the true state is recorded beside
+    the measured one, and metrics and figures judge the truth)."""
+    return any(k.startswith("noise_") and k != "noise_seed" and float(v) != 0.0
+               for k, v in scenario.plant_parameters.items())
 
 
 class CoSimulation:
@@ -237,7 +245,7 @@ class CoSimulation:
         refs0 = sc.references(np.zeros(1))
         refs0["rotor_health"] = sc.health(np.zeros(1))
         start = self.start_values(refs0)
-        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors)
+        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors, sensor_noise(sc))
         planned, columns = planned_rows or rows, sum(conn.widths())
         file = (self.spill if self.spill is not None
                 and planned * 8 * columns > self.spill_above else None)

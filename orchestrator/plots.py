@@ -211,13 +211,22 @@ def tracking_figure(result: RunResult) -> Figure:
     t = result.time
     fig = _new_figure(13.0, 10.0, top=0.93, hspace=0.12, wspace=0.17)
     axs = fig.subplots(4, 2, sharex=True)
-    pos, pos_ref = result.optional("plant.pos"), result.optional("ref.pos_ref")
+    # with sensor noise the true state is recorded too: it is what is judged, the measured
+    # one is drawn faint behind it
+    truth = result.has("plant.pos_true") and result.has("plant.euler_true")
+    judged = "_true" if truth else ""
+    pos, pos_ref = result.optional(f"plant.pos{judged}"), result.optional("ref.pos_ref")
+    sensed = result.optional("plant.pos") if truth else None
     for i, name in enumerate(("x", "y", "z")):
         ax = axs[i, 0]
+        if sensed is not None:
+            _line(ax, t, sensed[:, i], color=MEAS_COLOR, lw=0.6, alpha=0.3,
+                  label="measured (sensors)")
         if pos_ref is not None:
             _line(ax, t, pos_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="reference")
         if pos is not None:
-            _line(ax, t, pos[:, i], color=MEAS_COLOR, lw=1.0, label="measured")
+            _line(ax, t, pos[:, i], color=MEAS_COLOR, lw=1.0,
+                  label="true" if truth else "measured")
         ax.set_ylabel(f"{name} [m]" + (" (NED, down)" if name == "z" else ""))
         _finish_time_axis(ax, t)
     axs[0, 0].set_title("position (world NED)")
@@ -227,10 +236,14 @@ def tracking_figure(result: RunResult) -> Figure:
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
     bands = [] if feasible is None else false_intervals(t, feasible, min_gap=span / 1000.0)
     mu_ref, mu_c = result.optional("ref.euler_ref"), result.optional("ctrl.mu_c")
-    mu_m = result.optional("plant.euler")
+    mu_m = result.optional(f"plant.euler{judged}")
+    mu_sensed = result.optional("plant.euler") if truth else None
     for i, name in enumerate(("phi", "theta", "psi")):
         ax = axs[i, 1]
         _shade(ax, bands, "mu_ref infeasible" if i == 0 else None)
+        if mu_sensed is not None:
+            _line(ax, t, np.degrees(mu_sensed[:, i]), color=MEAS_COLOR, lw=0.6, alpha=0.3,
+                  label="mu_m measured")
         if mu_ref is not None:
             _line(ax, t, np.degrees(mu_ref[:, i]), color=REF_COLOR, ls="--", lw=1.0,
                   label="mu_ref")
@@ -238,7 +251,7 @@ def tracking_figure(result: RunResult) -> Figure:
             _line(ax, t, np.degrees(mu_c[:, i]), color=CMD_COLOR, lw=1.2, label="mu_c")
         if mu_m is not None:
             _line(ax, t, np.degrees(mu_m[:, i]), color=MEAS_COLOR, lw=0.9, ls=":",
-                  label="mu_m")
+                  label="mu_m true" if truth else "mu_m")
         ax.set_ylabel(f"{name} [deg]")
         _finish_time_axis(ax, t)
     axs[0, 1].set_title("attitude")
@@ -253,7 +266,7 @@ def tracking_figure(result: RunResult) -> Figure:
             ax.plot(t[k], err[k], "v", color=INFEASIBLE_COLOR, ms=5,
                     label=f"max {err[k]:.4f} m at {t[k]:.2f} s")
             ax.legend(loc="upper right", fontsize=8)
-    ax.set_ylabel("|pos - pos_ref| [m]")
+    ax.set_ylabel(f"|pos{judged} - pos_ref| [m]")
     ax.set_xlabel("time [s]")
     _finish_time_axis(ax, t)
     ax = axs[3, 1]
@@ -262,7 +275,7 @@ def tracking_figure(result: RunResult) -> Figure:
         for i, name in enumerate(("phi", "theta", "psi")):
             _line(ax, t, err_att[:, i], color=AXIS_COLORS[i], lw=0.9, label=name)
         ax.legend(loc="upper right", fontsize=8, ncols=3)
-    ax.set_ylabel("mu_m - mu_c [deg]")
+    ax.set_ylabel(f"mu_m{' true' if truth else ''} - mu_c [deg]")
     ax.set_xlabel("time [s]")
     _finish_time_axis(ax, t)
     fig.suptitle(_title(result, "full-pose tracking"))

@@ -144,6 +144,9 @@ def test_model_description(plant_fmu):
     for name in VECTOR3:
         expected += [(f"{name}[{i}]", OUTPUT_UNITS[name]) for i in range(1, 4)]
     expected += [(f"quat[{i}]", None) for i in range(1, 5)]
+    for name in ("pos", "vel", "euler", "rate"):  # the true state beside the measured one
+        expected += [(f"{name}_true[{i}]", OUTPUT_UNITS[name]) for i in range(1, 4)]
+    expected += [(f"quat_true[{i}]", None) for i in range(1, 5)]
     for name in PER_ROTOR:
         expected += [(f"{name}[{i}]", OUTPUT_UNITS[name]) for i in range(1, 9)]
     for name, unit in expected:
@@ -733,6 +736,31 @@ def test_noise_statistics(make_plant, run_steps, param, output):
     # white: successive samples of one channel are uncorrelated
     x = noisy[output][:, 0] - clean[output][:, 0]
     assert abs(np.corrcoef(x[:-1], x[1:])[0, 1]) < 4 / math.sqrt(n)
+
+
+TRUTH = {"pos": "pos_true", "vel": "vel_true", "euler": "euler_true", "quat": "quat_true",
+         "rate": "rate_true"}
+
+
+def test_the_true_state_is_the_noise_free_one(make_plant, run_steps):
+    """Oracle: the same plant without noise.  The true outputs of a noisy plant are the
+    outputs of a clean one, bit for bit, and the measured ones differ from them by the
+    configured noise; without noise measured and true are the same numbers."""
+    n = 2000
+    names = [*TRUTH, *TRUTH.values()]
+    noise = {"noise_pos": 0.01, "noise_vel": 0.02, "noise_att": 0.005, "noise_rate": 0.03,
+             "noise_seed": 3}
+    clean = run_steps(make_plant(), n, names)
+    noisy = run_steps(make_plant(noise), n, names)
+    for measured, true in TRUTH.items():
+        np.testing.assert_array_equal(clean[true], clean[measured], err_msg=measured)
+        np.testing.assert_array_equal(noisy[true], clean[measured], err_msg=true)
+    for measured, sigma in (("pos", 0.01), ("vel", 0.02), ("euler", 0.005), ("rate", 0.03)):
+        e = (noisy[measured] - noisy[TRUTH[measured]]).ravel()
+        assert abs(np.std(e) / sigma - 1.0) < 0.1, measured  # 6003 samples: 5 sigma is 4.6 %
+    q = noisy["quat_true"]
+    np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, rtol=0, atol=1e-12)
+    assert np.all(q[:, 0] >= 0.0)
 
 
 def test_attitude_noise_keeps_quaternion_consistent(make_plant, run_steps):

@@ -218,16 +218,26 @@ static void compute_outputs(PlantModel *m, const Commands *u) {
         m->alpha[i] = used ? m->x[X_ALPHA + i] : 0.0;
         m->beta[i] = used ? m->x[X_BETA + i] : 0.0;
     }
+    memcpy(m->pos_true, m->pos, sizeof m->pos_true);
+    memcpy(m->vel_true, m->vel, sizeof m->vel_true);
+    memcpy(m->euler_true, m->euler, sizeof m->euler_true);
+    memcpy(m->rate_true, m->rate, sizeof m->rate_true);
+    memcpy(m->quat_true, m->x + X_QUAT, sizeof m->quat_true);
+    if (m->quat_true[0] < 0.0)
+        for (i = 0; i < 4; i++) m->quat_true[i] = -m->quat_true[i];
     add_noise(m->rng, m->pos, 3, m->noise_pos);
     add_noise(m->rng, m->vel, 3, m->noise_vel);
     add_noise(m->rng, m->acc, 3, m->noise_acc);
     add_noise(m->rng, m->euler, 3, m->noise_att);
     add_noise(m->rng, m->rate, 3, m->noise_rate);
     add_noise(m->rng, m->ang_acc, 3, m->noise_ang_acc);
-    if (m->noise_att > 0.0) quat_from_euler(m->euler, m->quat);
-    else memcpy(m->quat, m->x + X_QUAT, sizeof m->quat);
-    if (m->quat[0] < 0.0)
-        for (i = 0; i < 4; i++) m->quat[i] = -m->quat[i];
+    if (m->noise_att > 0.0) {
+        quat_from_euler(m->euler, m->quat);
+        if (m->quat[0] < 0.0)
+            for (i = 0; i < 4; i++) m->quat[i] = -m->quat[i];
+    } else {
+        memcpy(m->quat, m->quat_true, sizeof m->quat);
+    }
 }
 
 /* ------------------------------------------------------------------------ */

@@ -39,6 +39,7 @@ typedef struct {
     double f_b[3], tau_b[3];
     int32_t sat_flags;
     double t_step;
+    double pos_true[3], vel_true[3], euler_true[3], quat_true[4], rate_true[3];
     /* internal state, derived at initialization */
     double x[PLANT_NX];
     double inertia_inv[3][3];

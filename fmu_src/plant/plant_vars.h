@@ -82,6 +82,12 @@
     X(f_b, 360, REAL, OUTPUT, 3, 1, FORCE, FP_ANY, "Rotor force f_b in the body frame")            \
     X(tau_b, 363, REAL, OUTPUT, 3, 1, TORQUE, FP_ANY, "Rotor torque tau_b in the body frame")      \
     X(sat_flags, 370, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Commands beyond limits in the last step: bit i-1 motor i, bit 7+i alpha i, bit 15+i beta i") \
-    X(t_step, 371, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last doStep (0 unless timing)")
+    X(t_step, 371, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last doStep (0 unless timing)") \
+    /* outputs: the true state beside the measured one (equal to it with the noise off) */    \
+    X(pos_true, 380, REAL, OUTPUT, 3, 1, LENGTH, FP_ANY, "True position, world NED (pos without sensor noise)") \
+    X(vel_true, 383, REAL, OUTPUT, 3, 1, VELOCITY, FP_ANY, "True velocity, world NED (vel without sensor noise)") \
+    X(euler_true, 386, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "True attitude [phi, theta, psi] (euler without sensor noise)") \
+    X(quat_true, 389, REAL, OUTPUT, 4, 1, DIMENSIONLESS, FP_ANY, "True attitude quaternion [w, x, y, z] of R_B^W, w >= 0") \
+    X(rate_true, 393, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "True body rates (rate without sensor noise)")
 
 #endif
