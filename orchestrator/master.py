@@ -169,11 +169,15 @@ def connections(plant: FmuInstance, ctrl: FmuInstance, n_rotors: int,
     return conn
 
 
-def sensor_noise(scenario: Scenario) -> bool:
-    """Whether the scenario's plant adds sensor noise (then the true state is recorded beside
-    the measured one, and metrics and figures judge the truth)."""
-    return any(k.startswith("noise_") and k != "noise_seed" and float(v) != 0.0
-               for k, v in scenario.plant_parameters.items())
+SENSOR_PARAMETERS = ("noise_pos", "noise_vel", "noise_acc", "noise_att", "noise_rate",
+                     "noise_ang_acc", "mocap_period", "mocap_delay", "imu_period")
+"""Plant parameters that make a measurement differ from the true state (all 0 by default)."""
+
+
+def sensors_differ(scenario: Scenario) -> bool:
+    """Whether the scenario's plant measures with noise, sampling or latency (then the true
+    state is recorded beside the measured one, and metrics and figures judge the truth)."""
+    return any(float(scenario.plant_parameters.get(k, 0.0)) != 0.0 for k in SENSOR_PARAMETERS)
 
 
 class CoSimulation:
@@ -245,7 +249,7 @@ class CoSimulation:
         refs0 = sc.references(np.zeros(1))
         refs0["rotor_health"] = sc.health(np.zeros(1))
         start = self.start_values(refs0)
-        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors, sensor_noise(sc))
+        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors, sensors_differ(sc))
         planned, columns = planned_rows or rows, sum(conn.widths())
         file = (self.spill if self.spill is not None
                 and planned * 8 * columns > self.spill_above else None)

@@ -320,7 +320,8 @@ class Run:
             self.inst.step(H)
         except FmuError:
             return False
-        return not any(s >= 1 and re.search(r"\binput \w+\[\d+\] = ", m) for s, _, m in self.log)
+        return not any(s >= 1 and re.search(r"\binput \w+(?:\[\d+\])? = ", m)
+                       for s, _, m in self.log)
 
     def names(self, name: str) -> list[tuple[int, str]]:
         """The warnings and errors that name the variable element (status, message)."""

@@ -161,7 +161,8 @@ def test_model_description(plant_fmu):
     assert sat.causality == "output" and sat.type == "Integer"
     assert "sat_flags" in outputs
     assert variables["t_step"].unit == "s" and "t_step" in outputs  # opt-in self-timing
-    assert len(outputs) == len(expected) + 2
+    assert variables["pose_age"].unit == "s" and "pose_age" in outputs
+    assert len(outputs) == len(expected) + 3
 
     # every unit used is defined; the physical variables all carry one
     for v in md.modelVariables:
@@ -761,6 +762,63 @@ def test_the_true_state_is_the_noise_free_one(make_plant, run_steps):
     q = noisy["quat_true"]
     np.testing.assert_allclose(np.linalg.norm(q, axis=1), 1.0, rtol=0, atol=1e-12)
     assert np.all(q[:, 0] >= 0.0)
+
+
+MOVING = {**vec("vel0", [1.0, 0.5, -0.2]), **vec("rate0", [0.2, -0.1, 0.3])}
+
+
+def test_sensor_timing_off_is_every_point_exact(make_plant, run_steps):
+    names = ["pos", "vel", "euler", "quat", "acc", "rate", "ang_acc"]
+    default = run_steps(make_plant(MOVING), 200, names)
+    zeros = run_steps(make_plant({**MOVING, "mocap_period": 0.0, "mocap_delay": 0.0,
+                                  "imu_period": 0.0}), 200, names)
+    for n in names:
+        np.testing.assert_array_equal(zeros[n], default[n], err_msg=n)
+
+
+def test_pose_samples_are_held_between_mocap_instants(make_plant, run_steps):
+    """A 10 ms pose sensor on 2 ms communication points: each value is the true pose at its
+    sample instant, held for five points; the inertial outputs stay at every point."""
+    r = run_steps(make_plant({**MOVING, "mocap_period": 0.01}), 100,
+                  ["pos", "pos_true", "euler", "euler_true", "rate", "rate_true"])
+    k = np.arange(101)
+    at = 5 * (k // 5)  # the point of the latest sample instant
+    np.testing.assert_array_equal(r["pos"], r["pos_true"][at])
+    np.testing.assert_array_equal(r["euler"], r["euler_true"][at])
+    np.testing.assert_array_equal(r["rate"], r["rate_true"])
+
+
+def test_imu_samples_are_held(make_plant, run_steps):
+    r = run_steps(make_plant({**MOVING, "imu_period": 0.004}), 50, ["rate", "rate_true", "pos",
+                                                                   "pos_true"])
+    at = 2 * (np.arange(51) // 2)
+    np.testing.assert_array_equal(r["rate"], r["rate_true"][at])
+    np.testing.assert_array_equal(r["pos"], r["pos_true"])
+
+
+def test_pose_latency_is_the_true_pose_that_long_ago(make_plant, run_steps):
+    """Oracle: numpy's linear interpolation of the recorded true pose at t - 5 ms (between
+    points 2 ms apart), and the initial pose before the start."""
+    r = run_steps(make_plant({**MOVING, "mocap_delay": 0.005}), 200,
+                  ["pos", "pos_true", "vel", "vel_true", "euler", "euler_true"])
+    t = r["t"]
+    for meas, true in (("pos", "pos_true"), ("vel", "vel_true"), ("euler", "euler_true")):
+        for i in range(3):
+            want = np.interp(t - 0.005, t, r[true][:, i])  # (holds the first value before t0)
+            np.testing.assert_allclose(r[meas][:, i], want, rtol=0, atol=1e-12, err_msg=meas)
+    assert np.abs(r["pos"] - r["pos_true"]).max() > 1e-3  # 5 ms at 1 m/s: really late
+
+
+def test_a_latency_beyond_the_kept_points_is_an_error(make_plant):
+    """0.3 s of latency at 0.5 ms points needs 600 points; the plant keeps 512: an error that
+    names the parameter once the run is that long, not a shorter delay."""
+    inst = make_plant({"mocap_delay": 0.3})
+    for _ in range(500):
+        inst.step(0.0005)
+    with pytest.raises(FMICallException):
+        for _ in range(200):
+            inst.step(0.0005)
+    assert any("mocap_delay = 0.3 s" in m and "512" in m for m in errors(inst)), inst.messages
 
 
 def test_attitude_noise_keeps_quaternion_consistent(make_plant, run_steps):

@@ -225,8 +225,9 @@ def hover_script(built, platform, path):
         if v.causality == "input" and name in cv and cv[name].causality == "output":
             lines.append(f"link controller {cv[name].valueReference} plant {v.valueReference}")
             links += 1
-    # pos vel acc euler rate, omega alpha beta[8] measured; omega/alpha/beta_cmd[8] commanded
-    assert links == 5 * 3 + 3 * 8 + 3 * 8, links
+    # pos vel acc euler rate, omega alpha beta[8], pose_age measured; omega/alpha/beta_cmd[8]
+    # commanded
+    assert links == 5 * 3 + 3 * 8 + 1 + 3 * 8, links
     lines += ["enter controller 0", "sync controller"]
     lines += [f"real controller {cv[f'pos_ref[{i + 1}]'].valueReference} {POS_REF[i]!r}"
               for i in range(3)]

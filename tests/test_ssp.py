@@ -155,8 +155,9 @@ def test_connection_table_is_the_name_match(hover_ssp, mds, caplog):
     with caplog.at_level(logging.INFO, logger="orchestrator.ssp"):
         table = connection_table(p_md, c_md)
     assert table == expected
-    # 3 x 5 rigid-body signals + 3 x 8 actuator states measured; 3 x 8 commands
-    assert len(table) == 15 + 24 + 24 == 63
+    # 3 x 5 rigid-body signals + 3 x 8 actuator states + the pose's age measured; 3 x 8
+    # commands
+    assert len(table) == 15 + 24 + 1 + 24 == 64
     assert "pos_ref[1]" in caplog.text and "f_d[1]" in caplog.text
     loose = unconnected_inputs(p_md, c_md)
     refs = {f"{r}[{i}]" for r in ("pos_ref", "euler_ref", "vel_ref", "acc_ref",

@@ -59,3 +59,41 @@ def test_the_tracking_figure_draws_the_truth_over_the_faint_measurement(runs):
     assert {"true", "measured (sensors)", "reference"} <= set(lines)
     assert lines["measured (sensors)"].get_alpha() < 0.5 and lines["true"].get_alpha() is None
     assert "pos_true" in fig.axes[6].get_ylabel()
+
+
+def test_latency_alone_records_the_truth_and_the_lag_shows_in_it():
+    """No noise, a 10 ms pose latency: the measured pose lags the true one by the speed
+    times the latency (S2's reference moves at ~0.1 m/s at first: ~1 mm), and the truth is
+    what the metrics judge."""
+    sc = load_scenario("translation_frequency_sweep").with_overrides(
+        duration=20.0, settings=["plant.mocap_delay=0.01"])
+    r = master.run(sc)
+    m = compute_metrics(r)
+    assert m["judged_on"] == "true state"
+    lag = np.linalg.norm(r.get("plant.pos") - r.get("plant.pos_true"), axis=1)
+    speed = np.linalg.norm(r.get("plant.vel_true"), axis=1)
+    k = len(lag) // 2
+    assert lag[k:].max() == pytest.approx(0.01 * speed[k:].max(), rel=0.1)
+
+
+MOCAP_120 = ["plant.mocap_period=0.008333333333333333", "plant.mocap_delay=0.005"]
+
+
+def test_the_controller_predicts_a_late_pose_to_now():
+    """Motion capture at 120 Hz, 5 ms late, while translating: a controller that took the
+    pose as current would trail the reference by the speed times the pose's age (5 to
+    13.3 ms); predicting with pose_age keeps the true error at the ideal sensors' level
+    (1.0 mm here; the paper's bound is 2 cm)."""
+    sc = load_scenario("translation_frequency_sweep").with_overrides(duration=40.0)
+    ideal = compute_metrics(master.run(sc))
+    r = master.run(sc.with_overrides(settings=MOCAP_120))
+    m = compute_metrics(r)
+    age = r.get("plant.pose_age")
+    # 5 ms, plus up to one 8.3 ms sample period as seen at 2 ms communication points
+    assert age.min() == pytest.approx(0.005)
+    assert 0.005 + 1 / 120 - 0.002 <= age.max() <= 0.005 + 1 / 120
+    speed = float(np.linalg.norm(r.get("plant.vel_true"), axis=1).max())
+    lag = speed * float(age.mean())  # what taking the pose as current would cost
+    assert m["measured"]["position_error"]["max"] > 0.5 * lag  # the sensors are that late
+    assert m["position_error"]["max"] < 0.25 * lag
+    assert m["position_error"]["max"] < ideal["position_error"]["max"] + 0.001

@@ -137,9 +137,11 @@ static void controller_set_defaults(void *model) {
 
 static CtrlFilterInputs filter_inputs(const ControllerModel *m) {
     CtrlFilterInputs in;
-    in.pos = m->pos, in.vel = m->vel, in.acc = m->acc, in.euler = m->euler, in.rate = m->rate;
+    /* the pose as predicted to now (ctrl_predict_pose, before this view is taken) */
+    in.pos = m->pose_now, in.vel = m->pose_now + 3, in.acc = m->acc;
+    in.euler = m->pose_now + 6, in.rate = m->rate;
     in.pos_ref = m->pos_ref, in.vel_ref = m->vel_ref, in.mu_ref = m->euler_ref;
-    in.psi = m->euler[2], in.psi_ref = m->euler_ref[2];
+    in.psi = m->pose_now[8], in.psi_ref = m->euler_ref[2];
     in.omega = m->omega, in.alpha = m->alpha, in.beta = m->beta;
     in.n_rotors = m->n_rotors;
     return in;
@@ -268,21 +270,25 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
 static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
     static const int rows[] = {CV_pos_ref, CV_euler_ref, CV_vel_ref, CV_acc_ref,
                                CV_euler_rate_ref, CV_pos, CV_vel, CV_acc, CV_euler, CV_rate,
-                               CV_omega, CV_alpha, CV_beta, CV_rotor_health};
-    const double *inputs[14];
-    int counts[14] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0};
+                               CV_omega, CV_alpha, CV_beta, CV_rotor_health, CV_pose_age};
+    const double *inputs[15];
+    int counts[15] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0, 1};
     int i, k, n = m->n_rotors;
     inputs[0] = m->pos_ref, inputs[1] = m->euler_ref, inputs[2] = m->vel_ref;
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
     inputs[6] = m->vel, inputs[7] = m->acc, inputs[8] = m->euler, inputs[9] = m->rate;
     inputs[10] = m->omega, inputs[11] = m->alpha, inputs[12] = m->beta;
-    inputs[13] = m->rotor_health;
+    inputs[13] = m->rotor_health, inputs[14] = &m->pose_age;
     counts[10] = counts[11] = counts[12] = counts[13] = n;
-    for (k = 0; k < 14; k++) {
+    for (k = 0; k < 15; k++) {
         const FpVar *row = &controller_vars[rows[k]];
         for (i = 0; i < counts[k]; i++) {
             double v = inputs[k][i], a = -HUGE_VAL, b = HUGE_VAL;
-            char range[96];
+            char range[96], name[48];
+            if (row->rows * row->cols > 1) /* a vector's element, a scalar by its name */
+                snprintf(name, sizeof name, "%s[%d]", row->name, i + 1);
+            else
+                snprintf(name, sizeof name, "%s", row->name);
             if (rows[k] == CV_omega) {
                 a = -m->omega_max, b = 2.0 * m->omega_max;
             } else if (rows[k] == CV_alpha || rows[k] == CV_beta) {
@@ -290,17 +296,17 @@ static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
                 b = (rows[k] == CV_alpha ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
             }
             if (!isfinite(v)) {
-                snprintf(why, size, "input %s[%d] = %g is not finite", row->name, i + 1, v);
+                snprintf(why, size, "input %s = %g is not finite", name, v);
                 return 0;
             }
             if (!fp_range_contains(&row->range, v)) {
-                snprintf(why, size, "input %s[%d] = %g is outside its plausible range %s",
-                         row->name, i + 1, v, fp_range_text(&row->range, 0, range, sizeof range));
+                snprintf(why, size, "input %s = %g is outside its plausible range %s", name, v,
+                         fp_range_text(&row->range, 0, range, sizeof range));
                 return 0;
             }
             if (v < a || v > b) {
-                snprintf(why, size, "input %s[%d] = %g is outside its plausible range [%g, %g]",
-                         row->name, i + 1, v, a, b);
+                snprintf(why, size, "input %s = %g is outside its plausible range [%g, %g]",
+                         name, v, a, b);
                 return 0;
             }
         }
@@ -357,8 +363,9 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     psi_before[0] = m->psi_raw, psi_before[1] = m->psi_unwrapped;
     psi_before[2] = m->psi_ref_raw, psi_before[3] = m->psi_ref_unwrapped;
     /* 1. filters (headings unwrapped first so that +-pi crossings filter smoothly) */
+    ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age, m->pose_now);
     fin = filter_inputs(m);
-    fin.psi = ctrl_unwrap(m->euler[2], &m->psi_raw, &m->psi_unwrapped);
+    fin.psi = ctrl_unwrap(m->pose_now[8], &m->psi_raw, &m->psi_unwrapped);
     fin.psi_ref = ctrl_unwrap(m->euler_ref[2], &m->psi_ref_raw, &m->psi_ref_unwrapped);
     ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->filt);
     ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, &m->rotor_trig, m->rotor_health,
@@ -451,10 +458,11 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     fp_preferred_prepare(&m->rotors, &m->pref_split, NULL, 0); /* apply checks its status */
     ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
     /* filters start in steady state at the initial measurements */
+    ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age, m->pose_now);
     fin = filter_inputs(m);
     ctrl_filters_start(&fin, m->filt);
     memset(m->blk, 0, sizeof m->blk);
-    m->psi_raw = m->psi_unwrapped = isfinite(m->euler[2]) ? m->euler[2] : 0.0;
+    m->psi_raw = m->psi_unwrapped = isfinite(m->pose_now[8]) ? m->pose_now[8] : 0.0;
     m->psi_ref_raw = m->psi_ref_unwrapped = isfinite(m->euler_ref[2]) ? m->euler_ref[2] : 0.0;
     memcpy(m->mu_c, m->euler_ref, sizeof m->mu_c);
     for (i = 0; i < CTRL_N_FILTERS; i++)

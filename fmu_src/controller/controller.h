@@ -42,6 +42,7 @@ typedef struct {
     double pos[3], vel[3], acc[3], euler[3], rate[3];
     double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
     double rotor_health[FP_MAX_ROTORS];
+    double pose_age;
     /* outputs */
     double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
     double mu_c[3], f_b_ref[3], f_b_c[3];
@@ -54,6 +55,7 @@ typedef struct {
     double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
     double filt[CTRL_N_FILTERS][2];        /* [value, derivative] per filtered signal */
     double psi_raw, psi_unwrapped;         /* heading unwrapping before filtering */
+    double pose_now[9]; /* pos, vel, euler predicted over pose_age to the sample (ctrl_predict_pose) */
     double psi_ref_raw, psi_ref_unwrapped; /* the same for the heading reference */
     double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
     double inertia_inv[3][3];

@@ -101,6 +101,7 @@
     X(alpha, 1130, REAL, INPUT, 8, 1, ANGLE, FP_IN(-CTRL_MAX_SERVO, CTRL_MAX_SERVO), "Measured servo angles alpha") \
     X(beta, 1140, REAL, INPUT, 8, 1, ANGLE, FP_IN(-CTRL_MAX_SERVO, CTRL_MAX_SERVO), "Measured servo angles beta") \
     X(rotor_health, 1150, REAL, INPUT, 8, 1, RATIO, FP_IN(0, 1), "Known rotor efficiency 0..1 (below 0.5: lost; the allocations exclude it)") \
+    X(pose_age, 1160, REAL, INPUT, 1, 1, TIME, FP_IN(0, 1), "Age of pos, vel and euler: the time since the state they show (0: current); the controller predicts them to now with acc and rate") \
     /* outputs: actuator commands (plant inputs) */                                                \
     X(omega_cmd, 2000, REAL, OUTPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Rotor speed commands")            \
     X(alpha_cmd, 2010, REAL, OUTPUT, 8, 1, ANGLE, FP_ANY, "Servo commands alpha")                  \

@@ -67,6 +67,31 @@ double ctrl_unwrap(double angle, double *raw, double *unwrapped) {
     return psi;
 }
 
+void ctrl_predict_pose(const double pos[3], const double vel[3], const double acc[3],
+                       const double euler[3], const double rate[3], double age, double out[9]) {
+    int i;
+    if (!(age > 0.0)) {
+        memcpy(out, pos, 3 * sizeof *out);
+        memcpy(out + 3, vel, 3 * sizeof *out);
+        memcpy(out + 6, euler, 3 * sizeof *out);
+        return;
+    }
+    for (i = 0; i < 3; i++) {
+        out[i] = pos[i] + age * (vel[i] + 0.5 * age * acc[i]);
+        out[3 + i] = vel[i] + age * acc[i];
+    }
+    {
+        double sp = sin(euler[0]), cp = cos(euler[0]), ct = cos(euler[1]);
+        double tt = tan(euler[1]);
+        double dphi = rate[0] + (sp * rate[1] + cp * rate[2]) * tt;
+        double dtheta = cp * rate[1] - sp * rate[2];
+        double dpsi = (sp * rate[1] + cp * rate[2]) / ct;
+        out[6] = euler[0] + age * dphi;
+        out[7] = euler[1] + age * dtheta;
+        out[8] = euler[2] + age * dpsi;
+    }
+}
+
 /* One sample of one filter: x+ = Phi x + Gamma u. */
 static void filter_update(const double phi[2][2], const double gamma[2], double x[2], double u) {
     double y = phi[0][0] * x[0] + phi[0][1] * x[1] + gamma[0] * u;

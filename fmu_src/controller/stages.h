@@ -68,6 +68,13 @@ void ctrl_filter_discretize(double wn, double zeta, double Ts, double phi[2][2],
  * differs from angle by a multiple of 2 pi.  Updates both states and returns it. */
 double ctrl_unwrap(double angle, double *raw, double *unwrapped);
 
+/* The pose measurements carried forward over their age to the sample instant: position and
+ * velocity with the measured acceleration (constant over the age), the Euler angles with the
+ * Euler-angle rates of the measured body rates (ZYX kinematics).  out = [pos, vel, euler];
+ * age 0 copies the measurements unchanged. */
+void ctrl_predict_pose(const double pos[3], const double vel[3], const double acc[3],
+                       const double euler[3], const double rate[3], double age, double out[9]);
+
 /* What the filters take in one sample. */
 typedef struct {
     const double *pos, *vel, *acc, *euler, *rate; /* measurements, 3 each */

@@ -200,44 +200,137 @@ static void saturate(const PlantModel *m, Commands *u, int32_t *flags) {
     }
 }
 
-static void compute_outputs(PlantModel *m, const Commands *u) {
+/* ------------------------------------------------------------------------ */
+/* Sensor timing                                                            */
+
+static double wrap_angle(double a) { /* to [-pi, pi) */
+    return a - 2.0 * PI * floor((a + PI) / (2.0 * PI));
+}
+
+/* Keeps the true pose of communication point t (a ring of PLANT_HISTORY points). */
+static void history_push(PlantModel *m, double t) {
+    int k = m->hist_count == 0 ? 0 : (m->hist_head + 1) % PLANT_HISTORY;
+    m->hist_t[k] = t;
+    memcpy(m->hist[k], m->pos_true, sizeof m->pos_true);
+    memcpy(m->hist[k] + 3, m->vel_true, sizeof m->vel_true);
+    memcpy(m->hist[k] + 6, m->euler_true, sizeof m->euler_true);
+    m->hist_head = k;
+    if (m->hist_count < PLANT_HISTORY) m->hist_count++;
+}
+
+/* The true pose at time s into out (linear between kept points, Euler angles the short way;
+ * before the first point of the run, the initial pose).  Fails (1) when s lies before the
+ * points kept. */
+static int pose_at(const PlantModel *m, double s, double out[9]) {
+    int k = m->hist_head, j, i;
+    if (s >= m->hist_t[k]) {
+        memcpy(out, m->hist[k], sizeof m->hist[k]);
+        return 0;
+    }
+    for (j = 1; j < m->hist_count; j++) {
+        int prev = (k + PLANT_HISTORY - 1) % PLANT_HISTORY;
+        if (s >= m->hist_t[prev]) {
+            double w = (s - m->hist_t[prev]) / (m->hist_t[k] - m->hist_t[prev]);
+            for (i = 0; i < 9; i++) {
+                double d = m->hist[k][i] - m->hist[prev][i];
+                out[i] = m->hist[prev][i] + w * (i >= 6 ? wrap_angle(d) : d);
+            }
+            out[6] = wrap_angle(out[6]);
+            out[8] = wrap_angle(out[8]);
+            return 0;
+        }
+        k = prev;
+    }
+    if (m->hist_count < PLANT_HISTORY) { /* k is the run's first point */
+        memcpy(out, m->hist[k], sizeof m->hist[k]);
+        return 0;
+    }
+    return 1;
+}
+
+/* The latest instant t0 + k p at or before t (t itself for p = 0: every point). */
+static double sample_instant(double t0, double p, double t) {
+    if (!(p > 0.0)) return t;
+    return t0 + floor((t - t0) / p + 1e-9) * p;
+}
+
+/* Outputs at communication point t: the true state, and the measurements taken from it.
+ * Pose measurements (pos, vel, euler, quat) are sampled every mocap_period and show the state
+ * mocap_delay before their sample instant; inertial ones (acc, rate, ang_acc) are sampled at
+ * the first communication point at or after each imu_period; both are held in between and
+ * their noise is drawn once per sample.  With all three parameters 0 every measurement is the
+ * current state plus fresh noise. */
+static FpStatus compute_outputs(PlantModel *m, const Commands *u, double t,
+                                const FpLogger *logger) {
     double dx[PLANT_NX];
+    double s_pose = sample_instant(m->t0, m->mocap_period, t);
+    double s_imu = sample_instant(m->t0, m->imu_period, t);
+    int pose_due = s_pose > m->mocap_last, imu_due = s_imu > m->imu_last;
+    /* (a sample instant on this point up to the round-off of summed steps is this point) */
+    int delayed = m->mocap_delay > 0.0 || fabs(s_pose - t) > 1e-9 * m->mocap_period;
     int i;
     derivative(m, u, m->x, dx, m->f_b, m->tau_b);
     for (i = 0; i < 3; i++) {
-        m->pos[i] = m->x[X_POS + i];
-        m->vel[i] = m->x[X_VEL + i];
-        m->acc[i] = dx[X_VEL + i];
-        m->rate[i] = m->x[X_RATE + i];
-        m->ang_acc[i] = dx[X_RATE + i];
+        m->pos_true[i] = m->x[X_POS + i];
+        m->vel_true[i] = m->x[X_VEL + i];
+        m->rate_true[i] = m->x[X_RATE + i];
     }
-    euler_from_quat(m->x + X_QUAT, m->euler);
+    euler_from_quat(m->x + X_QUAT, m->euler_true);
+    memcpy(m->quat_true, m->x + X_QUAT, sizeof m->quat_true);
+    if (m->quat_true[0] < 0.0)
+        for (i = 0; i < 4; i++) m->quat_true[i] = -m->quat_true[i];
     for (i = 0; i < FP_MAX_ROTORS; i++) {
         int used = i < m->n_rotors;
         m->omega[i] = used ? m->x[X_OMEGA + i] : 0.0;
         m->alpha[i] = used ? m->x[X_ALPHA + i] : 0.0;
         m->beta[i] = used ? m->x[X_BETA + i] : 0.0;
     }
-    memcpy(m->pos_true, m->pos, sizeof m->pos_true);
-    memcpy(m->vel_true, m->vel, sizeof m->vel_true);
-    memcpy(m->euler_true, m->euler, sizeof m->euler_true);
-    memcpy(m->rate_true, m->rate, sizeof m->rate_true);
-    memcpy(m->quat_true, m->x + X_QUAT, sizeof m->quat_true);
-    if (m->quat_true[0] < 0.0)
-        for (i = 0; i < 4; i++) m->quat_true[i] = -m->quat_true[i];
-    add_noise(m->rng, m->pos, 3, m->noise_pos);
-    add_noise(m->rng, m->vel, 3, m->noise_vel);
-    add_noise(m->rng, m->acc, 3, m->noise_acc);
-    add_noise(m->rng, m->euler, 3, m->noise_att);
-    add_noise(m->rng, m->rate, 3, m->noise_rate);
-    add_noise(m->rng, m->ang_acc, 3, m->noise_ang_acc);
-    if (m->noise_att > 0.0) {
-        quat_from_euler(m->euler, m->quat);
-        if (m->quat[0] < 0.0)
-            for (i = 0; i < 4; i++) m->quat[i] = -m->quat[i];
-    } else {
-        memcpy(m->quat, m->quat_true, sizeof m->quat);
+    history_push(m, t);
+    if (pose_due) {
+        double p[9];
+        if (!delayed) {
+            memcpy(p, m->hist[m->hist_head], sizeof p);
+        } else if (pose_at(m, s_pose - m->mocap_delay, p)) {
+            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                   "parameter mocap_delay = %g s: at t = %.6g s it reaches back beyond the %d "
+                   "communication points the plant keeps (to t = %.6g s); use a longer "
+                   "communication step or a shorter delay",
+                   m->mocap_delay, t, PLANT_HISTORY,
+                   m->hist_t[(m->hist_head + 1) % PLANT_HISTORY]);
+            return FP_ERROR;
+        }
+        memcpy(m->pos, p, sizeof m->pos);
+        memcpy(m->vel, p + 3, sizeof m->vel);
+        memcpy(m->euler, p + 6, sizeof m->euler);
+        m->mocap_last = delayed ? s_pose : t;
     }
+    /* (never below 0: a sample instant after t by round-off is t's own) */
+    m->pose_age = fmax(0.0, t - m->mocap_last) + m->mocap_delay;
+    if (imu_due) {
+        for (i = 0; i < 3; i++) {
+            m->acc[i] = dx[X_VEL + i];
+            m->rate[i] = m->x[X_RATE + i];
+            m->ang_acc[i] = dx[X_RATE + i];
+        }
+        m->imu_last = s_imu;
+    }
+    /* (one draw order for every setting: the default's, bit for bit) */
+    if (pose_due) add_noise(m->rng, m->pos, 3, m->noise_pos);
+    if (pose_due) add_noise(m->rng, m->vel, 3, m->noise_vel);
+    if (imu_due) add_noise(m->rng, m->acc, 3, m->noise_acc);
+    if (pose_due) add_noise(m->rng, m->euler, 3, m->noise_att);
+    if (imu_due) add_noise(m->rng, m->rate, 3, m->noise_rate);
+    if (imu_due) add_noise(m->rng, m->ang_acc, 3, m->noise_ang_acc);
+    if (pose_due) {
+        if (m->noise_att > 0.0 || delayed) {
+            quat_from_euler(m->euler, m->quat);
+            if (m->quat[0] < 0.0)
+                for (i = 0; i < 4; i++) m->quat[i] = -m->quat[i];
+        } else {
+            memcpy(m->quat, m->quat_true, sizeof m->quat);
+        }
+    }
+    return FP_OK;
 }
 
 /* ------------------------------------------------------------------------ */
@@ -300,6 +393,9 @@ static int validate(const PlantModel *m, const FpLogger *logger) {
     fp_need_param(&c, "noise_att", &m->noise_att, 1, NULL);
     fp_need_param(&c, "noise_rate", &m->noise_rate, 1, NULL);
     fp_need_param(&c, "noise_ang_acc", &m->noise_ang_acc, 1, NULL);
+    fp_need_param(&c, "mocap_period", &m->mocap_period, 1, NULL);
+    fp_need_param(&c, "mocap_delay", &m->mocap_delay, 1, NULL);
+    fp_need_param(&c, "imu_period", &m->imu_period, 1, NULL);
     if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->tau_motor, m->tau_servo))
         fp_check_warning(&c,
                          "parameter h_internal = %g s is coarse against the actuator time "
@@ -346,7 +442,6 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     Commands u;
     uint64_t seed;
     int i;
-    (void)t0;
     if (validate(m, logger) != 0) return FP_ERROR;
     FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
     if (invert3(m->inertia, m->inertia_inv) != 0) {
@@ -385,7 +480,10 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     saturate(m, &u, &m->sat_flags);
     m->sat_flags = 0;
     m->t_step = 0.0;
-    compute_outputs(m, &u);
+    m->t0 = t0;
+    m->hist_count = m->hist_head = 0;
+    m->mocap_last = m->imu_last = t0 - 1.0; /* every sensor samples at t0 */
+    if (compute_outputs(m, &u, t0, logger) != FP_OK) return FP_ERROR;
     fp_log(logger, FP_OK, FP_LOG_MODEL, "initial state: %d rotors, omega_1 = %g rad/s",
            (int)m->n_rotors, m->x[X_OMEGA]);
     return FP_OK;
@@ -454,7 +552,7 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
         m->sat_flags = flags_before;
         return FP_ERROR;
     }
-    compute_outputs(m, &u);
+    if (compute_outputs(m, &u, t + h, logger) != FP_OK) return FP_ERROR;
     if (m->timing) m->t_step = fp_clock_seconds() - t_start;
     return FP_OK;
 }

@@ -9,6 +9,7 @@
 #include "multirotor.h"
 
 #define PLANT_NX (13 + 3 * FP_MAX_ROTORS) /* p, v, q, Omega, omega, alpha, beta */
+#define PLANT_HISTORY 512 /* communication points of true pose kept for mocap_delay */
 
 typedef struct {
     /* parameters */
@@ -29,6 +30,7 @@ typedef struct {
     int32_t noise_seed;
     double noise_pos, noise_vel, noise_acc, noise_att, noise_rate, noise_ang_acc;
     int32_t timing;
+    double mocap_period, mocap_delay, imu_period;
     /* inputs */
     double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
     double efficiency[FP_MAX_ROTORS];
@@ -40,11 +42,18 @@ typedef struct {
     int32_t sat_flags;
     double t_step;
     double pos_true[3], vel_true[3], euler_true[3], quat_true[4], rate_true[3];
+    double pose_age;
     /* internal state, derived at initialization */
     double x[PLANT_NX];
     double inertia_inv[3][3];
     FpRotorSet rotors;
     uint64_t rng[4];
+    /* sensor timing: the true pose of the last PLANT_HISTORY communication points (ring),
+     * the instants of the last pose and inertial samples */
+    double hist_t[PLANT_HISTORY];
+    double hist[PLANT_HISTORY][9]; /* pos, vel, euler */
+    int32_t hist_head, hist_count;
+    double t0, mocap_last, imu_last;
 } PlantModel;
 
 /* The plant model; its FMU returns it from fp_model_info(). */

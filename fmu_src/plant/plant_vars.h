@@ -60,6 +60,10 @@
     X(noise_rate, 175, REAL, PARAM_FIXED, 1, 1, ANGULAR_VELOCITY, FP_NONNEGATIVE, "Standard deviation of body-rate noise") \
     X(noise_ang_acc, 176, REAL, PARAM_FIXED, 1, 1, ANGULAR_ACCELERATION, FP_NONNEGATIVE, "Standard deviation of angular-acceleration noise") \
     X(timing, 177, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Measure the computation time of each step (t_step); off keeps runs bit-reproducible") \
+    /* parameters: sensor timing (all zero: every output exact and current) */              \
+    X(mocap_period, 178, REAL, PARAM_FIXED, 1, 1, TIME, FP_IN(0, 1), "Sample period of the pose measurements pos, vel, euler, quat (motion capture, e.g. 1/120 s); held between samples; 0: every communication point") \
+    X(mocap_delay, 179, REAL, PARAM_FIXED, 1, 1, TIME, FP_IN(0, 0.5), "Latency of the pose measurements: each sample shows the state this long before it (linear between communication points)") \
+    X(imu_period, 180, REAL, PARAM_FIXED, 1, 1, TIME, FP_IN(0, 1), "Sample period of the inertial measurements acc, rate, ang_acc; held between samples; 0: every communication point") \
     /* inputs */                                                                                   \
     X(omega_cmd, 200, REAL, INPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Commanded rotor speeds (saturated at the limits, see sat_flags)") \
     X(alpha_cmd, 210, REAL, INPUT, 8, 1, ANGLE, FP_ANY, "Commanded servo angles alpha")            \
@@ -88,6 +92,7 @@
     X(vel_true, 383, REAL, OUTPUT, 3, 1, VELOCITY, FP_ANY, "True velocity, world NED (vel without sensor noise)") \
     X(euler_true, 386, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "True attitude [phi, theta, psi] (euler without sensor noise)") \
     X(quat_true, 389, REAL, OUTPUT, 4, 1, DIMENSIONLESS, FP_ANY, "True attitude quaternion [w, x, y, z] of R_B^W, w >= 0") \
-    X(rate_true, 393, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "True body rates (rate without sensor noise)")
+    X(rate_true, 393, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "True body rates (rate without sensor noise)") \
+    X(pose_age, 396, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Age of pos, vel, euler, quat: the time since the state they show (mocap_delay plus the time since their sample; 0 with ideal sensors)")
 
 #endif
