@@ -230,13 +230,14 @@ class FigurePool:
             fd, path = tempfile.mkstemp(prefix="fullpose-run-", suffix=".npy",
                                         dir=shm if shm.is_dir() else None)
             os.close(fd)
+            self._data = path  # from here close() removes it, whatever interrupts the copy
             try:
                 np.save(path, np.ascontiguousarray(result.data))
             except OSError:  # (a full /dev/shm): nothing half-written is left behind
                 with contextlib.suppress(OSError):
                     os.unlink(path)
+                self._data = None
                 raise
-            self._data = path
         self._handoff = path
         self._run = result
         self._names = list(names)

@@ -326,29 +326,6 @@ static int a_pass(const FpWls *w, int m0, double *colsq, int *diag_tail) {
     return small || none_big(w->A, w->n_rows * n);
 }
 
-/* The sums of squares of rows (<= 4) of length n, n apart, side by side (each summed in
- * index order). */
-static void row_sq4(const double *x, int n, int rows, double out[4]) {
-    const double *x0 = x, *x1 = x + n, *x2 = x + 2 * n, *x3 = x + 3 * n;
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
-    int i, r;
-    if (rows < 4) {
-        for (r = 0; r < rows; r++) {
-            double s = 0.0;
-            for (i = 0; i < n; i++) s += x[r * n + i] * x[r * n + i];
-            out[r] = s;
-        }
-        return;
-    }
-    for (i = 0; i < n; i++) {
-        s0 += x0[i] * x0[i];
-        s1 += x1[i] * x1[i];
-        s2 += x2[i] * x2[i];
-        s3 += x3[i] * x3[i];
-    }
-    out[0] = s0, out[1] = s1, out[2] = s2, out[3] = s3;
-}
-
 /* The checks of b and of the bounds (A: a_pass; C and d: in the row loop of solve). */
 static int b_bounds_ok(const FpWls *w) {
     int i, n = w->n_vars;
@@ -564,7 +541,7 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     for (i = 0; i < w->n_cons; i++) {
         const double *row = w->C + i * n;
         double sq, cn;
-        if (i % 4 == 0) row_sq4(row, n, w->n_cons - i < 4 ? w->n_cons - i : 4, sq4);
+        if (i % 4 == 0) sumsq4(row, n, w->n_cons - i < 4 ? w->n_cons - i : 4, n, sq4);
         sq = sq4[i % 4];
         if (!(sq <= BIG * BIG) && !none_big(row, n))
             return finish_stats(w, FP_WLS_BAD_INPUT, 0, 0, 0, out, stats);

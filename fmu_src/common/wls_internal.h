@@ -166,15 +166,18 @@ static inline double vnorm(const double *x, int len) {
     return m * sqrt(s);
 }
 
-/* vnorm of rows rows (<= 4) of length len, ld apart, side by side: each sums in the same
- * order as vnorm and takes its square root, or is vnorm itself when the sum under- or
- * overflowed. */
-static inline void vnorm4(const double *x, int ld, int rows, int len, double out[4]) {
+/* The sums of squares of rows rows (<= 4) of length len, ld apart, side by side (each summed
+ * in index order, as vnorm sums). */
+static inline void sumsq4(const double *x, int ld, int rows, int len, double out[4]) {
     const double *x0 = x, *x1 = x + ld, *x2 = x + 2 * ld, *x3 = x + 3 * ld;
-    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0, s[4];
-    int i;
+    double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
+    int i, r;
     if (rows < 4) {
-        for (i = 0; i < rows; i++) out[i] = vnorm(x + i * ld, len);
+        for (r = 0; r < rows; r++) {
+            double s = 0.0;
+            for (i = 0; i < len; i++) s += x[r * ld + i] * x[r * ld + i];
+            out[r] = s;
+        }
         return;
     }
     for (i = 0; i < len; i++) {
@@ -183,7 +186,20 @@ static inline void vnorm4(const double *x, int ld, int rows, int len, double out
         s2 += x2[i] * x2[i];
         s3 += x3[i] * x3[i];
     }
-    s[0] = s0, s[1] = s1, s[2] = s2, s[3] = s3;
+    out[0] = s0, out[1] = s1, out[2] = s2, out[3] = s3;
+}
+
+/* vnorm of rows rows (<= 4) of length len, ld apart, side by side: each sums in the same
+ * order as vnorm and takes its square root, or is vnorm itself when the sum under- or
+ * overflowed. */
+static inline void vnorm4(const double *x, int ld, int rows, int len, double out[4]) {
+    double s[4];
+    int i;
+    if (rows < 4) {
+        for (i = 0; i < rows; i++) out[i] = vnorm(x + i * ld, len);
+        return;
+    }
+    sumsq4(x, ld, 4, len, s);
     for (i = 0; i < 4; i++)
         out[i] = s[i] >= DBL_MIN && s[i] < HUGE_VAL ? sqrt(s[i]) : vnorm(x + i * ld, len);
 }
