@@ -267,6 +267,16 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
  * docs/robustness.md).  The actuator measurements are also held to the airframe: omega to
  * [-omega_max, 2 omega_max], alpha and beta to the servo limits +- CTRL_SERVO_MARGIN.
  * Else the first unusable input is described in why. */
+/* A vector's element by name and index, a scalar by its name (for messages only: this
+ * runs in the sample's check of every input). */
+static const char *element_name(const FpVar *row, int i, char *buf, size_t size) {
+    if (row->rows * row->cols > 1)
+        snprintf(buf, size, "%s[%d]", row->name, i + 1);
+    else
+        snprintf(buf, size, "%s", row->name);
+    return buf;
+}
+
 static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
     static const int rows[] = {CV_pos_ref, CV_euler_ref, CV_vel_ref, CV_acc_ref,
                                CV_euler_rate_ref, CV_pos, CV_vel, CV_acc, CV_euler, CV_rate,
@@ -285,10 +295,6 @@ static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
         for (i = 0; i < counts[k]; i++) {
             double v = inputs[k][i], a = -HUGE_VAL, b = HUGE_VAL;
             char range[96], name[48];
-            if (row->rows * row->cols > 1) /* a vector's element, a scalar by its name */
-                snprintf(name, sizeof name, "%s[%d]", row->name, i + 1);
-            else
-                snprintf(name, sizeof name, "%s", row->name);
             if (rows[k] == CV_omega) {
                 a = -m->omega_max, b = 2.0 * m->omega_max;
             } else if (rows[k] == CV_alpha || rows[k] == CV_beta) {
@@ -296,17 +302,19 @@ static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
                 b = (rows[k] == CV_alpha ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
             }
             if (!isfinite(v)) {
-                snprintf(why, size, "input %s = %g is not finite", name, v);
+                snprintf(why, size, "input %s = %g is not finite",
+                         element_name(row, i, name, sizeof name), v);
                 return 0;
             }
             if (!fp_range_contains(&row->range, v)) {
-                snprintf(why, size, "input %s = %g is outside its plausible range %s", name, v,
+                snprintf(why, size, "input %s = %g is outside its plausible range %s",
+                         element_name(row, i, name, sizeof name), v,
                          fp_range_text(&row->range, 0, range, sizeof range));
                 return 0;
             }
             if (v < a || v > b) {
                 snprintf(why, size, "input %s = %g is outside its plausible range [%g, %g]",
-                         name, v, a, b);
+                         element_name(row, i, name, sizeof name), v, a, b);
                 return 0;
             }
         }
