@@ -619,8 +619,7 @@ def _build(af: Airframe, torque: Array | None, n_directions: int, grid: int) -> 
     else:
         verts = p0.reshape(1, 3)
     verts = _dedupe(verts, tol)
-    z_lo = _lp_extreme(A, b, np.array([0.0, 0.0, 1.0]), minimise=True)
-    z_hi = _lp_extreme(A, b, np.array([0.0, 0.0, 1.0]), minimise=False)
+    z_lo, z_hi = z_extremes(A, b)
     inner_pts = _dedupe(inner, tol)
     dist = _distances(verts, inner_pts)
     A, b = canonical_facets(A, b, n_flat)
@@ -694,9 +693,18 @@ def same_polytope(A1: ArrayLike, b1: ArrayLike, A2: ArrayLike, b2: ArrayLike,
     problems = []
     for (A, b), (Ao, bo), who, other in (((A1, b1), (A2, b2), names[0], names[1]),
                                          ((A2, b2), (A1, b1), names[1], names[0])):
-        worst, at = reach_beyond(A, b, Ao, bo)
+        norms = np.linalg.norm(Ao, axis=1)
+        worst, at = -math.inf, -1
+        for i in np.flatnonzero(norms > 0.0):
+            h = _set_support(A, b, Ao[i] / norms[i])
+            excess = math.inf if h is None else h - bo[i] / norms[i]
+            if excess > worst:
+                worst, at = excess, int(i)
         if worst > tol:
-            problems.append(f"{who} {beyond_facet(worst, at, Ao, bo, other)}")
+            n = Ao[at] / norms[at]
+            problems.append(
+                f"{who} reaches {worst:.3g} N beyond facet {at} of {other} (normal "
+                f"[{', '.join(f'{x:.4f}' for x in n)}], offset {bo[at] / norms[at]:.6g} N)")
     if problems:
         return False, "; ".join(problems) + f" (tolerance {tol:.2g} N)"
     return True, f"same set within {tol:.2g} N ({A1.shape[0]} and {A2.shape[0]} facets)"
@@ -741,32 +749,6 @@ def facet_problem(airframe: Airframe | str | Path, A: ArrayLike, b: ArrayLike,
                 f"offset {b[at] / np.linalg.norm(A[at]):.9g} N where the forces reach "
                 f"{here:.9g} N here (tolerance {tol:.2g} N)")
     return None
-
-
-def reach_beyond(A: ArrayLike, b: ArrayLike, Ao: ArrayLike, bo: ArrayLike
-                 ) -> tuple[float, int]:
-    """How far {x : A x <= b} reaches beyond the facets of {x : Ao x <= bo}: the largest
-    h(a_i) - bo_i / |a_i| over the other set's unit facet normals a_i (N; <= 0: inside), and
-    that facet's index (an LP per facet; inf for an unbounded set)."""
-    A, b = np.atleast_2d(np.asarray(A, dtype=float)), np.asarray(b, dtype=float).ravel()
-    Ao, bo = np.atleast_2d(np.asarray(Ao, dtype=float)), np.asarray(bo, dtype=float).ravel()
-    norms = np.linalg.norm(Ao, axis=1)
-    worst, at = -math.inf, -1
-    for i in np.flatnonzero(norms > 0.0):
-        h = _set_support(A, b, Ao[i] / norms[i])
-        excess = math.inf if h is None else h - bo[i] / norms[i]
-        if excess > worst:
-            worst, at = excess, int(i)
-    return worst, at
-
-
-def beyond_facet(excess: float, at: int, Ao: ArrayLike, bo: ArrayLike, other: str) -> str:
-    """Words for :func:`reach_beyond`'s answer: ``reaches ... N beyond facet ... of other``."""
-    Ao, bo = np.atleast_2d(np.asarray(Ao, dtype=float)), np.asarray(bo, dtype=float).ravel()
-    norm = float(np.linalg.norm(Ao[at]))
-    n = Ao[at] / norm
-    return (f"reaches {excess:.3g} N beyond facet {at} of {other} (normal "
-            f"[{', '.join(f'{x:.4f}' for x in n)}], offset {bo[at] / norm:.6g} N)")
 
 
 def _set_support(A: Array, b: Array, c: Array) -> float | None:

@@ -80,9 +80,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
     print(f"max position error  {_fmt(pos.get('max'), '.4f', 'm')} "
           f"(RMS {_fmt(pos.get('rms'), '.4f', 'm')})"
           + ("" if measured is None else " of the true state"))
-    if measured is not None:  # with sensor noise: what the sensors said, as such
+    if measured is not None:  # imperfect sensors: what they said, as such
         print(f"  as measured       {_fmt(measured.get('max'), '.4f', 'm')} "
-              f"(RMS {_fmt(measured.get('rms'), '.4f', 'm')}), sensor noise included")
+              f"(RMS {_fmt(measured.get('rms'), '.4f', 'm')}), as the sensors read it")
     print(f"real-time factor    {_fmt(m.get('real_time_factor'), '.0f')}x "
           f"({_fmt(wall, '.2f', 's')} wall)")
     for line in output.paper:

@@ -67,8 +67,9 @@ def rotor_used(name: str, n_rotors: int) -> bool:
 
 TRUTH_SUFFIX = "_true"
 """The plant's true-state outputs (``pos_true``, ...): the measured ones without sensor
-noise, recorded only when ``truth`` is asked for (a run with noise); without noise they would
-be copies of the measured columns."""
+noise, sampling or latency, recorded only when ``truth`` is asked for
+(``master.sensors_differ``); with ideal sensors they would be copies of the measured
+columns."""
 
 
 def _outputs(inst: FmuInstance, kind: str, n_rotors: int, truth: bool = True) -> list[str]:

@@ -19,8 +19,9 @@ Keys (units in brackets)
     run records up to the time it was lost.
 ``judged_on``
     ``"true state"`` when the run recorded the plant's true state beside the measured one
-    (a run with sensor noise: ``plant.pos_true``, ``plant.euler_true``), else
-    ``"measured state"`` (no noise: the two are the same).  The errors below use it.
+    (a run with sensor noise, sampling or latency: ``plant.pos_true``,
+    ``plant.euler_true``), else ``"measured state"`` (ideal sensors: the two are the same).
+    The errors below use it.
 ``nonfinite_rows`` [-]
     Rows where the judged position or attitude is not finite.
 ``position_error`` [m]
@@ -29,8 +30,8 @@ Keys (units in brackets)
     sqrt(mean(e_i^2))}``.
 ``measured``
     With the true state recorded: ``position_error``, ``attitude_error_vs_mu_c`` and
-    ``attitude_error_vs_mu_ref`` of the *measured* state (what the sensors said, noise
-    included), reported as such; else None.
+    ``attitude_error_vs_mu_ref`` of the *measured* state (what the sensors said), reported
+    as such; else None.
 ``attitude_error_vs_mu_c``, ``attitude_error_vs_mu_ref`` [deg]
     e = ``plant.euler_true`` (or ``plant.euler``) - ``ctrl.mu_c`` (resp. ``ref.euler_ref``),
     each component wrapped to
@@ -167,12 +168,12 @@ def _timing(result: RunResult) -> dict[str, dict[str, float | None] | None]:
     return out
 
 
-def _tracking(result: RunResult, suffix: str) -> dict[str, Any]:
-    """Position and attitude errors of ``plant.pos{suffix}`` and ``plant.euler{suffix}``."""
+def _tracking(result: RunResult, pos_name: str, euler_name: str) -> dict[str, Any]:
+    """Position and attitude errors of the signals ``pos_name`` and ``euler_name``."""
     out: dict[str, Any] = {}
     t = result.time
-    pos, pos_ref = result.optional(f"plant.pos{suffix}"), result.optional("ref.pos_ref")
-    euler = result.optional(f"plant.euler{suffix}")
+    pos, pos_ref = result.optional(pos_name), result.optional("ref.pos_ref")
+    euler = result.optional(euler_name)
     out["position_error"] = None
     if pos is not None and pos_ref is not None and t.size:
         out["position_error"] = _error_stats(pos - pos_ref, POSITION_AXES)
@@ -220,17 +221,17 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
         m["lost"] = {"time": _num(outcome.get("time", math.nan)),
                      "reason": str(outcome.get("reason", ""))}
 
-    truth = result.has("plant.pos_true") and result.has("plant.euler_true")
-    judged = "_true" if truth else ""
+    truth = result.has_truth
+    judged = result.judged("plant.pos"), result.judged("plant.euler")
     m["judged_on"] = "true state" if truth else "measured state"
     bad = np.zeros(t.size, dtype=bool)
-    for name in (f"plant.pos{judged}", f"plant.euler{judged}"):
+    for name in judged:
         sig = result.optional(name)
         if sig is not None:
             bad |= ~np.all(np.isfinite(np.atleast_2d(sig.T).T), axis=1)
     m["nonfinite_rows"] = int(np.sum(bad))
-    m.update(_tracking(result, judged))
-    m["measured"] = _tracking(result, "") if truth else None
+    m.update(_tracking(result, *judged))
+    m["measured"] = _tracking(result, "plant.pos", "plant.euler") if truth else None
 
     feasible = result.optional("ctrl.feasible")
     m["infeasible_fraction"] = (None if feasible is None or feasible.size == 0

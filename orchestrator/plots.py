@@ -211,11 +211,10 @@ def tracking_figure(result: RunResult) -> Figure:
     t = result.time
     fig = _new_figure(13.0, 10.0, top=0.93, hspace=0.12, wspace=0.17)
     axs = fig.subplots(4, 2, sharex=True)
-    # with sensor noise the true state is recorded too: it is what is judged, the measured
-    # one is drawn faint behind it
-    truth = result.has("plant.pos_true") and result.has("plant.euler_true")
-    judged = "_true" if truth else ""
-    pos, pos_ref = result.optional(f"plant.pos{judged}"), result.optional("ref.pos_ref")
+    # with imperfect sensors the true state is recorded too: it is what is judged, the
+    # measured one is drawn faint behind it
+    truth = result.has_truth
+    pos, pos_ref = result.optional(result.judged("plant.pos")), result.optional("ref.pos_ref")
     sensed = result.optional("plant.pos") if truth else None
     for i, name in enumerate(("x", "y", "z")):
         ax = axs[i, 0]
@@ -236,7 +235,7 @@ def tracking_figure(result: RunResult) -> Figure:
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
     bands = [] if feasible is None else false_intervals(t, feasible, min_gap=span / 1000.0)
     mu_ref, mu_c = result.optional("ref.euler_ref"), result.optional("ctrl.mu_c")
-    mu_m = result.optional(f"plant.euler{judged}")
+    mu_m = result.optional(result.judged("plant.euler"))
     mu_sensed = result.optional("plant.euler") if truth else None
     for i, name in enumerate(("phi", "theta", "psi")):
         ax = axs[i, 1]
@@ -266,7 +265,7 @@ def tracking_figure(result: RunResult) -> Figure:
             ax.plot(t[k], err[k], "v", color=INFEASIBLE_COLOR, ms=5,
                     label=f"max {err[k]:.4f} m at {t[k]:.2f} s")
             ax.legend(loc="upper right", fontsize=8)
-    ax.set_ylabel(f"|pos{judged} - pos_ref| [m]")
+    ax.set_ylabel(f"|{result.judged('plant.pos').removeprefix('plant.')} - pos_ref| [m]")
     ax.set_xlabel("time [s]")
     _finish_time_axis(ax, t)
     ax = axs[3, 1]

@@ -98,6 +98,17 @@ class RunResult:
             raise KeyError(f"no signal {name!r} in the result")
         return self.data[:, idx]
 
+    @property
+    def has_truth(self) -> bool:
+        """Whether the run recorded the plant's true state beside the measured one (a run
+        with sensor noise, sampling or latency: ``plant.pos_true``, ``plant.euler_true``)."""
+        return self.has("plant.pos_true") and self.has("plant.euler_true")
+
+    def judged(self, name: str) -> str:
+        """The signal to judge the flight by: ``plant.pos`` -> ``plant.pos_true`` when the
+        true state is recorded, else ``name`` itself."""
+        return f"{name}_true" if self.has_truth and self.has(f"{name}_true") else name
+
     # -- files ---------------------------------------------------------------
 
     def optional(self, name: str) -> np.ndarray | None:

@@ -184,8 +184,7 @@ def _remove_stale_spills(folder: Path, name: str) -> None:
     file).  Safe even while another run maps one: POSIX keeps a removed file for the process
     that maps it, and Windows refuses to remove a file in use (the error is ignored)."""
     for stale in folder.glob(f".{glob.escape(name)}.*.recording.npy"):
-        with contextlib.suppress(OSError):
-            stale.unlink()
+        _forget(stale)
 
 
 def _remove_spill(path: Path, out: RunOutput | None) -> None:

@@ -186,8 +186,7 @@ def run_case(case: dict[str, float], design: str, params: dict[str, float],
     try:
         res = sim.run()
         t = np.asarray(res.time)
-        pos = res.optional("plant.pos_true")  # with sensor noise: the truth is judged
-        pos = res.get("plant.pos") if pos is None else pos
+        pos = res.get(res.judged("plant.pos"))  # with sensor noise: the truth
         err = np.linalg.norm(np.asarray(pos) - np.asarray(res.get("ref.pos_ref")),
                              axis=1)
     except (RunError, FmuError):  # a diverged plant may make an FMU refuse a step
