@@ -147,6 +147,14 @@ def lost_in(engine: Engine, first: int, last: int, criteria: LostCriteria) -> Lo
     stepped = slice(first, min(last + 1, rec.rows - 1))
     cmd_ok = np.all(np.isfinite(rec.commands[stepped]), axis=1)
     finite[:cmd_ok.size] &= cmd_ok
+    if "ctrl.pos_ref_s[1]" in rec.columns and last > 0:
+        # the vehicle is judged against the reference it is flying: the controller's shaped
+        # one (a 10 m step is not a 10 m error).  Rows first..last-1 have it; the row last,
+        # not answered yet, the one before's (it moves by millimetres per row)
+        shaped = rec.data[max(first - 1, 0):last, rec.columns_of("ctrl.pos_ref_s")]
+        ref = ref.copy()
+        ref[:last - first] = shaped[-(last - first):] if last > first else ref[:0]
+        ref[last - first] = shaped[-1]
     found = first_lost(rec.time[rows], pos, ref, euler, finite, criteria)
     if found is None:
         return None

@@ -6,8 +6,9 @@ vehicle is lost.  The bounds are scenario fields (``[lost]``, docs/scenarios.md)
 defaults are far outside anything a working controller does on the shipped airframes and far
 inside divergence:
 
-* position error |xi - xi_ref| > 10 m (the shipped scenarios stay within centimetres, the
-  largest reference step they command is 3 m);
+* position error |xi - xi_ref| > 10 m, xi_ref the reference the controller flies (its shaped
+  reference where it records one: a step is flown within limits, not counted as an error;
+  the shipped scenarios stay within centimetres of it);
 * tilt (angle between body z and world z, cos = cos(phi) cos(theta)) > 90 deg: upside down,
   beyond what the controller's Euler bounds (+-60 deg each: at most 75.5 deg) command;
 * any non-finite plant output or controller command.

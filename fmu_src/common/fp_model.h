@@ -42,6 +42,7 @@ typedef enum {
     T(LENGTH, "Length", "Length", "m", 0.0)                                                 \
     T(VELOCITY, "Velocity", "Velocity", "m/s", 0.0)                                         \
     T(ACCELERATION, "Acceleration", "Acceleration", "m/s2", 0.0)                            \
+    T(JERK, "Jerk", "Jerk", "m/s3", 0.0)                                                    \
     T(ANGLE, "Angle", "Angle", "rad", 0.0)                                                  \
     T(ANGULAR_VELOCITY, "AngularVelocity", "AngularVelocity", "rad/s", 0.0)                 \
     T(ANGULAR_ACCELERATION, "AngularAcceleration", "AngularAcceleration", "rad/s2", 0.0)    \

@@ -121,6 +121,19 @@ static void controller_set_defaults(void *model) {
     m->w_pref = 0.1;
     m->pref_omega_scale = 1.0 / 50.0;
     m->qp_max_iter = 50;
+    /* Reference shaping: a jump flown at most at ref_tilt_max of tilt (a 10 m step must not
+     * become a 50-degree lunge); the heading at 0.4 rad/s leaves yaw_rate_max's 0.5 some
+     * room for feedback. */
+    m->ref_shaping = 1;
+    m->ref_bandwidth = 3.0;
+    m->ref_tilt_max = 15.0 * CTRL_PI / 180.0;
+    m->ref_vel_max[0] = 2.0, m->ref_vel_max[1] = 1.0;
+    m->ref_acc_max[0] = m->ref_acc_max[1] = 0.0; /* derived at initialization */
+    m->ref_jerk_max[0] = m->ref_jerk_max[1] = 5.0;
+    m->ref_att_rate_max[0] = m->ref_att_rate_max[1] = 1.0;
+    m->ref_att_rate_max[2] = 0.4;
+    m->ref_att_acc_max[0] = m->ref_att_acc_max[1] = 2.0;
+    m->ref_att_acc_max[2] = 1.0;
     /* Measurements start at the hover trim of the default airframe. */
     w[2] = -af.mass * af.g;
     fp_preferred_config(&af.rotors, w, m->alpha, m->beta, m->omega, NULL, 0);
@@ -177,6 +190,19 @@ static CtrlGuidanceParams guidance_params(const ControllerModel *m) {
     p.euler_min = m->euler_min, p.euler_max = m->euler_max;
     p.force_constraint = m->force_constraint;
     p.max_iter = m->qp_max_iter, p.timing = m->timing;
+    return p;
+}
+
+static CtrlShapingParams shaping_params(const ControllerModel *m) {
+    CtrlShapingParams p;
+    p.enabled = m->ref_shaping != 0;
+    p.Ts = m->Ts;
+    p.lambda = m->ref_bandwidth;
+    memcpy(p.vel_max, m->ref_vel_max, sizeof p.vel_max);
+    memcpy(p.acc_max, m->acc_limit, sizeof p.acc_max);
+    memcpy(p.jerk_max, m->ref_jerk_max, sizeof p.jerk_max);
+    memcpy(p.att_rate_max, m->ref_att_rate_max, sizeof p.att_rate_max);
+    memcpy(p.att_acc_max, m->ref_att_acc_max, sizeof p.att_acc_max);
     return p;
 }
 
@@ -239,6 +265,20 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     return FP_OK;
 }
 
+/* The shaping's acceleration limits: ref_acc_max where given, else what the nominal force
+ * set allows.  Horizontally 90 % of the acceleration a conventional multirotor reaches at
+ * ref_tilt_max, g tan(tilt) (the rest is the feedback's), within the thrust the set has
+ * (|f_bz| at most -fz_min): over-actuated vehicles reach it with less tilt.  Vertically half of what is left of the
+ * thrust range at that tilt, up and down, so a climb or descent never saturates it. */
+static void derive_acc_limits(ControllerModel *m) {
+    double g = m->g, up = -m->fz_min / m->mass, least = -m->fz_max / m->mass;
+    double a_h = 0.9 * g * tan(m->ref_tilt_max), a_z;
+    if (up > g) a_h = fmin(a_h, sqrt(up * up - g * g));
+    a_z = 0.5 * fmin(up * cos(m->ref_tilt_max) - g, g - least);
+    m->acc_limit[0] = m->ref_acc_max[0] > 0.0 ? m->ref_acc_max[0] : a_h;
+    m->acc_limit[1] = m->ref_acc_max[1] > 0.0 ? m->ref_acc_max[1] : fmax(a_z, 0.05 * g);
+}
+
 /* ------------------------------------------------------------------------ */
 /* One sample                                                               */
 
@@ -253,6 +293,7 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     m->active_polytope = l.active_polytope;
     m->hover_possible = l.hover_possible;
     fp_wls_reset(&m->guid); /* the facets change: the old working set means nothing */
+    fp_wls_reset(&m->twin_qp);
     ctrl_log_losses(&l, logger);
 }
 
@@ -357,9 +398,15 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlStabilizationState sst;
     CtrlAllocationParams ap;
     CtrlAllocationOut a;
+    CtrlShapingParams shp;
+    CtrlShapingInputs shin;
+    CtrlShapedRef r;
+    double mu_in[3], mu_ff[3], mu_rate_ff[3], mu_acc_ff[3];
     double dtau_c[3], rate_c[3], dnu_c[6], t_start = m->timing ? fp_clock_seconds() : 0.0;
     /* what a sample changes besides its outputs: restored when the sample is discarded */
     double filt_before[CTRL_N_FILTERS][2], blk_before[4][3], psi_before[4];
+    CtrlShaping shaping_before = m->shaping;
+    CtrlTwin twin_before = m->twin;
     int i, n = m->n_rotors;
     if (!inputs_valid(m, logger)) return FP_WARNING;
     /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
@@ -370,19 +417,36 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     memcpy(blk_before, m->blk, sizeof blk_before);
     psi_before[0] = m->psi_raw, psi_before[1] = m->psi_unwrapped;
     psi_before[2] = m->psi_ref_raw, psi_before[3] = m->psi_ref_unwrapped;
-    /* 1. filters (headings unwrapped first so that +-pi crossings filter smoothly) */
+    /* 0. the reference: shaped (headings unwrapped first so that +-pi crossings are no
+     * jumps), then the twin's feed-forward attitude and its rate */
+    mu_in[0] = m->euler_ref[0], mu_in[1] = m->euler_ref[1];
+    mu_in[2] = ctrl_unwrap(m->euler_ref[2], &m->psi_ref_raw, &m->psi_ref_unwrapped);
+    shp = shaping_params(m);
+    shin.pos = m->pos_ref, shin.vel = m->vel_ref, shin.acc = m->acc_ref;
+    shin.mu = mu_in, shin.mu_rate = m->euler_rate_ref;
+    ctrl_shape_reference(&shp, &shin, &m->shaping, &r);
+    fs = force_set_in_use(m);
+    gp = guidance_params(m);
+    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, m->g, &m->twin, &m->twin_qp, mu_ff);
+    for (i = 0; i < 3; i++) /* the twin's rate wherever it departs from the reference */
+        mu_rate_ff[i] = m->twin.active || twin_before.active
+                            ? ctrl_wrap_pi(mu_ff[i] - m->mu_ff[i]) / m->Ts
+                            : r.mu_rate[i];
+    /* and its angular acceleration: without it the rate loop lags every change of rate
+     * (a quadrotor's attitude rate follows the jerk of its path) */
+    for (i = 0; i < 3; i++) mu_acc_ff[i] = (mu_rate_ff[i] - m->mu_rate_ff[i]) / m->Ts;
+    /* 1. filters (the measured heading unwrapped like the reference's) */
     ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age, m->pose_now);
     fin = filter_inputs(m);
     fin.psi = ctrl_unwrap(m->pose_now[8], &m->psi_raw, &m->psi_unwrapped);
-    fin.psi_ref = ctrl_unwrap(m->euler_ref[2], &m->psi_ref_raw, &m->psi_ref_unwrapped);
+    fin.pos_ref = r.pos, fin.vel_ref = r.vel;
+    fin.mu_ref = mu_ff, fin.psi_ref = mu_ff[2];
     ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->filt);
     ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, &m->rotor_trig, m->rotor_health,
                       m->lost_mask, &s);
     /* 2. guidance */
-    fs = force_set_in_use(m);
-    gp = guidance_params(m);
-    gin.acc_ref = m->acc_ref;
-    gin.mu_ref = m->euler_ref;
+    gin.acc_ref = r.acc;
+    gin.mu_ref = r.mu;
     gst.x_pos = m->blk[BLK_POS];
     gst.x_vel = m->blk[BLK_VEL];
     gst.qp = &m->guid;
@@ -391,7 +455,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     sp = stabilization_params(m);
     sst.x_att = m->blk[BLK_ATT];
     sst.x_rate = m->blk[BLK_RATE];
-    ctrl_stabilization(&sp, &s, g.mu_c, m->euler_ref, m->euler_rate_ref, &sst, rate_c, dtau_c);
+    ctrl_stabilization(&sp, &s, g.mu_c, mu_ff, mu_rate_ff, mu_acc_ff, &sst, rate_c, dtau_c);
     /* 4. inner allocation of dnu_c = [df_b_c; dtau_c] */
     for (i = 0; i < 3; i++) {
         dnu_c[i] = g.df_c[i];
@@ -405,8 +469,11 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
         !fp_all_finite(a.omega_cmd, (size_t)n) ||
         !fp_all_finite(g.mu_c, 3) || !fp_all_finite(g.acc_c, 3) || !fp_all_finite(g.f_b_ref, 3) ||
         !fp_all_finite(g.f_b_c, 3) || !fp_all_finite(rate_c, 3) || !fp_all_finite(dnu_c, 6) ||
-        !fp_all_finite(a.residual, 6)) {
+        !fp_all_finite(a.residual, 6) || !fp_all_finite(mu_acc_ff, 3)) {
         memcpy(m->filt, filt_before, sizeof filt_before);
+        m->shaping = shaping_before;
+        m->twin = twin_before;
+        fp_wls_reset(&m->twin_qp);
         memcpy(m->blk, blk_before, sizeof blk_before);
         m->psi_raw = psi_before[0], m->psi_unwrapped = psi_before[1];
         m->psi_ref_raw = psi_before[2], m->psi_ref_unwrapped = psi_before[3];
@@ -417,6 +484,12 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
                "valid command");
         return FP_WARNING;
     }
+    memcpy(m->pos_ref_s, r.pos, sizeof m->pos_ref_s);
+    memcpy(m->vel_ref_s, r.vel, sizeof m->vel_ref_s);
+    memcpy(m->acc_ref_s, r.acc, sizeof m->acc_ref_s);
+    memcpy(m->euler_ref_s, r.mu, sizeof m->euler_ref_s);
+    memcpy(m->mu_ff, mu_ff, sizeof m->mu_ff);
+    memcpy(m->mu_rate_ff, mu_rate_ff, sizeof m->mu_rate_ff);
     memcpy(m->acc_c, g.acc_c, sizeof m->acc_c);
     memcpy(m->f_b_ref, g.f_b_ref, sizeof m->f_b_ref);
     memcpy(m->f_b_c, g.f_b_c, sizeof m->f_b_c);
@@ -450,6 +523,8 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     char why[160];
     if (ctrl_check_parameters(m, logger) != 0 || prepare_force_sets(m, logger) != FP_OK)
         return FP_ERROR;
+    derive_acc_limits(m);
+    memcpy(m->ref_acc_limit, m->acc_limit, sizeof m->ref_acc_limit);
     if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "initialization: %s", why);
         return FP_ERROR;
@@ -473,6 +548,18 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->psi_raw = m->psi_unwrapped = isfinite(m->pose_now[8]) ? m->pose_now[8] : 0.0;
     m->psi_ref_raw = m->psi_ref_unwrapped = isfinite(m->euler_ref[2]) ? m->euler_ref[2] : 0.0;
     memcpy(m->mu_c, m->euler_ref, sizeof m->mu_c);
+    /* the reference as given, no jump being shaped; the twin at the reference pose */
+    memset(&m->shaping, 0, sizeof m->shaping);
+    memset(&m->twin, 0, sizeof m->twin);
+    memcpy(m->twin.mu, m->euler_ref, sizeof m->twin.mu);
+    m->twin.mu[2] = m->psi_ref_unwrapped;
+    m->twin.f[2] = -m->mass * m->g;
+    memcpy(m->mu_ff, m->twin.mu, sizeof m->mu_ff);
+    memcpy(m->euler_ref_s, m->twin.mu, sizeof m->euler_ref_s);
+    memcpy(m->mu_rate_ff, m->euler_rate_ref, sizeof m->mu_rate_ff);
+    memcpy(m->pos_ref_s, m->pos_ref, sizeof m->pos_ref_s);
+    memcpy(m->vel_ref_s, m->vel_ref, sizeof m->vel_ref_s);
+    memcpy(m->acc_ref_s, m->acc_ref, sizeof m->acc_ref_s);
     for (i = 0; i < CTRL_N_FILTERS; i++)
         if (!isfinite(m->filt[i][0])) {
             fp_log(logger, FP_ERROR, FP_LOG_ERROR,
@@ -480,6 +567,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
             return FP_ERROR;
         }
     if (fp_wls_setup(&m->guid, 5, 8, m->poly_n) != FP_OK ||
+        fp_wls_setup(&m->twin_qp, 5, 8, m->poly_n) != FP_OK ||
         fp_wls_setup(&m->alloc, 3 * n, 6 + 3 * n, 0) != FP_OK) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "allocation problem sizes exceed the solver caps");
         return FP_ERROR;
@@ -568,7 +656,7 @@ static int structure_valid(const ControllerModel *m) {
     if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
         m->rotors.n > FP_MAX_ROTORS || m->poly_n < 0 || m->poly_n > FP_POLYTOPE_MAX_FACETS ||
         m->active_polytope < -1 || m->active_polytope > FP_MAX_ROTORS ||
-        !wls_valid(&m->guid) || !wls_valid(&m->alloc))
+        !wls_valid(&m->guid) || !wls_valid(&m->alloc) || !wls_valid(&m->twin_qp))
         return 0;
     for (i = 0; i < FP_MAX_ROTORS; i++)
         if (m->fail_poly_n[i] < 0 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS) return 0;
@@ -591,6 +679,9 @@ static FpStatus controller_check_restored(const void *model, int initialized,
     }
     if (!fp_all_finite(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
         !fp_all_finite(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
+        !fp_all_finite(m->shaping.e_pos, 15) || !fp_all_finite(m->shaping.pos_in, 15) ||
+        !fp_all_finite(m->twin.mu, 3) || !fp_all_finite(m->twin.f, 3) ||
+        !fp_all_finite(m->acc_limit, 2) ||
         !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||
         !isfinite(m->grid_t0) || m->samples_run < 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,

@@ -13,6 +13,20 @@
 
 #define CTRL_N_FILTERS (24 + 3 * FP_MAX_ROTORS) /* measurements, pos/vel/euler refs, actuators */
 
+/* The reference shaping's state (reference.c): the last input and the error state, the
+ * shaped reference minus the input (zero: the input passes unchanged). */
+typedef struct {
+    int32_t started;
+    double pos_in[3], vel_in[3], acc_in[3], mu_in[3], mu_rate_in[3];
+    double e_pos[3], e_vel[3], e_acc[3], e_mu[3], e_rate[3];
+} CtrlShaping;
+
+/* The reference twin's pose (guidance.c, ctrl_guidance_twin): attitude and body force. */
+typedef struct {
+    double mu[3], f[3];
+    int32_t active; /* its last sample solved the QP (the reference pose was infeasible) */
+} CtrlTwin;
+
 typedef struct {
     /* parameters */
     double Ts;
@@ -36,6 +50,9 @@ typedef struct {
     double fail_poly_A[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS][3];
     double fail_poly_b[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS];
     double W_nu[6], w_pref, pref_omega_scale, yaw_rate_max;
+    int32_t ref_shaping;
+    double ref_bandwidth, ref_tilt_max, ref_vel_max[2], ref_acc_max[2], ref_jerk_max[2];
+    double ref_att_rate_max[3], ref_att_acc_max[3];
     int32_t qp_max_iter, timing;
     /* inputs */
     double pos_ref[3], euler_ref[3], vel_ref[3], acc_ref[3], euler_rate_ref[3];
@@ -50,6 +67,8 @@ typedef struct {
     double acc_c[3], rate_c[3], dnu_c[6], alloc_residual[6];
     int32_t rotors_lost, hover_possible, active_polytope;
     double t_step, t_guid, t_alloc;
+    double pos_ref_s[3], vel_ref_s[3], acc_ref_s[3], euler_ref_s[3], mu_ff[3], mu_rate_ff[3];
+    double ref_acc_limit[2];
     /* internal state */
     FpRotorSet rotors;
     double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
@@ -71,7 +90,10 @@ typedef struct {
     int32_t warned_coarse;                 /* the h > Ts warning was given */
     FpRotorTrig rotor_trig;     /* sin, cos of the rotors' mounting azimuths (gamma part) */
     FpPreferredSplit pref_split; /* the preferred configuration's geometry, all rotors */
-    FpWls guid, alloc;
+    CtrlShaping shaping;
+    CtrlTwin twin;
+    double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */
+    FpWls guid, alloc, twin_qp;
 } ControllerModel;
 
 const FpModelInfo *controller_model_info(void);

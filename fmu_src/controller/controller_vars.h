@@ -85,6 +85,15 @@
     X(pref_omega_scale, 607, REAL, PARAM_TUNABLE, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Scale of rotor speeds (in rad/s) in the preference term") \
     X(qp_max_iter, 608, INTEGER, PARAM_TUNABLE, 1, 1, NONE, FP_IN(1, 1000), "Iteration cap of both allocation QPs") \
     X(timing, 609, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Measure computation times (t_step, t_guid, t_alloc); off keeps runs bit-reproducible") \
+    /* parameters: reference shaping (reference.c) */                                             \
+    X(ref_shaping, 640, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Shape the reference: jumps of pos_ref, its derivatives and euler_ref are flown within the limits below (off: the reference as given)") \
+    X(ref_bandwidth, 641, REAL, PARAM_FIXED, 1, 1, ANGULAR_FREQUENCY, FP_POSITIVE, "Poles of the shaping in its linear region (triple for translation, double for the angles)") \
+    X(ref_tilt_max, 642, REAL, PARAM_FIXED, 1, 1, ANGLE, FP_IN_OPEN(0, 1.5), "Tilt the shaped horizontal acceleration may need: ref_acc_max[1] = g tan(ref_tilt_max) where it is 0") \
+    X(ref_vel_max, 643, REAL, PARAM_FIXED, 2, 1, VELOCITY, FP_POSITIVE, "Speed limits of the shaped correction [horizontal, vertical]") \
+    X(ref_acc_max, 645, REAL, PARAM_FIXED, 2, 1, ACCELERATION, FP_NONNEGATIVE, "Acceleration limits of the shaped correction [horizontal, vertical]; 0: derived from ref_tilt_max and the feasible-force set (ref_acc_limit)") \
+    X(ref_jerk_max, 647, REAL, PARAM_FIXED, 2, 1, JERK, FP_POSITIVE, "Jerk limits of the shaped correction [horizontal, vertical]") \
+    X(ref_att_rate_max, 649, REAL, PARAM_FIXED, 3, 1, ANGULAR_VELOCITY, FP_POSITIVE, "Euler-rate limits of the shaped attitude correction [roll, pitch, heading]") \
+    X(ref_att_acc_max, 652, REAL, PARAM_FIXED, 3, 1, ANGULAR_ACCELERATION, FP_POSITIVE, "Euler-acceleration limits of the shaped attitude correction [roll, pitch, heading]") \
     /* inputs: references */                                                                       \
     X(pos_ref, 1000, REAL, INPUT, 3, 1, LENGTH, FP_IN(-CTRL_MAX_DISTANCE, CTRL_MAX_DISTANCE), "Reference position xi_ref, world NED") \
     X(euler_ref, 1003, REAL, INPUT, 3, 1, ANGLE, FP_IN(-CTRL_MAX_ANGLE, CTRL_MAX_ANGLE), "Reference attitude mu_ref") \
@@ -126,6 +135,13 @@
     X(active_polytope, 2082, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Feasible-force set in use: 0 nominal, i: after losing rotor i, -1: several rotors lost (nominal set, no guarantee)") \
     X(t_step, 2070, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last controller sample (0 unless timing)") \
     X(t_guid, 2071, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last guidance QP solve (0 unless timing)") \
-    X(t_alloc, 2072, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last inner allocation QP solve (0 unless timing)")
+    X(t_alloc, 2072, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Computation time of the last inner allocation QP solve (0 unless timing)") \
+    X(pos_ref_s, 2110, REAL, OUTPUT, 3, 1, LENGTH, FP_ANY, "Shaped position reference (pos_ref where no jump is being shaped)") \
+    X(vel_ref_s, 2113, REAL, OUTPUT, 3, 1, VELOCITY, FP_ANY, "Shaped velocity reference") \
+    X(acc_ref_s, 2116, REAL, OUTPUT, 3, 1, ACCELERATION, FP_ANY, "Shaped acceleration reference") \
+    X(euler_ref_s, 2119, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "Shaped attitude reference (heading unwrapped)") \
+    X(mu_ff, 2122, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "Feed-forward attitude: the guidance's mu_c for a vehicle exactly on the shaped reference (the shaped mu_ref where that is feasible)") \
+    X(mu_rate_ff, 2125, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Euler-rate feed-forward of the attitude loop: the rate of mu_ff") \
+    X(ref_acc_limit, 2128, REAL, OUTPUT, 2, 1, ACCELERATION, FP_ANY, "Acceleration limits the shaping uses [horizontal, vertical] (ref_acc_max, or derived)")
 
 #endif

@@ -61,16 +61,18 @@ static void outer_loop(const CtrlGuidanceParams *p, const CtrlGuidanceInputs *in
 }
 
 /* The QP of eq. (17)-(23) into w: objective rows, bounds and the force-set rows. */
+/* Linearized at the attitude mu0 and body force f0: the filtered measurement for the
+ * vehicle, the reference twin's last pose for the feed-forward (ctrl_guidance_twin). */
 static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
-                     const double mu_ref[3], const CtrlFiltered *s, const OuterIndi *o,
-                     double f_bz_ref, FpWls *w) {
+                     const double mu_ref[3], const double mu0[3], const double f0[3],
+                     const OuterIndi *o, double f_bz_ref, FpWls *w) {
     double g_mat[3][NV], sg = sqrt(p->gamma_opt);
     int i, j, k, n_cons = 0;
     /* G = d(R f_b)/d[f_b, phi, theta] at the filtered measurement (eq. 14) */
     {
         double gp[3], gt[3];
-        m3_mul_v(o->dr_dphi, s->f_b_m, gp);
-        m3_mul_v(o->dr_dtheta, s->f_b_m, gt);
+        m3_mul_v(o->dr_dphi, f0, gp);
+        m3_mul_v(o->dr_dtheta, f0, gt);
         for (i = 0; i < 3; i++) {
             for (j = 0; j < 3; j++) g_mat[i][j] = o->r[3 * i + j];
             g_mat[i][3] = gp[i];
@@ -88,18 +90,18 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
      * increment") the force and attitude terms trade off and mu_c lags mu_ref by a
      * fraction of the tracking error even when mu_ref is feasible; with f_p both terms
      * vanish together, so mu_c = mu_ref up to second-order linearization error. */
-    for (i = 0; i < 3; i++) w->b[3 + i] = p->W_u[i] * (o->f_p[i] - s->f_b_m[i]);
+    for (i = 0; i < 3; i++) w->b[3 + i] = p->W_u[i] * (o->f_p[i] - f0[i]);
     memset(&w->A[3 * NV], 0, NV * NV * sizeof(double));
     for (i = 0; i < NV; i++) w->A[(3 + i) * NV + i] = p->W_u[i];
-    w->b[6] = p->W_u[3] * ctrl_wrap_pi(mu_ref[0] - s->mu_m[0]);
-    w->b[7] = p->W_u[4] * (mu_ref[1] - s->mu_m[1]);
+    w->b[6] = p->W_u[3] * ctrl_wrap_pi(mu_ref[0] - mu0[0]);
+    w->b[7] = p->W_u[4] * (mu_ref[1] - mu0[1]);
     for (i = 0; i < 3; i++) {
         w->lb[i] = -INFINITY;
         w->ub[i] = INFINITY;
     }
     for (i = 0; i < 2; i++) {
-        w->lb[3 + i] = p->euler_min[i] - s->mu_m[i];
-        w->ub[3 + i] = p->euler_max[i] - s->mu_m[i];
+        w->lb[3 + i] = p->euler_min[i] - mu0[i];
+        w->ub[3 + i] = p->euler_max[i] - mu0[i];
     }
     if (p->force_constraint == 0) {
         /* joint: A_poly (f_b_m + df) <= b_poly */
@@ -107,7 +109,7 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
             double *row = &w->C[n_cons * NV];
             row[0] = fs->A[k][0], row[1] = fs->A[k][1], row[2] = fs->A[k][2];
             row[3] = row[4] = 0.0;
-            w->d[n_cons] = fs->d[k] - v3_dot(fs->A[k], s->f_b_m);
+            w->d[n_cons] = fs->d[k] - v3_dot(fs->A[k], f0);
         }
     } else {
         /* paper eq. (22)-(23): slice at f_bz_ref (clamped into the polytope's z range) */
@@ -118,11 +120,11 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
             for (j = 0; j < NV; j++) w->C[n_cons * NV + j] = 0.0;
             w->C[n_cons * NV] = ax;
             w->C[n_cons * NV + 1] = ay;
-            w->d[n_cons] = fs->d[k] - fs->A[k][2] * fz - ax * s->f_b_m[0] - ay * s->f_b_m[1];
+            w->d[n_cons] = fs->d[k] - fs->A[k][2] * fz - ax * f0[0] - ay * f0[1];
             n_cons++;
         }
-        w->lb[2] = fs->fz[0] - s->f_b_m[2];
-        w->ub[2] = fs->fz[1] - s->f_b_m[2];
+        w->lb[2] = fs->fz[0] - f0[2];
+        w->ub[2] = fs->fz[1] - f0[2];
     }
     w->n_cons = n_cons;
 }
@@ -177,7 +179,7 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
             o.f_p[i] = r_ref[0][i] * o.f_w_ref[0] + r_ref[1][i] * o.f_w_ref[1] +
                        r_ref[2][i] * o.f_w_ref[2];
     }
-    build_qp(p, fs, in->mu_ref, s, &o, out->f_b_ref[2], w);
+    build_qp(p, fs, in->mu_ref, s->mu_m, s->f_b_m, &o, out->f_b_ref[2], w);
     t0 = p->timing ? fp_clock_seconds() : 0.0;
     fp_wls_solve_brief(w, p->max_iter, &res);
     if (p->timing) out->t_solve = fp_clock_seconds() - t0;
@@ -190,4 +192,56 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     out->flags = active_constraints(w);
     out->feasible = reference_feasible(fs, o.f_p);
     for (i = 0; i < 3; i++) out->f_b_c[i] = s->f_b_m[i] + out->df_c[i];
+}
+
+/*
+ * The reference twin: a virtual vehicle that flies the reference exactly (no disturbance,
+ * no tracking error) and realizes every force and attitude it commands.  Its guidance QP
+ * is the vehicle's own (eq. 17-23), linearized at the twin's last pose instead of the
+ * measurement, so its attitude mu_ff is the mu_c the guidance commands when tracking is
+ * exact.  Its rate is the feed-forward consistent with mu_c; it depends on the reference
+ * alone, so it never feeds the measured rate back (differentiating mu_c itself would:
+ * mu_c = mu_m + dmu).  Where the reference pose is feasible mu_ff = mu_ref exactly and no
+ * QP is solved.
+ */
+void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
+                        const double acc_ref[3], const double mu_ref[3], double g,
+                        CtrlTwin *tw, FpWls *w, double mu_ff[3]) {
+    OuterIndi o;
+    FpWlsResult res;
+    double q[4], r_ref[3][3], mu0[3], f0[3], rf[3], f_bz;
+    int i;
+    for (i = 0; i < 3; i++) o.f_w_ref[i] = p->mass * (acc_ref[i] - (i == 2 ? g : 0.0));
+    quat_from_euler(mu_ref, q);
+    rot_from_quat(q, r_ref);
+    for (i = 0; i < 3; i++)
+        o.f_p[i] = r_ref[0][i] * o.f_w_ref[0] + r_ref[1][i] * o.f_w_ref[1] +
+                   r_ref[2][i] * o.f_w_ref[2];
+    if (reference_feasible(fs, o.f_p)) {
+        memcpy(mu_ff, mu_ref, 3 * sizeof(double));
+        memcpy(tw->mu, mu_ref, sizeof tw->mu);
+        memcpy(tw->f, o.f_p, sizeof tw->f);
+        tw->active = 0;
+        return;
+    }
+    mu0[0] = tw->mu[0], mu0[1] = tw->mu[1], mu0[2] = mu_ref[2];
+    memcpy(f0, tw->f, sizeof f0);
+    attitude_jacobian(mu0, o.r, o.dr_dphi, o.dr_dtheta);
+    m3_mul_v(o.r, f0, rf);
+    for (i = 0; i < 3; i++) o.dacc[i] = (o.f_w_ref[i] - rf[i]) / p->mass;
+    f_bz = o.r[2] * o.f_w_ref[0] + o.r[5] * o.f_w_ref[1] + o.r[8] * o.f_w_ref[2];
+    build_qp(p, fs, mu_ref, mu0, f0, &o, f_bz, w);
+    fp_wls_solve_brief(w, p->max_iter, &res);
+    for (i = 0; i < 3; i++) tw->f[i] = f0[i] + w->x[i];
+    tw->mu[0] = mu0[0] + w->x[3];
+    tw->mu[1] = mu0[1] + w->x[4];
+    tw->mu[2] = mu_ref[2];
+    if (!fp_all_finite(tw->mu, 3) || !fp_all_finite(tw->f, 3)) {
+        /* never a non-finite feed-forward: start again from the reference pose */
+        fp_wls_reset(w);
+        memcpy(tw->mu, mu_ref, sizeof tw->mu);
+        memcpy(tw->f, o.f_p, sizeof tw->f);
+    }
+    memcpy(mu_ff, tw->mu, 3 * sizeof(double));
+    tw->active = 1;
 }

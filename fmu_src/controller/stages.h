@@ -1,6 +1,8 @@
 /*
  * The stages of one FullPoseController sample, as controller.c sequences them:
  *
+ *   reference.c      reference shaping: jumps of the input flown within limits
+ *   guidance.c       (first) the reference twin: the feed-forward attitude mu_ff
  *   filters.c        H(s) on every measurement, reference and actuator feedback
  *   guidance.c       K_xi, K_xidot, outer INDI and the WLS guidance QP: mu_c, df_b_c
  *   stabilization.c  attitude and rate blocks, inner INDI: rate_c, dtau_c
@@ -55,6 +57,30 @@ static inline double ctrl_block(const CtrlBlock *k, int axis, double *x, double 
     *x = k->A[axis] * (*x) + k->B[axis] * e;
     return y;
 }
+
+/* ------------------------------------------------------------------------ */
+/* reference.c                                                              */
+
+typedef struct {
+    int enabled;
+    double Ts;
+    double lambda;                       /* rad/s: the cascade's poles in its linear region */
+    double vel_max[2], acc_max[2], jerk_max[2]; /* [horizontal (norm), vertical] */
+    double att_rate_max[3], att_acc_max[3];     /* per Euler angle */
+} CtrlShapingParams;
+
+typedef struct {
+    const double *pos, *vel, *acc; /* xi_ref and its derivatives as given */
+    const double *mu, *mu_rate;    /* mu_ref (heading unwrapped) and its rate as given */
+} CtrlShapingInputs;
+
+typedef struct {
+    double pos[3], vel[3], acc[3], mu[3], mu_rate[3];
+} CtrlShapedRef;
+
+/* One sample of the shaped reference; x carries the error state. */
+void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *in,
+                          CtrlShaping *x, CtrlShapedRef *out);
 
 /* ------------------------------------------------------------------------ */
 /* filters.c                                                                */
@@ -186,6 +212,12 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
                    const CtrlGuidanceInputs *in, const CtrlFiltered *s, CtrlGuidanceState *st,
                    CtrlGuidanceOut *out);
 
+/* The feed-forward attitude mu_ff: the guidance's answer for a vehicle on the reference
+ * (acc_ref, mu_ref) exactly; tw carries its pose, w its QP (warm-started). */
+void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
+                        const double acc_ref[3], const double mu_ref[3], double g,
+                        CtrlTwin *tw, FpWls *w, double mu_ff[3]);
+
 /* ------------------------------------------------------------------------ */
 /* stabilization.c                                                          */
 
@@ -203,8 +235,8 @@ typedef struct {
  * rates rate_c and the torque increment dtau_c = I (dOmega_c - dOmega_m). */
 void ctrl_stabilization(const CtrlStabilizationParams *p, const CtrlFiltered *s,
                         const double mu_c[3], const double mu_ref[3],
-                        const double mu_dot_ref[3], CtrlStabilizationState *st,
-                        double rate_c[3], double dtau_c[3]);
+                        const double mu_dot_ref[3], const double mu_ddot_ref[3],
+                        CtrlStabilizationState *st, double rate_c[3], double dtau_c[3]);
 
 /* ------------------------------------------------------------------------ */
 /* allocation.c                                                             */

@@ -39,6 +39,18 @@ static void check_tunables(const ControllerModel *m, FpCheck *c) {
     fp_need_int_param(c, "qp_max_iter", &m->qp_max_iter, 1);
 }
 
+/* The reference shaping's limits (fixed: the acceleration limits derive from them at
+ * initialization). */
+static void check_shaping(const ControllerModel *m, FpCheck *c) {
+    fp_need_param(c, "ref_bandwidth", &m->ref_bandwidth, 1, NULL);
+    fp_need_param(c, "ref_tilt_max", &m->ref_tilt_max, 1, NULL);
+    fp_need_param(c, "ref_vel_max", m->ref_vel_max, 2, NULL);
+    fp_need_param(c, "ref_acc_max", m->ref_acc_max, 2, NULL);
+    fp_need_param(c, "ref_jerk_max", m->ref_jerk_max, 2, NULL);
+    fp_need_param(c, "ref_att_rate_max", m->ref_att_rate_max, 3, NULL);
+    fp_need_param(c, "ref_att_acc_max", m->ref_att_acc_max, 3, NULL);
+}
+
 /* Facet counts and the margin of the feasible-force polytopes. */
 static void check_polytope_sizes(const ControllerModel *m, FpCheck *c) {
     char why[64];
@@ -71,6 +83,7 @@ int ctrl_check_parameters(const ControllerModel *m, const FpLogger *logger) {
     fp_need_param(&c, "filt_zeta", &m->filt_zeta, 1, NULL);
     fp_need_int_param(&c, "force_constraint", &m->force_constraint, 1);
     check_tunables(m, &c);
+    check_shaping(m, &c);
     if (c.errors == 0) check_polytope_sizes(m, &c);
     return c.errors;
 }
