@@ -150,8 +150,11 @@ def _run_any_step(h: float, duration: float, t0: float = 0.0
     """The controller stepped by h (inputs set at each communication point), and the oracle:
     a second instance stepped by Ts = 2 ms, one sample per step (the behaviour the 2 ms
     scenario digests pin), fed for each grid instant the inputs the first had at the start of
-    the step holding that instant.  Returns the outputs after each step of h, the oracle's
-    outputs expected there (the last sample at or before the step), the instance."""
+    the step holding that instant, with ``pose_age`` the time from that start to the instant
+    (a measurement set `age` before a sample is a measurement `age` old: the controller
+    carries it forward exactly as a late pose; 0 within the grid's rounding tolerance).
+    Returns the outputs after each step of h, the oracle's outputs expected there (the last
+    sample at or before the step), the instance."""
     n = round(duration / h)
     grid = _grid_instants_of_each_step(h, n)
     b, a = _ctrl(t0), _ctrl(t0)
@@ -159,15 +162,20 @@ def _run_any_step(h: float, duration: float, t0: float = 0.0
     cmd_b, cmd_a = b.signal(CMD), a.signal(CMD)
     got, want = [], []
     last = a.read(cmd_a).copy()  # before any sample: the initial outputs
+    age_a = a.signal("pose_age")
     for j in range(n):
-        inputs = _measurement(b.time - t0)
+        t_comm = b.time
+        inputs = _measurement(t_comm - t0)
         for name, values in inputs.items():
             b.write(sig[name], values)
         b.step(h)
         got.append(b.read(cmd_b).copy())
-        for _k in grid[j]:
+        tol = 1e-9 * h + 1e-10 * (abs(t_comm) + abs(t0))  # the FMU's rounding tolerance
+        for k in grid[j]:
             for name, values in inputs.items():
                 a.write(a.signal(name), values)
+            age = (t0 + k * float(TS)) - t_comm
+            a.write(age_a, [age if age > tol else 0.0])
             a.step(float(TS))
             last = a.read(cmd_a).copy()
         want.append(last)

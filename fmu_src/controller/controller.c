@@ -401,7 +401,8 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlShapingParams shp;
     CtrlShapingInputs shin;
     CtrlShapedRef r;
-    double mu_in[3], mu_ff[3], mu_rate_ff[3], mu_acc_ff[3];
+    double mu_in[3], mu_ff[3], mu_rate_ff[3], mu_acc_ff[3], pos_in[3], vel_in[3];
+    double age = m->inputs_age;
     double dtau_c[3], rate_c[3], dnu_c[6], t_start = m->timing ? fp_clock_seconds() : 0.0;
     /* what a sample changes besides its outputs: restored when the sample is discarded */
     double filt_before[CTRL_N_FILTERS][2], blk_before[4][3], psi_before[4];
@@ -421,8 +422,19 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
      * jumps), then the twin's feed-forward attitude and its rate */
     mu_in[0] = m->euler_ref[0], mu_in[1] = m->euler_ref[1];
     mu_in[2] = ctrl_unwrap(m->euler_ref[2], &m->psi_ref_raw, &m->psi_ref_unwrapped);
+    memcpy(pos_in, m->pos_ref, sizeof pos_in);
+    memcpy(vel_in, m->vel_ref, sizeof vel_in);
+    if (age > 0.0)
+        /* inputs set before this instant (a step h that is no multiple of Ts): the
+         * reference carried forward by its own derivatives, as the pose is by its age, so
+         * that a smooth reference is seen smooth and not as a staircase of jumps */
+        for (i = 0; i < 3; i++) {
+            pos_in[i] += age * (m->vel_ref[i] + 0.5 * age * m->acc_ref[i]);
+            vel_in[i] += age * m->acc_ref[i];
+            mu_in[i] += age * m->euler_rate_ref[i];
+        }
     shp = shaping_params(m);
-    shin.pos = m->pos_ref, shin.vel = m->vel_ref, shin.acc = m->acc_ref;
+    shin.pos = pos_in, shin.vel = vel_in, shin.acc = m->acc_ref;
     shin.mu = mu_in, shin.mu_rate = m->euler_rate_ref;
     ctrl_shape_reference(&shp, &shin, &m->shaping, &r);
     fs = force_set_in_use(m);
@@ -435,8 +447,10 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     /* and its angular acceleration: without it the rate loop lags every change of rate
      * (a quadrotor's attitude rate follows the jerk of its path) */
     for (i = 0; i < 3; i++) mu_acc_ff[i] = (mu_rate_ff[i] - m->mu_rate_ff[i]) / m->Ts;
-    /* 1. filters (the measured heading unwrapped like the reference's) */
-    ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age, m->pose_now);
+    /* 1. filters (the measured heading unwrapped like the reference's; the pose predicted
+     * over its age and the inputs' own) */
+    ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age + age,
+                      m->pose_now);
     fin = filter_inputs(m);
     fin.psi = ctrl_unwrap(m->pose_now[8], &m->psi_raw, &m->psi_unwrapped);
     fin.pos_ref = r.pos, fin.vel_ref = r.vel;
@@ -531,6 +545,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     }
     m->holding = 0;
     m->grid_t0 = t0;
+    m->inputs_age = 0.0;
     m->samples_run = 0;
     m->warned_coarse = 0;
     n = m->n_rotors;
@@ -640,6 +655,9 @@ static FpStatus controller_step(void *model, double t, double h, const FpLogger 
     }
     n = (long)samples;
     for (k = 0; k < n; k++) {
+        /* the sample's instant is on the grid, its inputs are those set at t */
+        double age = m->grid_t0 + (double)m->samples_run * m->Ts - t;
+        m->inputs_age = age > tol ? age : 0.0;
         if (control_sample(m, logger) != FP_OK) status = FP_WARNING;
         m->samples_run++;
     }
@@ -680,6 +698,7 @@ static FpStatus controller_check_restored(const void *model, int initialized,
     if (!fp_all_finite(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
         !fp_all_finite(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
         !fp_all_finite(m->shaping.e_pos, 15) || !fp_all_finite(m->shaping.pos_in, 15) ||
+        !isfinite(m->inputs_age) ||
         !fp_all_finite(m->twin.mu, 3) || !fp_all_finite(m->twin.f, 3) ||
         !fp_all_finite(m->acc_limit, 2) ||
         !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||

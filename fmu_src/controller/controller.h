@@ -88,6 +88,8 @@ typedef struct {
     double grid_t0;                        /* the sample grid: instants grid_t0 + k Ts */
     int64_t samples_run;                   /* k of the next sample: the grid instants done */
     int32_t warned_coarse;                 /* the h > Ts warning was given */
+    double inputs_age;                     /* this sample's instant minus the communication
+                                            * point its inputs were set at (0 at h = Ts) */
     FpRotorTrig rotor_trig;     /* sin, cos of the rotors' mounting azimuths (gamma part) */
     FpPreferredSplit pref_split; /* the preferred configuration's geometry, all rotors */
     CtrlShaping shaping;
