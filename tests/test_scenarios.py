@@ -186,6 +186,7 @@ def test_shipped_scenarios_listed_and_valid():
                             "quadrotor_translation", "quadrotor_hover_attitude",
                             "fixed_tilt_translation", "fixed_tilt_hover_attitude",
                             "rotor_failure_hover", "rotor_failure_no_reconfiguration",
+                            "rotor_failure_detected",
                             "robustness_inertia_corner",
                             "robustness_inertia_corner_prototype"])
     loaded = list_scenarios()

@@ -237,6 +237,19 @@ void fp_rotor_wrench_trig(const FpRotorSet *rs, const FpRotorTrig *tr, const dou
     }
 }
 
+void fp_rotor_wrench_one(const FpRotorSet *rs, const FpRotorTrig *tr, int i, double omega,
+                         double w[6]) {
+    double t[3], f[3], arm[3], thrust = rs->k_t * omega * omega;
+    int j;
+    thrust_direction_sc(tr->sa[i], tr->ca[i], tr->sb[i], tr->cb[i], tr->sg[i], tr->cg[i], t);
+    for (j = 0; j < 3; j++) f[j] = thrust * t[j];
+    v3_cross(rs->pos[i], f, arm);
+    for (j = 0; j < 3; j++) {
+        w[j] = f[j];
+        w[3 + j] = arm[j] + rs->k_d / rs->k_t * (double)rs->dir[i] * f[j];
+    }
+}
+
 int fp_rotor_tilts(const FpRotorSet *rs, int i) {
     return rs->alpha_max[i] > rs->alpha_min[i] || rs->beta_max[i] > rs->beta_min[i];
 }

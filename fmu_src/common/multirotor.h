@@ -145,6 +145,10 @@ void fp_rotor_wrench(const FpRotorSet *rs, const double alpha[], const double be
                      const double omega[], const double efficiency[], double f_b[3],
                      double tau_b[3]);
 
+/* Rotor i's own wrench [f_b; tau_b] at speed omega and full efficiency (tr filled). */
+void fp_rotor_wrench_one(const FpRotorSet *rs, const FpRotorTrig *tr, int i, double omega,
+                         double w[6]);
+
 /* A rotor can tilt when either servo has a non-empty range. */
 int fp_rotor_tilts(const FpRotorSet *rs, int i);
 

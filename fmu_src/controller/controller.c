@@ -134,6 +134,13 @@ static void controller_set_defaults(void *model) {
     m->ref_att_rate_max[2] = 0.4;
     m->ref_att_acc_max[0] = m->ref_att_acc_max[1] = 2.0;
     m->ref_att_acc_max[2] = 1.0;
+    /* Fault detection (detect.c): on, as on a vehicle that must notice a broken propeller
+     * itself; thresholds from docs/controller.md's measurements (no false alarm over the
+     * shipped scenarios with sensor noise on). */
+    m->fault_detect = 1;
+    m->fault_loss_min = 0.3;
+    m->fault_fit_max = 0.35;
+    m->fault_time = 0.03;
     /* Measurements start at the hover trim of the default airframe. */
     w[2] = -af.mass * af.g;
     fp_preferred_config(&af.rotors, w, m->alpha, m->beta, m->omega, NULL, 0);
@@ -190,6 +197,23 @@ static CtrlGuidanceParams guidance_params(const ControllerModel *m) {
     p.euler_min = m->euler_min, p.euler_max = m->euler_max;
     p.force_constraint = m->force_constraint;
     p.max_iter = m->qp_max_iter, p.timing = m->timing;
+    return p;
+}
+
+static CtrlDetectParams detect_params(const ControllerModel *m) {
+    CtrlDetectParams p;
+    double arm = 0.0;
+    int i;
+    p.mass = m->mass, p.g = m->g;
+    memcpy(p.inertia, m->inertia, sizeof p.inertia);
+    for (i = 0; i < m->n_rotors; i++)
+        arm += sqrt(v3_dot(m->rotor_pos[i], m->rotor_pos[i])) / m->n_rotors;
+    p.arm = arm > 0.0 ? arm : 1.0;
+    p.loss_min = m->fault_loss_min, p.fit_max = m->fault_fit_max;
+    /* a rotor below a twentieth of its share of the weight has no signature to speak of */
+    p.wrench_min = 0.05 * m->mass * fabs(m->g) / m->n_rotors;
+    p.persist = (int)ceil(m->fault_time / m->Ts - 1e-9);
+    if (p.persist < 1) p.persist = 1;
     return p;
 }
 
@@ -286,7 +310,12 @@ static void derive_acc_limits(ControllerModel *m) {
  * the losses and say so once per change. */
 static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     CtrlLosses l;
-    ctrl_rotor_losses(m->n_rotors, m->rotor_health, m->fail_poly_n, m->hover_ok, &l);
+    int i;
+    /* what is known of each rotor: what the importer says, or less where detected */
+    for (i = 0; i < FP_MAX_ROTORS; i++)
+        m->health[i] = m->fault_detect ? fmin(m->rotor_health[i], m->detect.est[i])
+                                       : m->rotor_health[i];
+    ctrl_rotor_losses(m->n_rotors, m->health, m->fail_poly_n, m->hover_ok, &l);
     if (l.lost_mask == m->lost_mask) return;
     m->lost_mask = l.lost_mask;
     m->rotors_lost = l.rotors_lost;
@@ -407,6 +436,8 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     /* what a sample changes besides its outputs: restored when the sample is discarded */
     double filt_before[CTRL_N_FILTERS][2], blk_before[4][3], psi_before[4];
     CtrlShaping shaping_before = m->shaping;
+    CtrlDetect detect_before = m->detect;
+    CtrlDetectOut dout;
     CtrlTwin twin_before = m->twin;
     int i, n = m->n_rotors;
     if (!inputs_valid(m, logger)) return FP_WARNING;
@@ -456,8 +487,17 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     fin.pos_ref = r.pos, fin.vel_ref = r.vel;
     fin.mu_ref = mu_ff, fin.psi_ref = mu_ff[2];
     ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->filt);
-    ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, &m->rotor_trig, m->rotor_health,
+    ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, &m->rotor_trig, m->health,
                       m->lost_mask, &s);
+    if (m->fault_detect) {
+        /* a detection counts from the next sample on (update_rotor_losses) */
+        CtrlDetectParams dp = detect_params(m);
+        ctrl_detect(&dp, &m->rotors, &s, &m->detect, &dout);
+        if (dout.detected >= 0)
+            fp_log(logger, FP_WARNING, FP_LOG_WARNING,
+                   "rotor %d fault detected from the INDI residual: efficiency %.2f estimated",
+                   dout.detected + 1, m->detect.est[dout.detected]);
+    }
     /* 2. guidance */
     gin.acc_ref = r.acc;
     gin.mu_ref = r.mu;
@@ -486,6 +526,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
         !fp_all_finite(a.residual, 6) || !fp_all_finite(mu_acc_ff, 3)) {
         memcpy(m->filt, filt_before, sizeof filt_before);
         m->shaping = shaping_before;
+        m->detect = detect_before;
         m->twin = twin_before;
         fp_wls_reset(&m->twin_qp);
         memcpy(m->blk, blk_before, sizeof blk_before);
@@ -504,6 +545,11 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     memcpy(m->euler_ref_s, r.mu, sizeof m->euler_ref_s);
     memcpy(m->mu_ff, mu_ff, sizeof m->mu_ff);
     memcpy(m->mu_rate_ff, mu_rate_ff, sizeof m->mu_rate_ff);
+    if (m->fault_detect) {
+        memcpy(m->indi_residual, dout.residual, sizeof m->indi_residual);
+        memcpy(m->rotor_eff_est, m->detect.est, sizeof m->rotor_eff_est);
+        m->rotors_detected = m->detect.found_mask;
+    }
     memcpy(m->acc_c, g.acc_c, sizeof m->acc_c);
     memcpy(m->f_b_ref, g.f_b_ref, sizeof m->f_b_ref);
     memcpy(m->f_b_c, g.f_b_c, sizeof m->f_b_c);
@@ -565,6 +611,10 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     memcpy(m->mu_c, m->euler_ref, sizeof m->mu_c);
     /* the reference as given, no jump being shaped; the twin at the reference pose */
     memset(&m->shaping, 0, sizeof m->shaping);
+    ctrl_detect_start(&m->detect);
+    for (i = 0; i < FP_MAX_ROTORS; i++) m->rotor_eff_est[i] = 1.0;
+    memset(m->indi_residual, 0, sizeof m->indi_residual);
+    m->rotors_detected = 0;
     memset(&m->twin, 0, sizeof m->twin);
     memcpy(m->twin.mu, m->euler_ref, sizeof m->twin.mu);
     m->twin.mu[2] = m->psi_ref_unwrapped;
@@ -700,6 +750,7 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         !fp_all_finite(m->shaping.e_pos, 15) || !fp_all_finite(m->shaping.pos_in, 15) ||
         !isfinite(m->inputs_age) ||
         !fp_all_finite(m->twin.mu, 3) || !fp_all_finite(m->twin.f, 3) ||
+        !fp_all_finite(m->detect.est, FP_MAX_ROTORS) ||
         !fp_all_finite(m->acc_limit, 2) ||
         !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||
         !isfinite(m->grid_t0) || m->samples_run < 0) {

@@ -21,6 +21,14 @@ typedef struct {
     double e_pos[3], e_vel[3], e_acc[3], e_mu[3], e_rate[3];
 } CtrlShaping;
 
+/* Rotor-fault detection (detect.c): the rotor indicated in the last samples and for how
+ * many in a row, each rotor's efficiency estimate (1 until a detection), the rotors
+ * detected (bit i-1: rotor i). */
+typedef struct {
+    int32_t candidate, count, found_mask;
+    double est[FP_MAX_ROTORS];
+} CtrlDetect;
+
 /* The reference twin's pose (guidance.c, ctrl_guidance_twin): attitude and body force. */
 typedef struct {
     double mu[3], f[3];
@@ -53,6 +61,8 @@ typedef struct {
     int32_t ref_shaping;
     double ref_bandwidth, ref_tilt_max, ref_vel_max[2], ref_acc_max[2], ref_jerk_max[2];
     double ref_att_rate_max[3], ref_att_acc_max[3];
+    int32_t fault_detect;
+    double fault_loss_min, fault_fit_max, fault_time;
     int32_t qp_max_iter, timing;
     /* inputs */
     double pos_ref[3], euler_ref[3], vel_ref[3], acc_ref[3], euler_rate_ref[3];
@@ -69,6 +79,8 @@ typedef struct {
     double t_step, t_guid, t_alloc;
     double pos_ref_s[3], vel_ref_s[3], acc_ref_s[3], euler_ref_s[3], mu_ff[3], mu_rate_ff[3];
     double ref_acc_limit[2];
+    double rotor_eff_est[FP_MAX_ROTORS], indi_residual[6];
+    int32_t rotors_detected;
     /* internal state */
     FpRotorSet rotors;
     double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
@@ -93,6 +105,8 @@ typedef struct {
     FpRotorTrig rotor_trig;     /* sin, cos of the rotors' mounting azimuths (gamma part) */
     FpPreferredSplit pref_split; /* the preferred configuration's geometry, all rotors */
     CtrlShaping shaping;
+    CtrlDetect detect;
+    double health[FP_MAX_ROTORS]; /* efficiencies in use: rotor_health, or lower if detected */
     CtrlTwin twin;
     double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */
     FpWls guid, alloc, twin_qp;

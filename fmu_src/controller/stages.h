@@ -173,6 +173,29 @@ void ctrl_rotor_losses(int n_rotors, const double rotor_health[], const int32_t 
 void ctrl_log_losses(const CtrlLosses *l, const FpLogger *logger);
 
 /* ------------------------------------------------------------------------ */
+/* detect.c                                                                 */
+
+typedef struct {
+    double mass, inertia[3][3], g;
+    double arm;        /* m: the rotors' mean distance from the centre (torque scale) */
+    double loss_min;   /* share of a rotor's efficiency lost before it is indicated */
+    double fit_max;    /* share of the residual its signature may leave unexplained */
+    double wrench_min; /* N: a rotor whose full wrench is below this is not fitted */
+    int persist;       /* samples in a row a rotor must be indicated */
+} CtrlDetectParams;
+
+typedef struct {
+    double residual[6]; /* [force (N); torque (N m)], body */
+    int detected;       /* the rotor (0-based) detected in this sample, else -1 */
+} CtrlDetectOut;
+
+void ctrl_detect_start(CtrlDetect *x);
+
+/* One sample of the detector on the filtered signals s (s->eff: the efficiencies in use). */
+void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const CtrlFiltered *s,
+                 CtrlDetect *x, CtrlDetectOut *out);
+
+/* ------------------------------------------------------------------------ */
 /* guidance.c                                                               */
 
 typedef struct {

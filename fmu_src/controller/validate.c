@@ -49,6 +49,9 @@ static void check_shaping(const ControllerModel *m, FpCheck *c) {
     fp_need_param(c, "ref_jerk_max", m->ref_jerk_max, 2, NULL);
     fp_need_param(c, "ref_att_rate_max", m->ref_att_rate_max, 3, NULL);
     fp_need_param(c, "ref_att_acc_max", m->ref_att_acc_max, 3, NULL);
+    fp_need_param(c, "fault_loss_min", &m->fault_loss_min, 1, NULL);
+    fp_need_param(c, "fault_fit_max", &m->fault_fit_max, 1, NULL);
+    fp_need_param(c, "fault_time", &m->fault_time, 1, NULL);
 }
 
 /* Facet counts and the margin of the feasible-force polytopes. */
