@@ -40,7 +40,7 @@ from orchestrator.fmu import FmuInstance
 
 MAX_ROTORS = 8
 ROTOR_SIGNALS = frozenset({"omega_cmd", "alpha_cmd", "beta_cmd", "omega", "alpha", "beta",
-                           "efficiency", "rotor_health"})
+                           "efficiency", "rotor_health", "rotor_eff_est"})
 """Per-rotor vectors (8 elements): a run records and connects only the airframe's rotors."""
 REF_INPUTS = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref", "rotor_health")
 DIST_INPUTS = ("f_d", "tau_d", "a_d", "efficiency")
