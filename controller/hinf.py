@@ -24,7 +24,7 @@ Discretization at Ts = 2 ms, exactly as the FMU runs:
 * one extra sample of computational delay z^-1 on u_eff.  The default Gauss-Seidel coupling has
   none (controller samples y_k, plant integrates with u_k), the Jacobi option and real hardware
   have one: the design is made for the worse case and the margins are reported for it;
-* H(s) (wn = 50 rad/s, zeta = 0.55) discretized as controller.c does (exact ZOH of the 2-state
+* H(s) (wn = 80 rad/s, zeta = 0.55: the FMU's filt_wn, filt_zeta) discretized as controller.c does (exact ZOH of the 2-state
   filter, output taken after the update, i.e. with a direct feed-through), on the outer and
   inner measurements, on d (the INDI's measured acceleration) and on a_act (actuator feedback).
 
@@ -174,7 +174,7 @@ TRANSLATION = LoopSpec(
             math.log(-math.log(0.994308) / TS), math.sqrt(0.000741974), 6.32727),))
 ROTATION = LoopSpec(
     name="rotation", outer="att", inner="rate",
-    w1=6.0, w2=14.0, ms=5.0, u_max=90.0, u1_max=25.0, d_max=0.015, wT=150.0, r0=0.1, r_inf=1.8,
+    w1=8.0, w2=18.0, ms=5.0, u_max=90.0, u1_max=25.0, d_max=0.015, wT=150.0, r0=0.1, r_inf=1.8,
     k_range=(1 / 1.5, 1 / 0.5), delay=0, perf_scales_with_k=True,
     # an extra deterministic start: the optimum of an earlier run of these loops
     start=((math.log(-math.log(0.9977) / TS), 5.59941e-05, 7.65094,
