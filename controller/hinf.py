@@ -24,9 +24,10 @@ Discretization at Ts = 2 ms, exactly as the FMU runs:
 * one extra sample of computational delay z^-1 on u_eff.  The default Gauss-Seidel coupling has
   none (controller samples y_k, plant integrates with u_k), the Jacobi option and real hardware
   have one: the design is made for the worse case and the margins are reported for it;
-* H(s) (wn = 80 rad/s, zeta = 0.55: the FMU's filt_wn, filt_zeta) discretized as controller.c does (exact ZOH of the 2-state
-  filter, output taken after the update, i.e. with a direct feed-through), on the outer and
-  inner measurements, on d (the INDI's measured acceleration) and on a_act (actuator feedback).
+* H(s) (the FMU's filt_wn = 80 rad/s, filt_zeta = 0.55) discretized as controller.c does
+  (exact ZOH of the 2-state filter, output taken after the update, i.e. with a direct
+  feed-through), on the outer and inner measurements, on d (the INDI's measured acceleration)
+  and on a_act (actuator feedback).
 
 Loops: outer block K1 (position -> velocity command, or attitude -> rate command),
 inner block K2 (velocity -> acceleration, or rate -> angular acceleration).  Each block is

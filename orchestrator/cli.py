@@ -197,11 +197,14 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     if not (math.isfinite(args.noise) and args.noise >= 0.0):
         raise ValueError(f"sweep --noise must be a finite factor >= 0, got {args.noise}")
     t0 = time.perf_counter()
+    if not (math.isfinite(args.torque) and args.torque >= 0.0):
+        raise ValueError(f"sweep --torque must be a finite amplitude >= 0 N m, got {args.torque}")
     rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
-                     dask=args.dask, noise=args.noise,
+                     dask=args.dask, noise=args.noise, torque=args.torque, delay=args.delay,
                      design_set=[d.strip() for d in args.designs.split(",") if d.strip()])
     wall = time.perf_counter() - t0
     meta = {"n": args.cases, "seed": args.seed, "duration": args.duration, "noise": args.noise,
+            "torque": args.torque, "delay": args.delay,
             "workers": args.dask or args.workers, "wall_time": wall,
             "throughput": len(rows) / wall}
     files = write_outputs(rows, args.out, meta)
@@ -292,6 +295,11 @@ def build_parser() -> argparse.ArgumentParser:
                          "default: hinf,baseline)")
     sw.add_argument("--noise", type=float, default=1.0,
                     help="factor on the sampled sensor noise, 0 for none (default: 1)")
+    sw.add_argument("--torque", type=float, default=0.0,
+                    help="also a body-torque step of up to this many N m in a random direction "
+                         "(default: 0, none)")
+    sw.add_argument("--delay", action="store_true",
+                    help="fly every case with the command one sample late (Jacobi coupling)")
     sw.add_argument("--workers", type=int, default=1, help="local processes (default: 1)")
     sw.add_argument("--dask", default=None, metavar="tcp://HOST:PORT",
                     help="run on a Dask cluster at this scheduler address")

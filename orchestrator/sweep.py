@@ -61,16 +61,26 @@ QUIET_FROM = 0.25
 DIVERGED_BOUND = 1.0
 COLUMNS = ("case", "design", "mass_scale", "ixx_scale", "iyy_scale", "izz_scale",
            "tau_motor_scale", "tau_servo_scale", "dist_amp", "dist_x", "dist_y", "dist_z",
+           "torque_amp", "torque_x", "torque_y", "torque_z", "delay",
            "noise_scale", "stable", "max_err", "rms_err", "recovery_time", "recovery_band",
            "wall_time")
 
 
-def sample_cases(n: int, seed: int = 0, noise: float = 1.0) -> list[dict[str, float]]:
+def sample_cases(n: int, seed: int = 0, noise: float = 1.0, torque: float = 0.0,
+                 delay: bool = False) -> list[dict[str, float]]:
     """n cases from ``seed``; ``noise`` scales every case's sensor noise (0: none) and leaves
-    the other draws unchanged, so the same plants and disturbances can be flown noise-free."""
+    the other draws unchanged, so the same plants and disturbances can be flown noise-free.
+    ``torque`` > 0 adds a body-torque step of amplitude U(0.2, 1) x ``torque`` N m in a
+    uniformly random direction, on and off with the acceleration step, drawn from a generator
+    of its own (seed, 1): the other draws stay those of the same seed without it.  ``delay``
+    flies every case with the Jacobi coupling: the command one sample late."""
     rng = np.random.default_rng(seed)
+    trng = np.random.default_rng([seed, 1])
     cases = []
     for i in range(n):
+        t = trng.standard_normal(3)
+        t /= np.linalg.norm(t)
+        t_amp = torque * trng.uniform(0.2, 1.0)
         d = rng.standard_normal(3)
         d /= np.linalg.norm(d)
         cases.append({
@@ -80,7 +90,8 @@ def sample_cases(n: int, seed: int = 0, noise: float = 1.0) -> list[dict[str, fl
             "izz_scale": rng.uniform(0.5, 1.5),
             "tau_motor_scale": rng.uniform(0.7, 1.3), "tau_servo_scale": rng.uniform(0.7, 1.3),
             "dist_amp": rng.uniform(0.5, 3.0), "dist_x": d[0], "dist_y": d[1], "dist_z": d[2],
-            "noise_scale": noise * rng.uniform(0.0, 1.0)})
+            "torque_amp": t_amp, "torque_x": t[0], "torque_y": t[1], "torque_z": t[2],
+            "delay": int(delay), "noise_scale": noise * rng.uniform(0.0, 1.0)})
     return cases
 
 
@@ -150,10 +161,17 @@ def perturbed(hover: Scenario, case: dict[str, float], design: str,
     t_off = _t_off(duration)
     acc_x, acc_y, acc_z = (Steps((T_ON, t_off), (amp * case[k], 0.0))
                            for k in ("dist_x", "dist_y", "dist_z"))
+    t_amp = case.get("torque_amp", 0.0)
+    torque = hover.torque
+    if t_amp > 0:
+        torque = (Steps((T_ON, t_off), (t_amp * case["torque_x"], 0.0)),
+                  Steps((T_ON, t_off), (t_amp * case["torque_y"], 0.0)),
+                  Steps((T_ON, t_off), (t_amp * case["torque_z"], 0.0)))
     ctrl = {**hover.controller_parameters, **params}
     if design.endswith(MATCHED):
         ctrl.update({k: v for k, v in plant.items() if k == "mass" or k.startswith("inertia")})
-    return dataclasses.replace(hover, acceleration=(acc_x, acc_y, acc_z),
+    return dataclasses.replace(hover, acceleration=(acc_x, acc_y, acc_z), torque=torque,
+                               coupling="jacobi" if case.get("delay") else hover.coupling,
                                plant_parameters={**hover.plant_parameters, **plant},
                                controller_parameters=ctrl)
 
@@ -341,7 +359,8 @@ def _batch(tasks: Sequence[Task]) -> list[dict[str, Any]]:
 def run_sweep(n: int, seed: int = 0, duration: float = 6.0, workers: int = 1,
               dask: str | Any | None = None, progress: bool | None = None,
               design_set: Sequence[str] = ("hinf", "baseline"),
-              noise: float = 1.0, reuse: bool = True) -> list[dict[str, Any]]:
+              noise: float = 1.0, reuse: bool = True, torque: float = 0.0,
+              delay: bool = False) -> list[dict[str, Any]]:
     """All (case, design) runs, sorted by (case, design); identical for any worker count
     and with or without ``reuse`` (each worker's FMUs instantiated once and reset between
     cases; ``reuse=False``: fresh FMUs loaded for every case)."""
@@ -350,7 +369,8 @@ def run_sweep(n: int, seed: int = 0, duration: float = 6.0, workers: int = 1,
     if unknown or not design_set:
         raise ValueError(f"unknown design(s) {unknown or '(none)'}; known: {', '.join(params)}")
     tasks: list[Task] = [(c, d, params[d], duration, reuse)
-                         for c in sample_cases(n, seed, noise) for d in design_set]
+                         for c in sample_cases(n, seed, noise, torque, delay)
+                         for d in design_set]
     if progress is None:
         progress = sys.stderr.isatty()
     bar = _bar(len(tasks), progress)

@@ -33,6 +33,35 @@ def test_sampling_is_seeded():
         assert 0.7 <= c["tau_motor_scale"] <= 1.3 and 0.5 <= c["dist_amp"] <= 3.0
 
 
+def test_torque_steps_and_delay_keep_the_other_draws():
+    """A campaign with body-torque steps and the one-sample delay flies the same plants and
+    acceleration steps as without (the torque has a generator of its own); each case's torque
+    step is within its bounds and reaches the plant, and the delay is the Jacobi coupling."""
+    plain, more = sweep.sample_cases(20, 5), sweep.sample_cases(20, 5, torque=0.3, delay=True)
+    extra = ("torque_amp", "torque_x", "torque_y", "torque_z", "delay")
+    for a, b in zip(plain, more, strict=True):
+        assert {k: v for k, v in a.items() if k not in extra} == \
+            {k: v for k, v in b.items() if k not in extra}
+        assert a["torque_amp"] == 0.0 and a["delay"] == 0
+        assert 0.06 <= b["torque_amp"] <= 0.3 and b["delay"] == 1
+        assert abs(b["torque_x"] ** 2 + b["torque_y"] ** 2 + b["torque_z"] ** 2 - 1) < 1e-12
+    from orchestrator.runner import prepare
+
+    hover = prepare("hover", DURATION)
+    params = sweep.designs()["hinf"]
+    sc = sweep.perturbed(hover, more[0], "hinf", params, DURATION)
+    assert sc.coupling == "jacobi"
+    tau = sc.disturbances([0.5, 1.5, 2.5])["tau_d"]
+    expected = [more[0]["torque_amp"] * more[0][k] for k in ("torque_x", "torque_y", "torque_z")]
+    assert tau[0].tolist() == [0.0, 0.0, 0.0] and tau[2].tolist() == [0.0, 0.0, 0.0]
+    assert tau[1] == pytest.approx(expected, rel=1e-12)
+    assert sweep.perturbed(hover, plain[0], "hinf", params, DURATION).coupling == "gauss-seidel"
+    rows = sweep.run_sweep(2, seed=5, duration=DURATION, progress=False, torque=0.3, delay=True)
+    base = sweep.run_sweep(2, seed=5, duration=DURATION, progress=False)
+    assert all(r["stable"] for r in rows)
+    assert [r["max_err"] for r in rows] != [r["max_err"] for r in base]
+
+
 def test_two_processes_give_the_same_table(serial):
     par = sweep.run_sweep(N, seed=7, duration=DURATION, workers=2, progress=False)
     assert sweep.table_rows(par) == sweep.table_rows(serial)
