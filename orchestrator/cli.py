@@ -88,11 +88,34 @@ def _cmd_run(args: argparse.Namespace) -> int:
     for line in output.paper:
         print(line)
     print(f"wrote {out}: {', '.join(f.name for f in output.files)}")
+    if args.view or args.save is not None:
+        from orchestrator.view import replay
+
+        rep = replay(output.result, scenario.airframe, save=args.save, spawn=args.view)
+        print(f"3-D view: {rep.pose_rows} poses, {rep.series_rows} series rows in "
+              f"{rep.seconds:.2f} s" + (f", wrote {args.save}" if args.save else ""))
     lost = m.get("lost")
     if m.get("outcome") == "lost" and isinstance(lost, dict):
         print(f"fullpose: vehicle lost at t = {_fmt(lost.get('time'), '.3f', 's')}: "
               f"{lost.get('reason')}; the run stopped there", file=sys.stderr)
         return EXIT_LOST
+    return 0
+
+
+def _cmd_view(args: argparse.Namespace) -> int:
+    from orchestrator.results import RunResult
+    from orchestrator.view import replay
+    from plant.airframe import load_airframe
+
+    result = RunResult.read(args.results)
+    name = args.airframe or result.meta.get("airframe")
+    if not name:
+        raise ValueError(f"{args.results}: the results do not name their airframe; "
+                         "give it with --airframe NAME_OR_FILE")
+    airframe = load_airframe(name)
+    rep = replay(result, airframe, save=args.save, spawn=args.save is None)
+    print(f"{args.results}: {rep.pose_rows} poses, {rep.series_rows} series rows sent in "
+          f"{rep.seconds:.2f} s" + (f"; wrote {args.save}" if args.save else " to the viewer"))
     return 0
 
 
@@ -244,6 +267,19 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--engine", choices=("native", "python"), default="native",
                      help="step loop: C kernel (default) or the pure-Python reference")
     run.set_defaults(func=_cmd_run)
+
+    run.add_argument("--view", action="store_true",
+                     help="open the 3-D view (Rerun) of the run: pip install 'fullpose[view]'")
+    run.add_argument("--save", type=Path, default=None, metavar="FILE.rrd",
+                     help="write the 3-D view as a Rerun recording")
+
+    view = sub.add_parser("view", help="replay a finished run in 3-D (Rerun), from its results")
+    view.add_argument("results", type=Path, help="results folder or results file")
+    view.add_argument("--save", type=Path, default=None, metavar="FILE.rrd",
+                      help="write a Rerun recording instead of opening the viewer")
+    view.add_argument("--airframe", default=None,
+                      help="airframe name or file (default: the one the results name)")
+    view.set_defaults(func=_cmd_view)
 
     scen = sub.add_parser("scenarios", help="list the shipped scenarios")
     scen.set_defaults(func=_cmd_scenarios)
