@@ -67,7 +67,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     sys.stdout.flush()
     try:
         output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
-                              csv=args.csv, engine=args.engine)
+                              csv=args.csv, engine=args.engine, mcap=args.mcap)
     except (Exception, KeyboardInterrupt):
         kept = (out / "metrics.json").is_file()
         args.after_error = ("no results written" + (f"; the previous results in {out} are "
@@ -268,6 +268,8 @@ def build_parser() -> argparse.ArgumentParser:
                      help="step loop: C kernel (default) or the pure-Python reference")
     run.set_defaults(func=_cmd_run)
 
+    run.add_argument("--mcap", action="store_true",
+                     help="also write results.mcap (opens in Foxglove and PlotJuggler)")
     run.add_argument("--view", action="store_true",
                      help="open the 3-D view (Rerun) of the run: pip install 'fullpose[view]'")
     run.add_argument("--save", type=Path, default=None, metavar="FILE.rrd",

@@ -33,6 +33,8 @@ Files (:meth:`RunResult.write`, :meth:`RunResult.read`):
 ``results.csv`` (on request)
     Header of column names, every value in float64 with the shortest representation that
     reads back to the same double (integers as integers): exact, ~20x larger.
+``results.mcap`` (on request)
+    The same for Foxglove and PlotJuggler (orchestrator/mcap_export.py); not read back here.
 ``results.npz``
     The format of earlier versions (float64, numpy archive): still read.
 """

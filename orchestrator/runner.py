@@ -5,6 +5,7 @@ Files written into the output directory:
 - ``results.parquet``  every recorded signal at every step, typed columns with the run's
   metadata (``orchestrator.results``; ``RunResult.read``)
 - ``results.csv``      the same in text, exact float64 (on request: ``csv=True``)
+- ``results.mcap``     the same as MCAP for Foxglove and PlotJuggler (``mcap=True``)
 - ``metrics.json``     the metrics summary (``orchestrator.metrics``) and the run metadata
 - ``*.png``            the paper's figures for this run (``orchestrator.plots``), drawn by
   worker processes beside the run where the OS allows (``orchestrator.figure_pool``)
@@ -144,6 +145,7 @@ def paper_conditions(scenario: Scenario) -> str | None:
 def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: bool = True,
                  plots: bool = True, csv: bool = False, progress: bool | None = None,
                  engine: str = "native", figure_workers: bool | None = None,
+                 mcap: bool = False,
                  spill_above: int = SPILL_BYTES) -> RunOutput:
     """Run and, with an output directory, write results, metrics and figures (whole or not
     at all: :func:`publish`).  A lost vehicle is a completed call: ``metrics["outcome"]``
@@ -162,7 +164,7 @@ def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: boo
     try:
         out = _run_and_write(scenario, out_dir, pool, timing=timing, plots=draw, csv=csv,
                              progress=progress, engine=engine, spill=spill,
-                             spill_above=spill_above)
+                             spill_above=spill_above, mcap=mcap)
         return out
     finally:
         if pool is not None:
@@ -217,7 +219,7 @@ def _start_pool(scenario: Scenario) -> FigurePool | None:
 def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | None, *,
                    timing: bool, plots: bool, csv: bool, progress: bool | None,
                    engine: str, spill: Path | None = None,
-                   spill_above: int = SPILL_BYTES) -> RunOutput:
+                   spill_above: int = SPILL_BYTES, mcap: bool = False) -> RunOutput:
     timings: dict[str, float] = {}
     mark = time.perf_counter()
 
@@ -263,6 +265,12 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
             result.write_csv(folder / CSV_FILE)
             names.append(CSV_FILE)
             phase("csv")
+        if mcap:
+            from orchestrator.mcap_export import MCAP_FILE, write_mcap
+
+            write_mcap(result, folder / MCAP_FILE)
+            names.append(MCAP_FILE)
+            phase("mcap")
         doc = {"scenario": scenario.name, "metrics": metrics, "paper": paper,
                "meta": result.meta}
         (folder / RESULT_MARKER).write_text(json.dumps(doc, indent=2, default=str) + "\n")
