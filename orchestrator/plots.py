@@ -3,13 +3,18 @@
 :func:`plot_run` writes, into ``out_dir``:
 
 ``tracking.png`` (Figs. 4, 7, 9)
-    Position x, y, z (reference vs measured, world NED) and attitude phi, theta, psi
-    (mu_ref, mu_c, mu_m in degrees) with the intervals where mu_ref is infeasible
-    (``ctrl.feasible == 0``) shaded; a bottom row with the position error norm and the
-    attitude error mu_m - mu_c per axis.
+    Position x, y, z (reference, shaped reference where it departs, and the true or measured
+    position, world NED, never an offset axis) and attitude phi, theta, psi (mu_ref, mu_c,
+    mu_m in degrees) with the intervals where mu_ref is infeasible (``ctrl.feasible == 0``)
+    shaded; a bottom row with the position error norm in millimetres (against the reference
+    the controller flies) and the attitude error mu_m - mu_c per axis.  Rotor faults,
+    detections, disturbance steps and reference jumps are vertical lines on every panel;
+    a signal that is zero shows a floor (0.1 deg, 0.1 mm, 2 mm of position), not round-off;
+    one legend under the plots.
 ``actuators.png`` (Figs. 5, 10)
-    Commanded servo angles alpha_i, beta_i (deg) with the servo limits dashed, and commanded
-    rotor speeds omega_i (rpm) with the speed limit dashed.
+    Servo angles alpha_i, beta_i (deg) and rotor speeds omega_i (rpm), commands solid and
+    measured states dotted, each axis zoomed on what the actuators did: a limit inside that
+    view is dashed, one outside it is named in the legend as off scale.
 ``forces.png`` (Fig. 6)
     f_b_ref vs f_b_c per body axis over time; both force trajectories in 3-D against the
     attainable force set (AFS, green) and S(tau = 0) (blue edges), drawn with
@@ -17,9 +22,11 @@
     against the lateral force limits P_xy (S(0) sliced at the run's smallest, median and
     largest f_bz) and the AFS slice at the median f_bz.
 ``disturbance_timing.png`` (Fig. 8)
-    The disturbance acceleration a_d on top (and f_d, tau_d, rotor efficiency when they are
-    not at their defaults), and below the guidance and allocation QP computation times on a
-    log scale when the run measured them (else the QP iteration counts).
+    The disturbances that act (a_d, f_d, tau_d, rotor efficiency: a panel for each that is
+    not at its default, none otherwise) over time, and below the guidance and allocation QP
+    solve times as histograms with their p50 and p99, solves slower than 5x the median of
+    their iteration count told apart as host preemption (the solver did no more work); the
+    QP iteration counts over time when the run did not time them.
 ``force_set.png`` (Fig. 3)
     :func:`controller.plots_force_sets.plot_force_sets` for the run's airframe (optional).
 
@@ -50,6 +57,7 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 
 from orchestrator import figure_pool
+from orchestrator.events import Event, events
 from orchestrator.metrics import wrap_deg
 from orchestrator.results import RunResult
 
@@ -195,6 +203,50 @@ def _finish_time_axis(ax: Axes, t: np.ndarray) -> None:
     if t.size > 1:
         ax.set_xlim(float(t[0]), float(t[-1]))
     ax.grid(True, alpha=0.3)
+    ax.ticklabel_format(axis="y", useOffset=False)  # -3.000, never -2.999 + 2e-4 ticks
+
+
+def _floor(ax: Axes, min_span: float) -> None:
+    """At least ``min_span`` of y: a signal that is (nearly) zero shows its floor, not
+    round-off autoscaled to 1e-14."""
+    lo, hi = ax.get_ylim()
+    if hi - lo < min_span:
+        mid = 0.5 * (lo + hi)
+        ax.set_ylim(mid - 0.5 * min_span, mid + 0.5 * min_span)
+
+
+EVENT_STYLE = {"fault": ("#d62728", "-"), "detection": ("#9467bd", "--"),
+               "disturbance": ("#8c564b", ":"), "reference": ("#7f7f7f", "-.")}
+"""Colour and line style of each kind of event marked on the time axes."""
+
+
+def _mark_events(ax: Axes, found: list[Event], label: bool = False) -> None:
+    """Vertical lines at the events (faults, detections, disturbance steps, reference
+    jumps); ``label``: one legend entry per kind."""
+    seen: set[str] = set()
+    for e in found:
+        color, ls = EVENT_STYLE[e.kind]
+        ax.axvline(e.time, color=color, ls=ls, lw=0.9, alpha=0.8,
+                   label=e.kind if label and e.kind not in seen else None)
+        seen.add(e.kind)
+
+
+def _legend_below(fig: Figure, axes: list[Axes], ncols: int = 6) -> None:
+    """One legend for ``axes`` under the plots: it never covers data."""
+    handles: dict[str, Any] = {}
+    for ax in axes:
+        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
+            if not lab.startswith("_"):
+                handles.setdefault(lab, h)
+    if handles:
+        fig.legend(list(handles.values()), list(handles), loc="lower center", ncols=ncols,
+                   fontsize=8, frameon=False)
+
+
+def _legend_right(ax: Axes) -> None:
+    """The axes' legend outside it, on the right: it never covers data."""
+    if ax.get_legend_handles_labels()[0]:
+        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=7)
 
 
 # ---------------------------------------------------------------------------
@@ -209,12 +261,14 @@ def plot_tracking(result: RunResult, path: Path) -> Path:
 def tracking_figure(result: RunResult) -> Figure:
     """The figure of :func:`plot_tracking`."""
     t = result.time
-    fig = _new_figure(13.0, 10.0, top=0.93, hspace=0.12, wspace=0.17)
+    fig = _new_figure(13.0, 10.5, top=0.93, bottom=0.11, hspace=0.12, wspace=0.17)
     axs = fig.subplots(4, 2, sharex=True)
+    marks = events(result, ("fault", "detection", "disturbance", "reference"))
     # with imperfect sensors the true state is recorded too: it is what is judged, the
     # measured one is drawn faint behind it
     truth = result.has_truth
     pos, pos_ref = result.optional(result.judged("plant.pos")), result.optional("ref.pos_ref")
+    shaped = result.optional("ctrl.pos_ref_s")
     sensed = result.optional("plant.pos") if truth else None
     for i, name in enumerate(("x", "y", "z")):
         ax = axs[i, 0]
@@ -223,13 +277,16 @@ def tracking_figure(result: RunResult) -> Figure:
                   label="measured (sensors)")
         if pos_ref is not None:
             _line(ax, t, pos_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="reference")
+        if shaped is not None and pos_ref is not None and np.any(shaped != pos_ref):
+            _line(ax, t, shaped[:, i], color=CMD_COLOR, lw=1.0, label="shaped reference")
         if pos is not None:
             _line(ax, t, pos[:, i], color=MEAS_COLOR, lw=1.0,
                   label="true" if truth else "measured")
         ax.set_ylabel(f"{name} [m]" + (" (NED, down)" if name == "z" else ""))
         _finish_time_axis(ax, t)
+        _floor(ax, 0.002)
+        _mark_events(ax, marks, label=i == 0)
     axs[0, 0].set_title("position (world NED)")
-    axs[0, 0].legend(loc="upper right", fontsize=8)
 
     feasible = result.optional("ctrl.feasible")
     span = float(t[-1] - t[0]) if t.size > 1 else 0.0
@@ -253,30 +310,37 @@ def tracking_figure(result: RunResult) -> Figure:
                   label="mu_m true" if truth else "mu_m")
         ax.set_ylabel(f"{name} [deg]")
         _finish_time_axis(ax, t)
+        _floor(ax, 0.1)
+        _mark_events(ax, marks)
     axs[0, 1].set_title("attitude")
-    axs[0, 1].legend(loc="upper right", fontsize=8)
 
     ax = axs[3, 0]
     if pos is not None and pos_ref is not None:
-        err = np.linalg.norm(pos - pos_ref, axis=1)
+        # against the reference the controller flies (its shaped one: a 10 m step is not a
+        # 10 m error), in millimetres
+        err = 1e3 * np.linalg.norm(pos - (shaped if shaped is not None else pos_ref), axis=1)
         _line(ax, t, err, color=MEAS_COLOR, lw=1.0)
         if err.size and np.all(np.isfinite(err)):
             k = int(np.argmax(err))
             ax.plot(t[k], err[k], "v", color=INFEASIBLE_COLOR, ms=5,
-                    label=f"max {err[k]:.4f} m at {t[k]:.2f} s")
-            ax.legend(loc="upper right", fontsize=8)
-    ax.set_ylabel(f"|{result.judged('plant.pos').removeprefix('plant.')} - pos_ref| [m]")
+                    label=f"max error {err[k]:.1f} mm at {t[k]:.2f} s")
+    what = result.judged("plant.pos").removeprefix("plant.")
+    ax.set_ylabel(f"|{what} - pos_ref{'_s' if shaped is not None else ''}| [mm]")
     ax.set_xlabel("time [s]")
     _finish_time_axis(ax, t)
+    _floor(ax, 0.1)
+    _mark_events(ax, marks)
     ax = axs[3, 1]
     if mu_m is not None and mu_c is not None:
         err_att = wrap_deg(np.degrees(mu_m - mu_c))
         for i, name in enumerate(("phi", "theta", "psi")):
-            _line(ax, t, err_att[:, i], color=AXIS_COLORS[i], lw=0.9, label=name)
-        ax.legend(loc="upper right", fontsize=8, ncols=3)
+            _line(ax, t, err_att[:, i], color=AXIS_COLORS[i], lw=0.9, label=f"{name} error")
     ax.set_ylabel(f"mu_m{' true' if truth else ''} - mu_c [deg]")
     ax.set_xlabel("time [s]")
     _finish_time_axis(ax, t)
+    _floor(ax, 0.1)
+    _mark_events(ax, marks)
+    _legend_below(fig, [axs[0, 0], axs[0, 1], axs[3, 0], axs[3, 1]], ncols=7)
     fig.suptitle(_title(result, "full-pose tracking"))
     return fig
 
@@ -306,33 +370,51 @@ def plot_actuators(result: RunResult, path: Path, airframe: Airframe | None = No
 
 
 def actuators_figure(result: RunResult, airframe: Airframe | None = None) -> Figure:
-    """The figure of :func:`plot_actuators`."""
+    """The figure of :func:`plot_actuators`: commands solid, measured states dotted, each axis
+    zoomed on what the actuators did; a limit is drawn where it lies within that view and
+    named in the legend as off scale where it does not."""
     t = result.time
     n = result.n_rotors
     lims = _limits(result, airframe)
-    fig = _new_figure(13.0, 9.0, right=0.9, top=0.94, hspace=0.12)
+    fig = _new_figure(13.0, 9.0, right=0.86, top=0.94, hspace=0.12)
     axs = fig.subplots(3, 1, sharex=True)
-    groups = (("alpha", "alpha", np.degrees(1.0), "deg"), ("beta", "beta", np.degrees(1.0), "deg"),
-              ("omega", "omega", RPM_PER_RAD_S, "rpm"))
-    for ax, (key, sym, scale, unit) in zip(axs, groups, strict=True):
-        sig = result.optional(f"ctrl.{key}_cmd")
-        what = "commanded"
-        if sig is None:
-            sig, what = result.optional(f"plant.{key}"), "measured"
-        if sig is not None:
-            sig = _cols(sig)
-            for i in range(min(n, sig.shape[1])):
-                _line(ax, t, scale * sig[:, i], lw=0.9, label=f"{sym}_{i + 1}")
+    marks = events(result, ("fault", "detection"))
+    groups = (("alpha", "alpha", np.degrees(1.0), "deg", 1.0),
+              ("beta", "beta", np.degrees(1.0), "deg", 1.0),
+              ("omega", "omega", RPM_PER_RAD_S, "rpm", 20.0))
+    for ax, (key, sym, scale, unit, floor) in zip(axs, groups, strict=True):
+        cmd, meas = result.optional(f"ctrl.{key}_cmd"), result.optional(f"plant.{key}")
+        drawn: list[np.ndarray] = []
+        for sig, ls, what in ((cmd, "-", "command"), (meas, ":", "measured")):
+            if sig is None:
+                continue
+            sig = scale * _cols(sig)[:, :n]
+            drawn.append(sig)
+            for i in range(sig.shape[1]):
+                _line(ax, t, sig[:, i], lw=0.9, ls=ls, color=f"C{i}",
+                      label=f"{sym}_{i + 1}" if what == "command" else None)
+        if drawn:
+            both = np.concatenate(drawn, axis=1)
+            lo, hi = float(np.min(both)), float(np.max(both))
+            pad = max(0.1 * (hi - lo), 0.5 * floor)
+            ax.set_ylim(lo - pad, hi + pad)
+        view = ax.get_ylim()
         if key in lims:
-            lo, hi = lims[key]
-            for j, v in enumerate((lo, hi) if key != "omega" or lo > 0 else (hi,)):
-                ax.axhline(scale * v, color="k", ls="--", lw=1.0,
-                           label="limit" if j == 0 else None)
-        ax.set_ylabel(f"{sym} ({what}) [{unit}]")
-        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=7)
+            for j, v in enumerate(lims[key]):
+                v = scale * v
+                inside = view[0] <= v <= view[1]
+                if inside:
+                    ax.axhline(v, color="k", ls="--", lw=1.0, label="limit" if j == 0 else None)
+                else:  # said, not drawn: it would flatten what the actuators did
+                    ax.plot([], [], " ", label=f"limit {v:.0f} {unit} (off scale)")
+        ax.plot([], [], color="0.3", ls="-", lw=0.9, label="solid: command")
+        ax.plot([], [], color="0.3", ls=":", lw=0.9, label="dotted: measured")
+        ax.set_ylabel(f"{sym} [{unit}]")
         _finish_time_axis(ax, t)
+        _mark_events(ax, marks, label=key == "alpha")
+        _legend_right(ax)
     axs[-1].set_xlabel("time [s]")
-    fig.suptitle(_title(result, "actuator inputs"))
+    fig.suptitle(_title(result, "actuators: commands and measured states"))
     return fig
 
 
@@ -460,69 +542,72 @@ def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
     return _save(disturbance_timing_figure(result), path)
 
 
+PREEMPTION_FACTOR = 5.0
+"""A solve that took this many times the median of the solves with its iteration count did no
+more work than they did: the host took the CPU away (preemption), not the solver."""
+
+
+def preempted(times: np.ndarray, iterations: np.ndarray | None) -> np.ndarray:
+    """Which solve times are host preemption: above PREEMPTION_FACTOR x the median time of
+    the solves with the same iteration count (all solves when the counts are unknown)."""
+    out = np.zeros(times.shape, dtype=bool)
+    groups = np.zeros(times.shape) if iterations is None else np.asarray(iterations)
+    for it in np.unique(groups):
+        sel = groups == it
+        out[sel] = times[sel] > PREEMPTION_FACTOR * np.median(times[sel])
+    return out
+
+
 def disturbance_timing_figure(result: RunResult) -> Figure:
-    """The figure of :func:`plot_disturbance_timing`."""
+    """The figure of :func:`plot_disturbance_timing`: the disturbances that act (a panel per
+    kind that is not zero throughout, none when nothing acts) over time, and the QP solve
+    times as the distribution they are (or the iteration counts when timing was off)."""
     t = result.time
     n = result.n_rotors
-    a_d = result.optional("dist.a_d")
-    f_d, tau_d = result.optional("dist.f_d"), result.optional("dist.tau_d")
+    panels: list[tuple[str, np.ndarray, str]] = []
+    for name, unit in (("a_d", "m/s^2"), ("f_d", "N"), ("tau_d", "N m")):
+        sig = result.optional(f"dist.{name}")
+        if sig is not None and _nonzero(sig):
+            panels.append((name, sig, unit))
     eff = result.optional("dist.efficiency")
-    if eff is not None:
-        eff = _cols(eff)[:, :n]
-    panels: list[tuple[str, np.ndarray | None, str]] = [("a_d", a_d, "m/s^2")]
-    if _nonzero(f_d):
-        panels.append(("f_d", f_d, "N"))
-    if _nonzero(tau_d):
-        panels.append(("tau_d", tau_d, "N m"))
+    eff = None if eff is None else _cols(eff)[:, :n]
     show_eff = eff is not None and eff.size > 0 and _nonzero(eff, 1.0)
     timing = {k: result.optional(f"ctrl.{k}") for k in ("t_guid", "t_alloc")}
     measured = any(_nonzero(v) for v in timing.values())
-    rows = len(panels) + int(show_eff) + 1
-    height = 2.6 * rows + 0.6
-    fig = _new_figure(12.0, height, left=0.09, bottom=0.5 / height, top=1 - 0.85 / height,
-                      hspace=0.35)
-    axs = np.atleast_1d(fig.subplots(rows, 1, sharex=True))
+    time_rows = len(panels) + int(show_eff) + int(not measured)
+    height = 2.4 * time_rows + (3.0 if measured else 0.0) + 1.0
+    fig = _new_figure(12.0, height, left=0.09, right=0.86, bottom=0.55 / height,
+                      top=1 - 0.85 / height, hspace=0.45)
+    grid = fig.add_gridspec(time_rows + int(measured), 2 if measured else 1)
+    axs: list[Axes] = []
+    for row in range(time_rows):
+        ax = fig.add_subplot(grid[row, :], sharex=axs[0] if axs else None)
+        axs.append(ax)
+    marks = events(result, ("fault", "detection"))
     for ax, (name, sig, unit) in zip(axs, panels, strict=False):
-        if sig is not None:
-            for i, axis in enumerate(("x", "y", "z")):
-                _line(ax, t, sig[:, i], color=AXIS_COLORS[i], lw=1.0, label=f"{name} {axis}")
-            ax.legend(loc="upper right", fontsize=8, ncols=3)
+        for i, axis in enumerate(("x", "y", "z")):
+            _line(ax, t, sig[:, i], color=AXIS_COLORS[i], lw=1.0, label=f"{name} {axis}")
         frame = "body FRD" if name == "tau_d" else "world NED"
         ax.set_ylabel(f"{name} [{unit}]\n({frame})")
         _finish_time_axis(ax, t)
-    axs[0].set_title("disturbances")
+        _legend_right(ax)
+    if panels:
+        axs[0].set_title("disturbances")
     k = len(panels)
     if show_eff and eff is not None:
         ax = axs[k]
         for i in range(eff.shape[1]):
             _line(ax, t, eff[:, i], lw=1.0, label=f"rotor {i + 1}")
         ax.set_ylabel("rotor efficiency [-]")
-        ax.legend(loc="lower right", fontsize=7, ncols=min(eff.shape[1], 8))
+        ax.set_ylim(-0.05, 1.05)
         _finish_time_axis(ax, t)
+        _mark_events(ax, marks, label=True)
+        _legend_right(ax)
+        if not panels:
+            ax.set_title("rotor faults")
         k += 1
-    ax = axs[k]
-    if measured:
-        for (name, sig), color, label in zip(timing.items(), (CMD_COLOR, MEAS_COLOR),
-                                             ("guidance QP", "allocation QP"), strict=True):
-            if sig is None or not _nonzero(sig):
-                continue
-            # zeros (samples without a solve) are masked by the log scale
-            _line(ax, t, sig, color=color, lw=0.8, label=f"{label} ({name})")
-        from orchestrator.metrics import PAPER_MAX_GUIDANCE_TIME
-
-        ax.axhline(PAPER_MAX_GUIDANCE_TIME, color="k", ls="--", lw=1.0,
-                   label="paper's max guidance time (MATLAB)")
-        ax.set_yscale("log")
-        # limits from the positive samples: zeros (no solve in that sample) would make
-        # matplotlib's log autoscale fail
-        positive = [sig[sig > 0] for sig in timing.values() if sig is not None and _nonzero(sig)]
-        if positive:
-            lo = min(float(p.min()) for p in positive)
-            hi = max(max(float(p.max()) for p in positive), PAPER_MAX_GUIDANCE_TIME)
-            ax.set_ylim(lo / 2, hi * 2)
-        ax.set_ylabel("computation time [s]")
-        ax.set_title("QP computation times")
-    else:
+    if not measured:
+        ax = axs[k]
         for name, color, label in (("guid_iter", CMD_COLOR, "guidance QP"),
                                    ("alloc_iter", MEAS_COLOR, "allocation QP")):
             sig = result.optional(f"ctrl.{name}")
@@ -530,9 +615,41 @@ def disturbance_timing_figure(result: RunResult) -> Figure:
                 _line(ax, t, sig, color=color, lw=0.8, label=label)
         ax.set_ylabel("iterations [-]")
         ax.set_title("QP iterations (computation times not measured: controller timing off)")
-    ax.legend(loc="upper right", fontsize=8)
-    ax.set_xlabel("time [s]")
-    _finish_time_axis(ax, t)
+        _finish_time_axis(ax, t)
+        _legend_right(ax)
+    if axs:
+        axs[-1].set_xlabel("time [s]")
+        for ax in axs[:-1]:
+            ax.tick_params(labelbottom=False)
+    if measured:
+        for col, (key, label, iters) in enumerate((("t_guid", "guidance QP", "guid_iter"),
+                                                   ("t_alloc", "allocation QP", "alloc_iter"))):
+            ax = fig.add_subplot(grid[time_rows, col])
+            sig = timing[key]
+            if sig is None or not np.any(sig > 0):
+                ax.set_title(f"{label}: no solve timed")
+                continue
+            timed = sig > 0
+            solved = sig[timed]
+            it = result.optional(f"ctrl.{iters}")
+            spike = preempted(solved, None if it is None else it[timed])
+            us = 1e6 * solved
+            bins = np.geomspace(max(us.min(), 1e-3), us.max() * 1.01, 60).tolist()
+            ax.hist(us[~spike], bins=bins, color=MEAS_COLOR, label="solves")
+            if np.any(spike):
+                ax.hist(us[spike], bins=bins, color=INFEASIBLE_COLOR,
+                        label=f"host preemption ({int(spike.sum())}, "
+                              f"{100 * spike.mean():.2f} %)")
+            for q, ls in ((50, "-"), (99, "--")):
+                v = float(np.percentile(us, q))
+                ax.axvline(v, color="k", ls=ls, lw=1.0, label=f"p{q} {v:.2f} us")
+            ax.set_xscale("log")
+            ax.set_yscale("log")
+            ax.set_xlabel(f"{label} solve time [us]")
+            ax.set_ylabel("samples")
+            ax.set_title(f"{label}: {us.size} solves")
+            ax.legend(loc="upper right", fontsize=7)
+            ax.grid(True, alpha=0.3)
     fig.suptitle(_title(result, "disturbances and guidance computation"))
     return fig
 

@@ -164,7 +164,7 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
         rec.send_columns("world/disturbance", indexes=when, columns=rr.Arrows3D.columns(
             vectors=f_d * scale, origins=pos, colors=np.tile([200, 30, 30], (k.size, 1))))
     series = _send_series(rr, rec, r, n)
-    _send_events(rr, rec, r, n)
+    _send_events(rr, rec, r)
     return int(k.size), series
 
 
@@ -193,37 +193,14 @@ def _send_series(rr: Any, rec: Any, r: RunResult, n: int) -> int:
     return int(t.size)
 
 
-def _changes(x: np.ndarray) -> np.ndarray:
-    """Rows where x differs from the row before (rows >= 1)."""
-    x = np.asarray(x)
-    diff = np.any(x[1:] != x[:-1], axis=1) if x.ndim > 1 else x[1:] != x[:-1]
-    return np.nonzero(diff)[0] + 1
+def _send_events(rr: Any, rec: Any, r: RunResult) -> None:
+    from orchestrator.events import events
 
-
-def _send_events(rr: Any, rec: Any, r: RunResult, n: int) -> None:
-    t = np.asarray(r.time)
-    events: list[tuple[float, str, str]] = []
-    feasible = r.get("ctrl.feasible")
-    for i in _changes(feasible):
-        events.append((t[i], "mu_ref feasible again" if feasible[i] > 0.5
-                       else "mu_ref infeasible: flying mu_c", "INFO"))
-    if r.has("dist.efficiency[1]"):
-        eff = r.get("dist.efficiency")[:, :n]
-        for i in _changes(eff):
-            rotors = [f"rotor {j + 1} at {eff[i, j]:.2f}" for j in range(n)
-                      if eff[i, j] != eff[i - 1, j]]
-            events.append((t[i], "fault: " + ", ".join(rotors), "WARN"))
-    if r.has("ctrl.rotors_detected"):
-        found = r.get("ctrl.rotors_detected")
-        for i in _changes(found):
-            events.append((t[i], f"detected: rotors mask {int(found[i]):#x}", "WARN"))
-    if r.has("ctrl.pos_ref_s[1]"):
-        jump = np.nonzero(np.any(np.abs(np.diff(r.get("ref.pos_ref"), axis=0)) > 1e-3, axis=1))[0]
-        for i in jump + 1:
-            events.append((t[i], "reference jump: flown shaped", "INFO"))
-    if not events:
+    found = events(r, ("feasibility", "fault", "detection", "reference"))
+    if not found:
         return
-    events.sort()
-    rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=[e[0] for e in events])],
-                     columns=rr.TextLog.columns(text=[e[1] for e in events],
-                                                level=[e[2] for e in events]))
+    level = {"fault": "WARN", "detection": "WARN"}
+    text = [e.text + (": flown shaped" if e.kind == "reference" else "") for e in found]
+    rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=[e.time for e in found])],
+                     columns=rr.TextLog.columns(text=text,
+                                                level=[level.get(e.kind, "INFO") for e in found]))

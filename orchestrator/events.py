@@ -1,0 +1,64 @@
+"""The moments of a run worth marking on its timeline, from its recording alone: the reference
+pose turning infeasible or feasible again, rotor faults, the controller's detections,
+disturbance steps and reference jumps.  One source for the figures (orchestrator/plots.py)
+and the 3-D view (orchestrator/view.py)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from orchestrator.results import RunResult
+
+KINDS = ("feasibility", "fault", "detection", "disturbance", "reference")
+
+
+@dataclass(frozen=True)
+class Event:
+    time: float
+    kind: str  # one of KINDS
+    text: str
+
+
+def changes(x: np.ndarray) -> np.ndarray:
+    """Rows where x differs from the row before (rows >= 1)."""
+    x = np.asarray(x)
+    diff = np.any(x[1:] != x[:-1], axis=1) if x.ndim > 1 else x[1:] != x[:-1]
+    return np.nonzero(diff)[0] + 1
+
+
+def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
+    """The run's events of ``kinds``, in time order."""
+    t = np.asarray(r.time)
+    n = r.n_rotors
+    out: list[Event] = []
+    if "feasibility" in kinds and r.has("ctrl.feasible"):
+        feasible = r.get("ctrl.feasible")
+        for i in changes(feasible):
+            out.append(Event(float(t[i]), "feasibility",
+                             "mu_ref feasible again" if feasible[i] > 0.5
+                             else "mu_ref infeasible: flying mu_c"))
+    if "fault" in kinds and r.has("dist.efficiency[1]"):
+        eff = r.get("dist.efficiency")[:, :n]
+        for i in changes(eff):
+            what = [f"rotor {j + 1} at {eff[i, j]:.2f}" for j in range(eff.shape[1])
+                    if eff[i, j] != eff[i - 1, j]]
+            out.append(Event(float(t[i]), "fault", "fault: " + ", ".join(what)))
+    if "detection" in kinds and r.has("ctrl.rotors_detected"):
+        found = r.get("ctrl.rotors_detected")
+        for i in changes(found):
+            rotors = [str(j + 1) for j in range(8) if int(found[i]) >> j & 1]
+            out.append(Event(float(t[i]), "detection", "detected: rotor " + ", ".join(rotors)))
+    if "disturbance" in kinds:
+        for name in ("dist.a_d", "dist.f_d", "dist.tau_d"):
+            if r.has(f"{name}[1]"):
+                for i in changes(r.get(name)):
+                    out.append(Event(float(t[i]), "disturbance",
+                                     f"{name.removeprefix('dist.')} step"))
+    if "reference" in kinds and r.has("ref.pos_ref[1]"):
+        jump = np.nonzero(np.any(np.abs(np.diff(r.get("ref.pos_ref"), axis=0)) > 1e-3,
+                                 axis=1))[0]
+        for i in jump + 1:
+            out.append(Event(float(t[i]), "reference", "reference jump"))
+    return sorted(out, key=lambda e: (e.time, e.kind))
