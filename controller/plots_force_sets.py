@@ -2,7 +2,7 @@
 
     python -m controller.plots_force_sets [AIRFRAME] [OUT.png]
 
-Left: the AFS (translucent green) and S(tau = 0) (blue edges) in body FRD, f_bz axis pointing
+Left: the attainable force set, AFS (translucent green) and S(tau = 0) (blue edges) in body FRD, f_bz axis pointing
 down so that thrust is drawn upwards, with the hover plane slice P_xy of S(0) in red.
 Right: P_xy = S(0) cut by f_bz = -m g (hover, zero attitude) as a polygon (the outer
 H-representation the controller uses), with the slices of the AFS and of the inner hull
@@ -119,13 +119,14 @@ def force_set_figure(af: Airframe, afs: Polytope, s0: Polytope) -> Figure:
     pxy = s0.slice_polygon(z)
     pxy_afs = afs.slice_polygon(afs.clamp_z(hover[2]))
 
-    fig = Figure(figsize=(14.0, 5.6))
+    fig = Figure(figsize=(15.0, 7.5))
     FigureCanvasAgg(fig)  # the Agg backend, without touching pyplot's global state
-    grid = fig.add_gridspec(1, 2, width_ratios=[1.1, 1.0], wspace=0.3, left=0.02, right=0.82,
-                            top=0.9, bottom=0.08)
+    grid = fig.add_gridspec(1, 2, width_ratios=[1.5, 1.0], wspace=0.25, left=0.01, right=0.84,
+                            top=0.92, bottom=0.16)
     ax = fig.add_subplot(grid[0], projection="3d")
-    draw_polytope(ax, afs, GREEN, 0.18, False, f"AFS ({afs.n_facets} facets)")
-    draw_polytope(ax, s0, BLUE, 0.0, True, f"S(0) ({s0.n_facets} facets)")
+    draw_polytope(ax, afs, GREEN, 0.18, False,
+                  f"attainable force set, AFS ({afs.n_facets} facets)")
+    draw_polytope(ax, s0, BLUE, 0.0, True, f"S(0): forces at zero torque ({s0.n_facets} facets)")
     ring = _closed(pxy)
     ax.add_collection3d(Poly3DCollection([np.column_stack([pxy, np.full(len(pxy), z)])],
                                          facecolor=RED, alpha=0.45, edgecolor=RED),
@@ -135,12 +136,13 @@ def force_set_figure(af: Airframe, afs: Polytope, s0: Polytope) -> Figure:
     ax.scatter(*hover, color="k", s=12, label="hover force")
     force_axes(ax, np.vstack([afs.vertices, s0.vertices]))
     ax.set_title(f"{af.name}: attainable force set vs S(tau = 0)")
-    ax.legend(loc="upper left", bbox_to_anchor=(-0.1, 1.0), fontsize=8)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, 0.0), ncols=2, fontsize=9)  # below it
     ax.view_init(elev=18, azim=-60)
 
     ax2 = fig.add_subplot(grid[1])
     a_ring = _closed(pxy_afs)
-    ax2.plot(a_ring[:, 0], a_ring[:, 1], "--", color=GREEN, lw=1.5, label="AFS slice")
+    ax2.plot(a_ring[:, 0], a_ring[:, 1], "--", color=GREEN, lw=1.5,
+             label="attainable force set (AFS) slice")
     inner = s0.inner_slice_polygon(z)
     if len(inner) >= 3:
         i_ring = _closed(inner)

@@ -146,3 +146,24 @@ def test_noisy_run_draws_the_truth_over_faint_measurements():
     assert "true" in labels and "measured (sensors)" in labels
     faint = [line for line in fig.axes[0].get_lines() if line.get_label() == "measured (sensors)"]
     assert faint and faint[0].get_alpha() is not None and faint[0].get_alpha() < 0.5
+
+
+def test_force_set_figure_spelled_out_large_and_uncovered():
+    from controller.plots_force_sets import force_set_figure
+    from orchestrator.plots import force_sets
+
+    af = load_airframe("paper_hexacopter")
+    afs, s0 = force_sets(af)
+    fig = drawn(force_set_figure(af, afs, s0))
+    renderer = fig.canvas.get_renderer()
+    ax3, ax2 = fig.axes
+    labels = [t.get_text() for ax in (ax3, ax2) for t in ax.get_legend().texts]
+    assert any(lab.startswith("attainable force set, AFS") for lab in labels)
+    assert "attainable force set (AFS) slice" in labels
+    # the 3-D set at least 5 inches wide (it was 4.6 in a 14 x 5.6 in figure)
+    assert ax3.get_window_extent(renderer).width >= 5.0 * fig.dpi
+    # legends beside or below their plots, not on them
+    box3, frame3 = ax3.get_legend().get_window_extent(renderer), ax3.get_window_extent(renderer)
+    assert box3.y1 <= frame3.y0 + 1
+    box2, frame2 = ax2.get_legend().get_window_extent(renderer), ax2.get_window_extent(renderer)
+    assert box2.x0 >= frame2.x1 - 1
