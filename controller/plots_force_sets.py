@@ -2,8 +2,9 @@
 
     python -m controller.plots_force_sets [AIRFRAME] [OUT.png]
 
-Left: the attainable force set, AFS (translucent green) and S(tau = 0) (blue edges) in body FRD, f_bz axis pointing
-down so that thrust is drawn upwards, with the hover plane slice P_xy of S(0) in red.
+Left: the attainable force set, AFS (translucent green) and S(tau = 0) (blue edges) in body
+FRD, f_bz axis pointing down so that thrust is drawn upwards, with the hover plane slice P_xy
+of S(0) in red.
 Right: P_xy = S(0) cut by f_bz = -m g (hover, zero attitude) as a polygon (the outer
 H-representation the controller uses), with the slices of the AFS and of the inner hull
 (attainable forces; the exact set lies between the two) for reference.
