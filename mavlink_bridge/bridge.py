@@ -187,6 +187,11 @@ class Bridge:
         self._told_unsupported: dict[tuple[str, int, int], float] = {}  # -> wall time
         self.on_chunk: Callable[[Bridge], None] | None = None
 
+    @property
+    def state(self) -> dict[str, dict[str, np.ndarray]]:
+        """The session's latest outputs (``LiveSession.state()``), as of the last chunk."""
+        return self._state
+
     # -- setup -----------------------------------------------------------------
 
     def _tunables(self) -> list[tuple[str, float, Range]]:

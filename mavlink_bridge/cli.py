@@ -7,6 +7,7 @@ from __future__ import annotations
 import argparse
 import math
 import sys
+from pathlib import Path
 from typing import Any
 
 
@@ -34,6 +35,10 @@ def register(sub: Any) -> None:
                           "the endpoints if not a --gcs one; default: SETUP_SIGNING refused)")
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
+    fly.add_argument("--view", action="store_true",
+                     help="watch the flight in 3-D (Rerun): pip install 'fullpose[view]'")
+    fly.add_argument("--save", type=Path, default=None, metavar="FILE.rrd",
+                     help="write the 3-D view of the flight as a Rerun recording")
     fly.set_defaults(func=_fly)
 
 
@@ -78,6 +83,7 @@ def _fly(args: argparse.Namespace) -> int:
             raise ValueError(f"signing key: {e}") from None
     with Bridge(config) as bridge:
         af = bridge.airframe
+        view = _live_view(bridge, args) if args.view or args.save is not None else None
         print(f"flying {af.name} from {tuple(float(x) for x in config.pos0)} "
               f"(speed {args.speed}, signing {'on' if config.signing_key else 'off'})")
         o = config.origin
@@ -90,8 +96,32 @@ def _fly(args: argparse.Namespace) -> int:
             stats = bridge.run()
         except KeyboardInterrupt:
             stats = bridge.stats
+        finally:
+            if view is not None:
+                view.close()
         for line in stats.lines():
             print(line)
+        if view is not None:
+            share = view.seconds / stats.wall_time if stats.wall_time > 0 else 0.0
+            print(f"3-D view            {view.logged} moments logged in {view.seconds:.2f} s "
+                  f"({100 * share:.1f} % of the wall time)"
+                  + (f", wrote {args.save}" if args.save is not None else ""))
     return 0
+
+
+def _live_view(bridge: Any, args: argparse.Namespace) -> Any:
+    """A 3-D view fed after each chunk the bridge flies."""
+    from orchestrator.view import LiveView
+
+    view = LiveView(bridge.airframe, args.save, spawn=args.view)
+
+    def on_chunk(b: Any) -> None:
+        t = b.session.time
+        view.log(t, b.state, b.ref.pos, b.ref.euler,
+                 {"mode": b.mode, "armed": b.armed,
+                  "setpoints": "streaming" if t - b.last_setpoint <= b.stale else "stale"})
+
+    bridge.on_chunk = on_chunk
+    return view
 
 

@@ -99,7 +99,16 @@ def replay(result: RunResult, airframe: Airframe, save: Path | None = None,
     streamed to a viewer started here (``spawn``)."""
     rr = _rerun()
     t0 = time.perf_counter()
-    rec = rr.RecordingStream(APP_ID, recording_id=str(result.meta.get("scenario", "run")))
+    rec = _open(rr, str(result.meta.get("scenario", "run")), save, spawn)
+    poses, series = _send(rr, rec, result, airframe)
+    rec.flush()
+    rec.disconnect()
+    return ViewReport(time.perf_counter() - t0, poses, series, save)
+
+
+def _open(rr: Any, recording_id: str, save: Path | None, spawn: bool) -> Any:
+    """A recording stream to a viewer started here (``spawn``) and/or to ``save``."""
+    rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
         if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
                                                      or os.environ.get("WAYLAND_DISPLAY")):
@@ -116,22 +125,15 @@ def replay(result: RunResult, airframe: Airframe, save: Path | None = None,
                           default_blueprint=blueprint())
     elif save is not None:
         rec.save(save, default_blueprint=blueprint())
-    poses, series = _send(rr, rec, result, airframe)
-    rec.flush()
-    rec.disconnect()
-    return ViewReport(time.perf_counter() - t0, poses, series, save)
+    return rec
 
 
-def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
-    t = np.asarray(r.time)
-    step = max(1, round((t[1] - t[0] if t.size > 1 else 0.002) ** -1 / VIEW_HZ))
-    k = np.arange(0, t.size, step)
-    when = [rr.TimeColumn("time", duration=t[k])]
-    pos, euler = r.get(r.judged("plant.pos"))[k], r.get(r.judged("plant.euler"))[k]
+def _scene(rr: Any, rec: Any, af: Airframe) -> float:
+    """The static parts: NED world, the body's arms and rotors, the ghosts' outlines.
+    Returns the arm span (m)."""
     n = af.n_rotors
     span = float(np.max(np.linalg.norm(af.positions, axis=1)))
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)  # NED
-    # the body: arms to the rotors, and its ghosts (reference pose, commanded attitude)
     arms = [[[0.0, 0.0, 0.0], list(p)] for p in af.positions]
     rec.log("world/vehicle/arms", rr.LineStrips3D(arms, radii=0.01 * span,
                                                   colors=[60, 60, 60]), static=True)
@@ -141,6 +143,27 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
     for name, color in (("reference", [120, 120, 120]), ("commanded", [230, 140, 20])):
         rec.log(f"world/{name}/body", ghost, rr.Points3D([[0.0, 0.0, 0.0]], colors=[color]),
                 static=True)
+    return span
+
+
+def thrust_vectors(af: Airframe, omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+                   efficiency: np.ndarray | float = 1.0) -> np.ndarray:
+    """Each rotor's thrust k_t omega^2 (times its efficiency) along its tilted axis, drawn so
+    that the hover share of the weight spans one arm: (N, n) -> (N, n, 3)."""
+    span = float(np.max(np.linalg.norm(af.positions, axis=1)))
+    scale = span / (af.mass * af.gravity / af.n_rotors)
+    thrust = af.k_t * omega ** 2 * efficiency
+    return thrust_directions(alpha, beta, af.gamma[None, :]) * (thrust * scale)[..., None]
+
+
+def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
+    t = np.asarray(r.time)
+    step = max(1, round((t[1] - t[0] if t.size > 1 else 0.002) ** -1 / VIEW_HZ))
+    k = np.arange(0, t.size, step)
+    when = [rr.TimeColumn("time", duration=t[k])]
+    pos, euler = r.get(r.judged("plant.pos"))[k], r.get(r.judged("plant.euler"))[k]
+    n = af.n_rotors
+    span = _scene(rr, rec, af)
     rec.send_columns("world/vehicle", indexes=when, columns=rr.Transform3D.columns(
         translation=pos, quaternion=quaternion_xyzw(euler)))
     rec.send_columns("world/reference", indexes=when, columns=rr.Transform3D.columns(
@@ -150,9 +173,8 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
     # thrust: k_t omega^2 (times the rotor's efficiency) along each tilted axis
     omega, alpha, beta = (r.get(f"plant.{s}")[k][:, :n] for s in ("omega", "alpha", "beta"))
     eff = r.get("dist.efficiency")[k][:, :n] if r.has("dist.efficiency[1]") else 1.0
-    thrust = af.k_t * omega ** 2 * eff
-    scale = span / (af.mass * af.gravity / n)  # the hover share spans one arm
-    vec = thrust_directions(alpha, beta, af.gamma[None, :]) * (thrust * scale)[..., None]
+    vec = thrust_vectors(af, omega, alpha, beta, eff)
+    scale = span / (af.mass * af.gravity / n)
     origins = np.broadcast_to(af.positions, vec.shape)
     rec.send_columns("world/vehicle/thrust", indexes=when, columns=rr.Arrows3D.columns(
         vectors=vec.reshape(-1, 3), origins=origins.reshape(-1, 3)).partition([n] * k.size))
@@ -199,8 +221,114 @@ def _send_events(rr: Any, rec: Any, r: RunResult) -> None:
     found = events(r, ("feasibility", "fault", "detection", "reference"))
     if not found:
         return
-    level = {"fault": "WARN", "detection": "WARN"}
-    text = [e.text + (": flown shaped" if e.kind == "reference" else "") for e in found]
-    rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=[e.time for e in found])],
-                     columns=rr.TextLog.columns(text=text,
-                                                level=[level.get(e.kind, "INFO") for e in found]))
+    # one row per instant (a timeline holds one value per entity and time): events at the
+    # same time share it
+    rows: dict[float, tuple[list[str], str]] = {}
+    for e in found:
+        texts = rows.setdefault(e.time, ([], "INFO"))[0]
+        texts.append(e.text + (": flown shaped" if e.kind == "reference" else ""))
+        if e.kind in ("fault", "detection"):
+            rows[e.time] = (texts, "WARN")
+    times = sorted(rows)
+    rec.send_columns("events", indexes=[rr.TimeColumn("time", duration=times)],
+                     columns=rr.TextLog.columns(text=["; ".join(rows[t][0]) for t in times],
+                                                level=[rows[t][1] for t in times]))
+
+
+LIVE_HZ = 25.0
+"""Rate of a live view: what a ground station's display shows, at a fifth of the CPU of
+fly's own work (measured: docs/orchestrator.md)."""
+LIVE_BATCH = 12
+"""Moments a live view gathers before sending them as columns (0.5 s at 25 Hz): one call per
+entity per batch instead of one per moment."""
+
+
+class LiveView:
+    """A live session in the 3-D view (``fullpose fly --view / --save``): call :meth:`log`
+    after each chunk the session advanced.  Every 1 / :data:`LIVE_HZ` of simulated time it
+    keeps the vehicle's pose, the ghosts, the thrust and the series' values, and sends them
+    as columns every :data:`LIVE_BATCH` moments (the view trails the flight by half a
+    second); mode, arming and setpoint-stream changes are events, sent at once."""
+
+    def __init__(self, airframe: Airframe, save: Path | None = None, spawn: bool = False,
+                 recording_id: str = "fly") -> None:
+        self.rr = _rerun()
+        self.af = airframe
+        self.rec = _open(self.rr, recording_id, save, spawn)
+        _scene(self.rr, self.rec, airframe)
+        self.next_t = 0.0
+        self.logged = 0
+        self.seconds = 0.0  # spent logging and sending
+        self._last: dict[str, Any] = {}
+        self._rows: list[np.ndarray] = []
+
+    def log(self, t: float, state: dict[str, dict[str, np.ndarray]], pos_ref: np.ndarray,
+            euler_ref: np.ndarray, status: dict[str, Any] | None = None) -> None:
+        """One moment of a live flight: its outputs (``LiveSession.state()``), its reference
+        and the ground-station facts (``status``: mode, armed, setpoints) for events."""
+        if t + 1e-9 < self.next_t:
+            return
+        t0 = time.perf_counter()
+        self.next_t = t + 1.0 / LIVE_HZ
+        n = self.af.n_rotors
+        plant, ctrl = state["plant"], state["ctrl"]
+        self._rows.append(np.concatenate([
+            [t], plant.get("pos_true", plant["pos"]), plant.get("euler_true", plant["euler"]),
+            pos_ref, euler_ref, ctrl["mu_c"], ctrl.get("pos_ref_s", pos_ref),
+            plant["omega"][:n], plant["alpha"][:n], plant["beta"][:n], ctrl["omega_cmd"][:n],
+            ctrl["guid_iter"][:1], ctrl["alloc_iter"][:1]]))
+        changed = []
+        for key, value in (status or {}).items():
+            if key in self._last and self._last[key] != value:
+                changed.append(f"{key}: {value}")
+            self._last[key] = value
+        if changed:  # one row per instant: a timeline holds one value per entity and time
+            self.rec.set_time("time", duration=t)
+            self.rec.log("events", self.rr.TextLog(
+                "; ".join(changed),
+                level="WARN" if any(c.endswith("stale") for c in changed) else "INFO"))
+        self.logged += 1
+        if len(self._rows) >= LIVE_BATCH:
+            self._flush()
+        self.seconds += time.perf_counter() - t0
+
+    def _flush(self) -> None:
+        if not self._rows:
+            return
+        rr, rec, af, n = self.rr, self.rec, self.af, self.af.n_rotors
+        a = np.array(self._rows)
+        self._rows = []
+        t, pos, euler, pos_ref, euler_ref, mu_c, pos_s = (
+            a[:, 0], a[:, 1:4], a[:, 4:7], a[:, 7:10], a[:, 10:13], a[:, 13:16], a[:, 16:19])
+        omega, alpha, beta, omega_cmd = (a[:, 19 + i * n:19 + (i + 1) * n] for i in range(4))
+        iters = a[:, 19 + 4 * n:]
+        when = [rr.TimeColumn("time", duration=t)]
+        for path, p, e in (("world/vehicle", pos, euler), ("world/reference", pos_ref, euler_ref),
+                           ("world/commanded", pos, mu_c)):
+            rec.send_columns(path, indexes=when, columns=rr.Transform3D.columns(
+                translation=p, quaternion=quaternion_xyzw(e)))
+        vec = thrust_vectors(af, omega, alpha, beta)
+        rec.send_columns("world/vehicle/thrust", indexes=when, columns=rr.Arrows3D.columns(
+            vectors=vec.reshape(-1, 3),
+            origins=np.broadcast_to(af.positions, vec.shape).reshape(-1, 3)).partition(
+                [n] * t.size))
+        series: dict[str, np.ndarray] = {}
+        err = 1e3 * (pos - pos_s)
+        att = (np.degrees(euler - mu_c) + 180.0) % 360.0 - 180.0
+        for i, (axis, angle) in enumerate(zip("xyz", ("roll", "pitch", "yaw"), strict=True)):
+            series[f"series/position_error_mm/{axis}"] = err[:, i]
+            series[f"series/attitude_error_deg/{angle}"] = att[:, i]
+        rpm = 60.0 / (2.0 * np.pi)
+        for i in range(n):
+            series[f"series/omega_rpm/{i + 1}/measured"] = rpm * omega[:, i]
+            series[f"series/omega_rpm/{i + 1}/commanded"] = rpm * omega_cmd[:, i]
+        series["series/qp/guid_iter"], series["series/qp/alloc_iter"] = iters[:, 0], iters[:, 1]
+        for path, values in series.items():
+            rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(scalars=values))
+
+    def close(self) -> None:
+        t0 = time.perf_counter()
+        self._flush()
+        self.rec.flush()
+        self.rec.disconnect()
+        self.seconds += time.perf_counter() - t0

@@ -17,7 +17,7 @@ import pytest
 rr = pytest.importorskip("rerun", reason="the view extra: pip install '.[view]'")
 
 from orchestrator.results import RunResult  # noqa: E402
-from orchestrator.view import VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
+from orchestrator.view import LIVE_HZ, VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
 from plant.airframe import load_airframe  # noqa: E402
 from plant.effectiveness import thrust_direction  # noqa: E402
 
@@ -155,3 +155,50 @@ def test_quaternions_and_thrust_directions_against_independent_code():
     got = thrust_directions(a, b, g)
     want = np.stack([thrust_direction(*x) for x in zip(a, b, g, strict=True)])
     np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_fly_writes_a_live_view_of_the_flight(tmp_path):
+    """``fullpose fly --save``: a hover streamed as it flies, read back through Rerun."""
+    rrd = tmp_path / "fly.rrd"
+    res = subprocess.run([sys.executable, "-m", "orchestrator.cli", "fly", "--speed", "max",
+                          "--duration", "3", "--gcs", "udpout:127.0.0.1:9", "--save", str(rrd)],
+                         capture_output=True, text=True, timeout=300)
+    assert res.returncode == 0, res.stderr
+    assert "3-D view" in res.stdout
+    columns, frame = read_rrd(rrd)
+    pose = frame.dropna(subset=["/world/vehicle:Transform3D:translation"])
+    t = pose["time"].dt.total_seconds().to_numpy()
+    assert len(t) == pytest.approx(3.0 * LIVE_HZ, abs=1) and np.all(np.diff(t) > 0)
+    pos = np.stack([v[0] for v in pose["/world/vehicle:Transform3D:translation"]])
+    np.testing.assert_allclose(pos, np.tile([0.0, 0.0, -3.0], (len(t), 1)), atol=1e-6)  # hover
+    arrows = _rows(frame, "/world/vehicle/thrust:Arrows3D:vectors")
+    assert len(arrows) == len(t) and all(len(a) == 6 for a in arrows)
+    # the hover share of the weight spans one arm: every arrow's length is the arm's
+    af = load_airframe("paper_hexacopter")
+    span = float(np.max(np.linalg.norm(af.positions, axis=1)))
+    lengths = np.linalg.norm(np.stack([np.stack(a) for a in arrows]), axis=2)
+    np.testing.assert_allclose(lengths, span, rtol=1e-3)
+    assert "/series/omega_rpm/6/measured:Scalars:scalars" in columns
+
+
+def test_live_view_marks_mode_and_setpoint_changes(tmp_path):
+    from orchestrator.live import LiveSession
+    from orchestrator.view import LiveView
+
+    af = load_airframe("paper_hexacopter")
+    rrd = tmp_path / "live.rrd"
+    with LiveSession(af) as s:
+        view = LiveView(af, rrd)
+        for k in range(60):  # chunks of 10 ms; the view logs every 40 ms (25 Hz)
+            s.advance()
+            mode = "OFFBOARD" if k >= 20 else "HOLD"
+            view.log(s.time, s.state(), np.array([0.0, 0.0, -3.0]), np.zeros(3),
+                     {"mode": mode, "setpoints": "streaming" if 20 <= k < 40 else "stale"})
+        view.close()
+    _, frame = read_rrd(rrd)
+    ev = frame.dropna(subset=["/events:TextLog:text"])
+    got = [(round(float(t), 3), v[0]) for t, v in zip(ev["time"].dt.total_seconds(),
+                                                       ev["/events:TextLog:text"], strict=True)]
+    # logged moments at 0.01 s and every 40 ms after: the changes (after the 21st and 41st
+    # chunk) fall on moments 0.21 s and 0.41 s
+    assert got == [(0.21, "mode: OFFBOARD; setpoints: streaming"), (0.41, "setpoints: stale")]
