@@ -113,7 +113,7 @@ def _live_view(bridge: Any, args: argparse.Namespace) -> Any:
     """A 3-D view fed after each chunk the bridge flies."""
     from orchestrator.view import LiveView
 
-    view = LiveView(bridge.airframe, args.save, spawn=args.view)
+    view = LiveView(bridge.airframe, args.save, spawn=args.view, start=bridge.config.pos0)
 
     def on_chunk(b: Any) -> None:
         t = b.session.time

@@ -75,9 +75,16 @@ def thrust_directions(alpha: np.ndarray, beta: np.ndarray, gamma: np.ndarray) ->
     return -np.stack([cg * w0 - sg * w1, sg * w0 + cg * w1, w2], axis=-1)
 
 
-def blueprint() -> Any:
-    """The layout the recording opens with: the 3-D scene left, the time series right."""
+def blueprint(center: Any = (0.0, 0.0, -3.0), span: float = 0.3) -> Any:
+    """The layout the recording opens with: the 3-D scene left, the time series right.  The
+    camera follows the vehicle, from behind and above its start ``center`` (NED: up is -z),
+    a dozen arm spans ``span`` away."""
     import rerun.blueprint as rrb
+
+    c = np.asarray(center, float)
+    eye = rrb.EyeControls3D(position=(c + span * np.array([-8.0, -8.0, -5.0])).tolist(),
+                            look_target=c.tolist(), eye_up=[0.0, 0.0, -1.0],
+                            tracking_entity="world/vehicle")
 
     series = [("position error (mm)", "series/position_error_mm"),
               ("attitude error against mu_c (deg)", "series/attitude_error_deg"),
@@ -86,7 +93,7 @@ def blueprint() -> Any:
               ("QP iterations", "series/qp")]
     return rrb.Blueprint(
         rrb.Horizontal(
-            rrb.Vertical(rrb.Spatial3DView(name="vehicle", origin="world"),
+            rrb.Vertical(rrb.Spatial3DView(name="vehicle", origin="world", eye_controls=eye),
                          rrb.TextLogView(name="events", origin="events"), row_shares=[4, 1]),
             rrb.Vertical(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in series]),
             column_shares=[3, 2]),
@@ -99,15 +106,19 @@ def replay(result: RunResult, airframe: Airframe, save: Path | None = None,
     streamed to a viewer started here (``spawn``)."""
     rr = _rerun()
     t0 = time.perf_counter()
-    rec = _open(rr, str(result.meta.get("scenario", "run")), save, spawn)
+    first = result.get(result.judged("plant.pos"))[0]
+    span = float(np.max(np.linalg.norm(airframe.positions, axis=1)))
+    rec = _open(rr, str(result.meta.get("scenario", "run")), save, spawn,
+                blueprint(first, span))
     poses, series = _send(rr, rec, result, airframe)
     rec.flush()
     rec.disconnect()
     return ViewReport(time.perf_counter() - t0, poses, series, save)
 
 
-def _open(rr: Any, recording_id: str, save: Path | None, spawn: bool) -> Any:
-    """A recording stream to a viewer started here (``spawn``) and/or to ``save``."""
+def _open(rr: Any, recording_id: str, save: Path | None, spawn: bool, layout: Any) -> Any:
+    """A recording stream to a viewer started here (``spawn``) and/or to ``save``, opening
+    with ``layout``."""
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
         if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
@@ -116,15 +127,15 @@ def _open(rr: Any, recording_id: str, save: Path | None, spawn: bool) -> Any:
                                   "Rerun viewer cannot open; write a recording with --save "
                                   "FILE.rrd and open it where a display is (rerun FILE.rrd)")
         try:
-            rec.spawn(connect=save is None, default_blueprint=blueprint())
+            rec.spawn(connect=save is None, default_blueprint=layout)
         except Exception as e:  # no viewer binary, no display
             raise ViewUnavailable(f"cannot start the Rerun viewer: {e}; write a recording "
                                   "with --save FILE.rrd and open it where a display is") from e
         if save is not None:  # both: the viewer and the file
             rec.set_sinks(rr.sinks.GrpcSink(), rr.sinks.FileSink(save),
-                          default_blueprint=blueprint())
+                          default_blueprint=layout)
     elif save is not None:
-        rec.save(save, default_blueprint=blueprint())
+        rec.save(save, default_blueprint=layout)
     return rec
 
 
@@ -190,28 +201,37 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
     return int(k.size), series
 
 
+def series_block(rr: Any, rec: Any, path: str, when: list[Any], values: np.ndarray,
+                 names: list[str]) -> None:
+    """Several series of one panel as one entity: a row of ``len(names)`` scalars per
+    instant (one chunk per call, not one per series), named once for the legend."""
+    values = np.asarray(values, float).reshape(values.shape[0], -1)
+    rec.log(path, rr.SeriesLines(names=names), static=True)
+    rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(
+        scalars=values.reshape(-1)).partition([values.shape[1]] * values.shape[0]))
+
+
 def _send_series(rr: Any, rec: Any, r: RunResult, n: int) -> int:
     t = np.asarray(r.time)
     when = [rr.TimeColumn("time", duration=t)]
-    out: dict[str, np.ndarray] = {}
     err = (r.get(r.judged("plant.pos")) - r.get("ctrl.pos_ref_s")
            if r.has("ctrl.pos_ref_s[1]") else r.get(r.judged("plant.pos")) - r.get("ref.pos_ref"))
-    for i, axis in enumerate("xyz"):
-        out[f"series/position_error_mm/{axis}"] = 1e3 * err[:, i]
+    series_block(rr, rec, "series/position_error_mm", when, 1e3 * err, ["x", "y", "z"])
     att = np.degrees(r.get(r.judged("plant.euler")) - r.get("ctrl.mu_c"))
-    att = (att + 180.0) % 360.0 - 180.0
-    for i, axis in enumerate(("roll", "pitch", "yaw")):
-        out[f"series/attitude_error_deg/{axis}"] = att[:, i]
+    series_block(rr, rec, "series/attitude_error_deg", when, (att + 180.0) % 360.0 - 180.0,
+                 ["roll", "pitch", "yaw"])
     rpm = 60.0 / (2.0 * np.pi)
-    for i in range(n):
-        out[f"series/omega_rpm/{i + 1}/measured"] = rpm * r.get("plant.omega")[:, i]
-        out[f"series/omega_rpm/{i + 1}/commanded"] = rpm * r.get("ctrl.omega_cmd")[:, i]
-        out[f"series/servo_deg/alpha_{i + 1}"] = np.degrees(r.get("plant.alpha")[:, i])
-        out[f"series/servo_deg/beta_{i + 1}"] = np.degrees(r.get("plant.beta")[:, i])
-    for name in ("guid_iter", "alloc_iter"):
-        out[f"series/qp/{name}"] = r.get(f"ctrl.{name}")
-    for path, values in out.items():
-        rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(scalars=values))
+    rotors = [str(i + 1) for i in range(n)]
+    series_block(rr, rec, "series/omega_rpm/measured", when,
+                 rpm * r.get("plant.omega")[:, :n], [f"{i} measured" for i in rotors])
+    series_block(rr, rec, "series/omega_rpm/commanded", when,
+                 rpm * r.get("ctrl.omega_cmd")[:, :n], [f"{i} commanded" for i in rotors])
+    for servo in ("alpha", "beta"):
+        series_block(rr, rec, f"series/servo_deg/{servo}", when,
+                     np.degrees(r.get(f"plant.{servo}")[:, :n]), [f"{servo}_{i}" for i in rotors])
+    series_block(rr, rec, "series/qp", when,
+                 np.column_stack([r.get("ctrl.guid_iter"), r.get("ctrl.alloc_iter")]),
+                 ["guidance iterations", "allocation iterations"])
     return int(t.size)
 
 
@@ -238,8 +258,8 @@ def _send_events(rr: Any, rec: Any, r: RunResult) -> None:
 LIVE_HZ = 25.0
 """Rate of a live view: what a ground station's display shows, at a fifth of the CPU of
 fly's own work (measured: docs/orchestrator.md)."""
-LIVE_BATCH = 12
-"""Moments a live view gathers before sending them as columns (0.5 s at 25 Hz): one call per
+LIVE_BATCH = 25
+"""Moments a live view gathers before sending them as columns (1 s at 25 Hz): one call per
 entity per batch instead of one per moment."""
 
 
@@ -247,20 +267,22 @@ class LiveView:
     """A live session in the 3-D view (``fullpose fly --view / --save``): call :meth:`log`
     after each chunk the session advanced.  Every 1 / :data:`LIVE_HZ` of simulated time it
     keeps the vehicle's pose, the ghosts, the thrust and the series' values, and sends them
-    as columns every :data:`LIVE_BATCH` moments (the view trails the flight by half a
-    second); mode, arming and setpoint-stream changes are events, sent at once."""
+    as columns every :data:`LIVE_BATCH` moments (the view trails the flight by a second);
+    mode, arming and setpoint-stream changes are events, sent at once."""
 
     def __init__(self, airframe: Airframe, save: Path | None = None, spawn: bool = False,
-                 recording_id: str = "fly") -> None:
+                 recording_id: str = "fly", start: Any = (0.0, 0.0, -3.0)) -> None:
         self.rr = _rerun()
         self.af = airframe
-        self.rec = _open(self.rr, recording_id, save, spawn)
+        span = float(np.max(np.linalg.norm(airframe.positions, axis=1)))
+        self.rec = _open(self.rr, recording_id, save, spawn, blueprint(start, span))
         _scene(self.rr, self.rec, airframe)
         self.next_t = 0.0
         self.logged = 0
         self.seconds = 0.0  # spent logging and sending
         self._last: dict[str, Any] = {}
         self._rows: list[np.ndarray] = []
+        self._named = False  # the series' names sent (static, once)
 
     def log(self, t: float, state: dict[str, dict[str, np.ndarray]], pos_ref: np.ndarray,
             euler_ref: np.ndarray, status: dict[str, Any] | None = None) -> None:
@@ -312,19 +334,22 @@ class LiveView:
             vectors=vec.reshape(-1, 3),
             origins=np.broadcast_to(af.positions, vec.shape).reshape(-1, 3)).partition(
                 [n] * t.size))
-        series: dict[str, np.ndarray] = {}
-        err = 1e3 * (pos - pos_s)
-        att = (np.degrees(euler - mu_c) + 180.0) % 360.0 - 180.0
-        for i, (axis, angle) in enumerate(zip("xyz", ("roll", "pitch", "yaw"), strict=True)):
-            series[f"series/position_error_mm/{axis}"] = err[:, i]
-            series[f"series/attitude_error_deg/{angle}"] = att[:, i]
+        rotors = [str(i + 1) for i in range(n)]
         rpm = 60.0 / (2.0 * np.pi)
-        for i in range(n):
-            series[f"series/omega_rpm/{i + 1}/measured"] = rpm * omega[:, i]
-            series[f"series/omega_rpm/{i + 1}/commanded"] = rpm * omega_cmd[:, i]
-        series["series/qp/guid_iter"], series["series/qp/alloc_iter"] = iters[:, 0], iters[:, 1]
-        for path, values in series.items():
-            rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(scalars=values))
+        att = (np.degrees(euler - mu_c) + 180.0) % 360.0 - 180.0
+        for path, values, names in (
+                ("series/position_error_mm", 1e3 * (pos - pos_s), ["x", "y", "z"]),
+                ("series/attitude_error_deg", att, ["roll", "pitch", "yaw"]),
+                ("series/omega_rpm/measured", rpm * omega, [f"{i} measured" for i in rotors]),
+                ("series/omega_rpm/commanded", rpm * omega_cmd,
+                 [f"{i} commanded" for i in rotors]),
+                ("series/qp", iters, ["guidance iterations", "allocation iterations"])):
+            if not self._named:
+                rec.log(path, rr.SeriesLines(names=names), static=True)
+            rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(
+                scalars=np.asarray(values, float).reshape(-1)).partition(
+                    [values.shape[1]] * t.size))
+        self._named = True
 
     def close(self) -> None:
         t0 = time.perf_counter()
