@@ -7,8 +7,9 @@ that the hover share of the weight spans one arm.  Beside it, as ghosts: the ref
 The whole path is a trail; disturbance forces are arrows at the vehicle; feasibility changes,
 rotor faults and detections, shaped reference jumps are events on the timeline; time series
 panels show the position error (mm), the attitude error against mu_c (deg), rotor speeds
-(commanded and measured, rpm), servo angles and the QPs' iterations.  A blueprint saved with
-the recording lays these out, so the viewer opens ready to read.
+(commanded and measured, rpm), servo angles and the QPs' iterations; a force space shows the
+body force the guidance required and the one it commanded inside the attainable force set.
+A blueprint saved with the recording lays these out, so the viewer opens ready to read.
 
 Everything goes through Rerun's columnar API (one ``send_columns`` per entity for the whole
 run), the 3-D entities decimated to :data:`VIEW_HZ`, the time series at the full 500 Hz.
@@ -94,7 +95,11 @@ def blueprint(center: Any = (0.0, 0.0, -3.0), span: float = 0.3) -> Any:
     return rrb.Blueprint(
         rrb.Horizontal(
             rrb.Vertical(rrb.Spatial3DView(name="vehicle", origin="world", eye_controls=eye),
-                         rrb.TextLogView(name="events", origin="events"), row_shares=[4, 1]),
+                         rrb.Horizontal(
+                             rrb.Spatial3DView(name="body force in the attainable set (N)",
+                                               origin="force"),
+                             rrb.TextLogView(name="events", origin="events")),
+                         row_shares=[3, 2]),
             rrb.Vertical(*[rrb.TimeSeriesView(name=n, origin=o) for n, o in series]),
             column_shares=[3, 2]),
         collapse_panels=True)
@@ -196,9 +201,37 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
     if np.any(f_d != 0.0):
         rec.send_columns("world/disturbance", indexes=when, columns=rr.Arrows3D.columns(
             vectors=f_d * scale, origins=pos, colors=np.tile([200, 30, 30], (k.size, 1))))
+    _send_forces(rr, rec, r, af, k, when)
     series = _send_series(rr, rec, r, n)
     _send_events(rr, rec, r)
     return int(k.size), series
+
+
+def _send_forces(rr: Any, rec: Any, r: RunResult, af: Airframe, k: np.ndarray,
+                 when: list[Any]) -> None:
+    """The force space (body FRD, N): the attainable force set as a translucent hull, the
+    force the guidance required (f_b_ref) and the one it commanded (f_b_c) as arrows."""
+    from scipy.spatial import ConvexHull, QhullError
+
+    from controller.polytope_cache import force_sets
+
+    afs, _ = force_sets(af)
+    rec.log("force", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)
+    try:
+        hull = ConvexHull(afs.vertices)
+        rec.log("force/attainable_set", rr.Mesh3D(
+            vertex_positions=afs.vertices, triangle_indices=hull.simplices,
+            albedo_factor=[80, 180, 80, 70]), static=True)
+    except QhullError:  # a flat set (a quadrotor's is a segment): its vertices
+        rec.log("force/attainable_set", rr.Points3D(afs.vertices, colors=[80, 180, 80]),
+                static=True)
+    origin = np.zeros((k.size, 3))
+    for name, sig, color in (("required", "ctrl.f_b_ref", [120, 120, 120]),
+                             ("commanded", "ctrl.f_b_c", [230, 140, 20])):
+        if r.has(f"{sig}[1]"):
+            rec.send_columns(f"force/{name}", indexes=when, columns=rr.Arrows3D.columns(
+                vectors=r.get(sig)[k], origins=origin,
+                colors=np.tile(color, (k.size, 1))))
 
 
 def series_block(rr: Any, rec: Any, path: str, when: list[Any], values: np.ndarray,

@@ -98,6 +98,13 @@ def test_values_match_the_results_file(flown):
     eff = result.get("dist.efficiency")[k][:, :af.n_rotors]
     np.testing.assert_allclose(np.linalg.norm(vec, axis=2), af.k_t * omega ** 2 * eff * scale,
                                rtol=1e-5, atol=1e-6)
+    # the force space: the attainable set's hull, the commanded body force as an arrow
+    from controller.polytope_cache import force_sets
+
+    hull = frame["/force/attainable_set:Mesh3D:vertex_positions"].dropna().iloc[0]
+    np.testing.assert_allclose(np.stack(hull), force_sets(af)[0].vertices, rtol=1e-6)
+    cmd = np.stack([v[0] for v in pose["/force/commanded:Arrows3D:vectors"]])
+    np.testing.assert_allclose(cmd, result.get("ctrl.f_b_c")[k], rtol=1e-6, atol=1e-6)
     # the position error series in mm against the shaped reference, at every row
     err = frame.dropna(subset=["/series/position_error_mm:Scalars:scalars"])
     z = np.array([v[2] for v in err["/series/position_error_mm:Scalars:scalars"]])  # x, y, z
