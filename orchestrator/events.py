@@ -12,6 +12,9 @@ import numpy as np
 from orchestrator.results import RunResult
 
 KINDS = ("feasibility", "fault", "detection", "disturbance", "reference")
+JUMP = 1e-3
+"""m: a reference increment beyond what its velocity explains by this much is a jump (a
+trajectory's own error over 2 ms is ~1e-9 m; a waypoint or a step is centimetres or more)."""
 
 
 @dataclass(frozen=True)
@@ -56,9 +59,12 @@ def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
                 for i in changes(r.get(name)):
                     out.append(Event(float(t[i]), "disturbance",
                                      f"{name.removeprefix('dist.')} step"))
-    if "reference" in kinds and r.has("ref.pos_ref[1]"):
-        jump = np.nonzero(np.any(np.abs(np.diff(r.get("ref.pos_ref"), axis=0)) > 1e-3,
-                                 axis=1))[0]
-        for i in jump + 1:
+    if "reference" in kinds and r.has("ref.pos_ref[1]") and t.size > 1:
+        # a jump: an increment its own velocity does not explain (the trapezoidal rule, as
+        # the controller's reference shaping tells a jump from a trajectory)
+        pos = r.get("ref.pos_ref")
+        vel = r.get("ref.vel_ref") if r.has("ref.vel_ref[1]") else np.zeros_like(pos)
+        step = np.diff(pos, axis=0) - 0.5 * np.diff(t)[:, None] * (vel[1:] + vel[:-1])
+        for i in np.nonzero(np.any(np.abs(step) > JUMP, axis=1))[0] + 1:
             out.append(Event(float(t[i]), "reference", "reference jump"))
     return sorted(out, key=lambda e: (e.time, e.kind))

@@ -167,3 +167,15 @@ def test_force_set_figure_spelled_out_large_and_uncovered():
     assert box3.y1 <= frame3.y0 + 1
     box2, frame2 = ax2.get_legend().get_window_extent(renderer), ax2.get_window_extent(renderer)
     assert box2.x0 >= frame2.x1 - 1
+
+
+def test_reference_jumps_are_jumps_not_trajectories():
+    """A chirp moving 3 mm per sample is a trajectory (its velocity explains it); a step is
+    the one jump of position_step, at its time."""
+    from orchestrator.events import events
+
+    chirp = run(prepare("translation_frequency_sweep", duration=20.0), timing=False)
+    assert not [e for e in events(chirp) if e.kind == "reference"]
+    step = run(prepare("position_step", duration=2.0), timing=False)
+    jumps = [e for e in events(step) if e.kind == "reference"]
+    assert [e.time for e in jumps] == [pytest.approx(1.0)]
