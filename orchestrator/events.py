@@ -15,6 +15,10 @@ KINDS = ("feasibility", "fault", "detection", "disturbance", "reference")
 JUMP = 1e-3
 """m: a reference increment beyond what its velocity explains by this much is a jump (a
 trajectory's own error over 2 ms is ~1e-9 m; a waypoint or a step is centimetres or more)."""
+OUTSTANDING = 20.0
+"""... and by this many times the median unexplained increment of the reference."""
+MAX_PER_KIND = 200
+"""At most this many events of one kind (a timeline of thousands of lines reads as none)."""
 
 
 @dataclass(frozen=True)
@@ -38,7 +42,7 @@ def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
     out: list[Event] = []
     if "feasibility" in kinds and r.has("ctrl.feasible"):
         feasible = r.get("ctrl.feasible")
-        for i in changes(feasible):
+        for i in changes(feasible)[:MAX_PER_KIND]:
             out.append(Event(float(t[i]), "feasibility",
                              "mu_ref feasible again" if feasible[i] > 0.5
                              else "mu_ref infeasible: flying mu_c"))
@@ -56,7 +60,7 @@ def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
     if "disturbance" in kinds:
         for name in ("dist.a_d", "dist.f_d", "dist.tau_d"):
             if r.has(f"{name}[1]"):
-                for i in changes(r.get(name)):
+                for i in changes(r.get(name))[:MAX_PER_KIND]:
                     out.append(Event(float(t[i]), "disturbance",
                                      f"{name.removeprefix('dist.')} step"))
     if "reference" in kinds and r.has("ref.pos_ref[1]") and t.size > 1:
@@ -64,7 +68,10 @@ def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
         # the controller's reference shaping tells a jump from a trajectory)
         pos = r.get("ref.pos_ref")
         vel = r.get("ref.vel_ref") if r.has("ref.vel_ref[1]") else np.zeros_like(pos)
-        step = np.diff(pos, axis=0) - 0.5 * np.diff(t)[:, None] * (vel[1:] + vel[:-1])
-        for i in np.nonzero(np.any(np.abs(step) > JUMP, axis=1))[0] + 1:
+        step = np.abs(np.diff(pos, axis=0) - 0.5 * np.diff(t)[:, None] * (vel[1:] + vel[:-1]))
+        # ... and stands out of the reference's own unexplained motion (a trajectory given
+        # without its velocity moves millimetres every sample: no jumps)
+        floor = np.maximum(JUMP, OUTSTANDING * np.median(step, axis=0))
+        for i in np.nonzero(np.any(step > floor, axis=1))[0][:MAX_PER_KIND] + 1:
             out.append(Event(float(t[i]), "reference", "reference jump"))
     return sorted(out, key=lambda e: (e.time, e.kind))

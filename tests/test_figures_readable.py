@@ -11,6 +11,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from orchestrator.master import run
+from orchestrator.results import RunResult
 from orchestrator.plots import (
     PREEMPTION_FACTOR,
     actuators_figure,
@@ -179,3 +180,9 @@ def test_reference_jumps_are_jumps_not_trajectories():
     step = run(prepare("position_step", duration=2.0), timing=False)
     jumps = [e for e in events(step) if e.kind == "reference"]
     assert [e.time for e in jumps] == [pytest.approx(1.0)]
+    # the same chirp given without its velocity (a user's positions only): still no jumps
+    bare = RunResult([c for c in chirp.columns if not c.startswith("ref.vel_ref")],
+                     chirp.data[:, [i for i, c in enumerate(chirp.columns)
+                                    if not c.startswith("ref.vel_ref")]], chirp.meta,
+                     chirp.integer)
+    assert not [e for e in events(bare) if e.kind == "reference"]
