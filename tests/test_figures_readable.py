@@ -11,7 +11,6 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from orchestrator.master import run
-from orchestrator.results import RunResult
 from orchestrator.plots import (
     PREEMPTION_FACTOR,
     actuators_figure,
@@ -19,6 +18,7 @@ from orchestrator.plots import (
     preempted,
     tracking_figure,
 )
+from orchestrator.results import RunResult
 from orchestrator.runner import prepare
 from plant.airframe import load_airframe
 
