@@ -81,6 +81,10 @@ def _fly(args: argparse.Namespace) -> int:
             config.signing_key = load_key(args.signing_key)
         except (OSError, UnicodeDecodeError) as e:
             raise ValueError(f"signing key: {e}") from None
+    if args.view:  # before the sockets open: a viewer that cannot show is said at once
+        from orchestrator.view import check_viewer
+
+        check_viewer()
     with Bridge(config) as bridge:
         af = bridge.airframe
         view = _live_view(bridge, args) if args.view or args.save is not None else None

@@ -61,6 +61,10 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     scenario = prepare(args.scenario, args.duration, args.set)
     _warn(scenario.warnings)
+    if args.view or args.save is not None:  # no run whose view cannot be shown or written
+        from orchestrator.view import check_viewer
+
+        check_viewer(display=args.view)
     out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
     print(f"running {scenario.name} ({scenario.duration:g} s, airframe {scenario.airframe.name}, "
           f"{scenario.coupling}) -> {out}")

@@ -60,6 +60,17 @@ def _rerun() -> Any:
     return rr
 
 
+def check_viewer(display: bool = True) -> None:
+    """Refuses, before any work, a view that cannot be made here: Rerun missing, or (with
+    ``display``: a viewer to open) Linux without a display."""
+    _rerun()
+    if display and sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
+                                                 or os.environ.get("WAYLAND_DISPLAY")):
+        raise ViewUnavailable("no display here (DISPLAY and WAYLAND_DISPLAY unset): the "
+                              "Rerun viewer cannot open; write a recording with --save "
+                              "FILE.rrd and open it where a display is (rerun FILE.rrd)")
+
+
 def quaternion_xyzw(euler: np.ndarray) -> np.ndarray:
     """ZYX Euler angles [phi, theta, psi] (N, 3) as unit quaternions [x, y, z, w]."""
     from scipy.spatial.transform import Rotation
@@ -126,11 +137,7 @@ def _open(rr: Any, recording_id: str, save: Path | None, spawn: bool, layout: An
     with ``layout``."""
     rec = rr.RecordingStream(APP_ID, recording_id=recording_id)
     if spawn:
-        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY")
-                                                     or os.environ.get("WAYLAND_DISPLAY")):
-            raise ViewUnavailable("no display here (DISPLAY and WAYLAND_DISPLAY unset): the "
-                                  "Rerun viewer cannot open; write a recording with --save "
-                                  "FILE.rrd and open it where a display is (rerun FILE.rrd)")
+        check_viewer()
         try:
             rec.spawn(connect=save is None, default_blueprint=layout)
         except Exception as e:  # no viewer binary, no display

@@ -209,3 +209,13 @@ def test_live_view_marks_mode_and_setpoint_changes(tmp_path):
     # logged moments at 0.01 s and every 40 ms after: the changes (after the 21st and 41st
     # chunk) fall on moments 0.21 s and 0.41 s
     assert got == [(0.21, "mode: OFFBOARD; setpoints: streaming"), (0.41, "setpoints: stale")]
+
+
+def test_run_with_a_view_that_cannot_open_refuses_before_running(tmp_path, monkeypatch):
+    monkeypatch.delenv("DISPLAY", raising=False)
+    monkeypatch.delenv("WAYLAND_DISPLAY", raising=False)
+    res = cli("run", "hover", "--duration", "0.2", "--no-plots", "--view", "--out",
+              str(tmp_path / "r"))
+    assert res.returncode == 2 and "no display here" in res.stderr
+    assert "Traceback" not in res.stderr
+    assert not (tmp_path / "r").exists()  # nothing ran, nothing written
