@@ -28,6 +28,8 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
+from orchestrator.metrics import wrap_deg
+
 if TYPE_CHECKING:
     from orchestrator.results import RunResult
     from plant.airframe import Airframe
@@ -69,6 +71,11 @@ def check_viewer(display: bool = True) -> None:
         raise ViewUnavailable("no display here (DISPLAY and WAYLAND_DISPLAY unset): the "
                               "Rerun viewer cannot open; write a recording with --save "
                               "FILE.rrd and open it where a display is (rerun FILE.rrd)")
+
+
+def arm_span(af: Airframe) -> float:
+    """The farthest rotor's distance from the centre (m): the scale of the drawings."""
+    return float(np.max(np.linalg.norm(af.positions, axis=1)))
 
 
 def quaternion_xyzw(euler: np.ndarray) -> np.ndarray:
@@ -123,7 +130,7 @@ def replay(result: RunResult, airframe: Airframe, save: Path | None = None,
     rr = _rerun()
     t0 = time.perf_counter()
     first = result.get(result.judged("plant.pos"))[0]
-    span = float(np.max(np.linalg.norm(airframe.positions, axis=1)))
+    span = arm_span(airframe)
     rec = _open(rr, str(result.meta.get("scenario", "run")), save, spawn,
                 blueprint(first, span))
     poses, series = _send(rr, rec, result, airframe)
@@ -155,7 +162,7 @@ def _scene(rr: Any, rec: Any, af: Airframe) -> float:
     """The static parts: NED world, the body's arms and rotors, the ghosts' outlines.
     Returns the arm span (m)."""
     n = af.n_rotors
-    span = float(np.max(np.linalg.norm(af.positions, axis=1)))
+    span = arm_span(af)
     rec.log("world", rr.ViewCoordinates.RIGHT_HAND_Z_DOWN, static=True)  # NED
     arms = [[[0.0, 0.0, 0.0], list(p)] for p in af.positions]
     rec.log("world/vehicle/arms", rr.LineStrips3D(arms, radii=0.01 * span,
@@ -173,7 +180,7 @@ def thrust_vectors(af: Airframe, omega: np.ndarray, alpha: np.ndarray, beta: np.
                    efficiency: np.ndarray | float = 1.0) -> np.ndarray:
     """Each rotor's thrust k_t omega^2 (times its efficiency) along its tilted axis, drawn so
     that the hover share of the weight spans one arm: (N, n) -> (N, n, 3)."""
-    span = float(np.max(np.linalg.norm(af.positions, axis=1)))
+    span = arm_span(af)
     scale = span / (af.mass * af.gravity / af.n_rotors)
     thrust = af.k_t * omega ** 2 * efficiency
     return thrust_directions(alpha, beta, af.gamma[None, :]) * (thrust * scale)[..., None]
@@ -187,20 +194,11 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
     pos, euler = r.get(r.judged("plant.pos"))[k], r.get(r.judged("plant.euler"))[k]
     n = af.n_rotors
     span = _scene(rr, rec, af)
-    rec.send_columns("world/vehicle", indexes=when, columns=rr.Transform3D.columns(
-        translation=pos, quaternion=quaternion_xyzw(euler)))
-    rec.send_columns("world/reference", indexes=when, columns=rr.Transform3D.columns(
-        translation=r.get("ref.pos_ref")[k], quaternion=quaternion_xyzw(r.get("ref.euler_ref")[k])))
-    rec.send_columns("world/commanded", indexes=when, columns=rr.Transform3D.columns(
-        translation=pos, quaternion=quaternion_xyzw(r.get("ctrl.mu_c")[k])))
-    # thrust: k_t omega^2 (times the rotor's efficiency) along each tilted axis
     omega, alpha, beta = (r.get(f"plant.{s}")[k][:, :n] for s in ("omega", "alpha", "beta"))
     eff = r.get("dist.efficiency")[k][:, :n] if r.has("dist.efficiency[1]") else 1.0
-    vec = thrust_vectors(af, omega, alpha, beta, eff)
+    _send_poses(rr, rec, af, when, pos, euler, r.get("ref.pos_ref")[k],
+                r.get("ref.euler_ref")[k], r.get("ctrl.mu_c")[k], omega, alpha, beta, eff)
     scale = span / (af.mass * af.gravity / n)
-    origins = np.broadcast_to(af.positions, vec.shape)
-    rec.send_columns("world/vehicle/thrust", indexes=when, columns=rr.Arrows3D.columns(
-        vectors=vec.reshape(-1, 3), origins=origins.reshape(-1, 3)).partition([n] * k.size))
     # the trail, and the disturbance force at the vehicle (world frame)
     rec.log("world/trail", rr.LineStrips3D([pos], radii=0.003 * span, colors=[40, 160, 80]),
             static=True)
@@ -212,6 +210,24 @@ def _send(rr: Any, rec: Any, r: RunResult, af: Airframe) -> tuple[int, int]:
     series = _send_series(rr, rec, r, n)
     _send_events(rr, rec, r)
     return int(k.size), series
+
+
+def _send_poses(rr: Any, rec: Any, af: Airframe, when: list[Any], pos: np.ndarray,
+                euler: np.ndarray, pos_ref: np.ndarray, euler_ref: np.ndarray, mu_c: np.ndarray,
+                omega: np.ndarray, alpha: np.ndarray, beta: np.ndarray,
+                efficiency: np.ndarray | float = 1.0) -> None:
+    """The moving 3-D parts at the instants ``when``: the vehicle, its ghosts (the reference
+    pose, mu_c at the vehicle) and each rotor's thrust (k_t omega^2 times its efficiency
+    along its tilted axis)."""
+    for path, p, e in (("world/vehicle", pos, euler), ("world/reference", pos_ref, euler_ref),
+                       ("world/commanded", pos, mu_c)):
+        rec.send_columns(path, indexes=when, columns=rr.Transform3D.columns(
+            translation=p, quaternion=quaternion_xyzw(e)))
+    vec = thrust_vectors(af, omega, alpha, beta, efficiency)
+    origins = np.broadcast_to(af.positions, vec.shape)
+    rec.send_columns("world/vehicle/thrust", indexes=when, columns=rr.Arrows3D.columns(
+        vectors=vec.reshape(-1, 3), origins=origins.reshape(-1, 3)).partition(
+            [af.n_rotors] * pos.shape[0]))
 
 
 def _send_forces(rr: Any, rec: Any, r: RunResult, af: Airframe, k: np.ndarray,
@@ -242,36 +258,46 @@ def _send_forces(rr: Any, rec: Any, r: RunResult, af: Airframe, k: np.ndarray,
 
 
 def series_block(rr: Any, rec: Any, path: str, when: list[Any], values: np.ndarray,
-                 names: list[str]) -> None:
-    """Several series of one panel as one entity: a row of ``len(names)`` scalars per
-    instant (one chunk per call, not one per series), named once for the legend."""
+                 names: list[str] | None) -> None:
+    """Several series of one panel as one entity: a row of scalars per instant (one chunk
+    per call, not one per series); ``names`` (for the legend) are sent when given."""
     values = np.asarray(values, float).reshape(values.shape[0], -1)
-    rec.log(path, rr.SeriesLines(names=names), static=True)
+    if names is not None:
+        rec.log(path, rr.SeriesLines(names=names), static=True)
     rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(
         scalars=values.reshape(-1)).partition([values.shape[1]] * values.shape[0]))
+
+
+def _send_panels(rr: Any, rec: Any, when: list[Any], pos_error: np.ndarray,
+                 euler: np.ndarray, mu_c: np.ndarray, omega: np.ndarray,
+                 omega_cmd: np.ndarray, iterations: np.ndarray, named: bool = True) -> None:
+    """The time-series panels a replay and a live view share: position error (mm), attitude
+    error against mu_c (deg), rotor speeds measured and commanded (rpm), QP iterations;
+    ``named``: send the legends' names too (once per recording)."""
+    rotors = [str(i + 1) for i in range(omega.shape[1])]
+    rpm = 60.0 / (2.0 * np.pi)
+    for path, values, names in (
+            ("series/position_error_mm", 1e3 * pos_error, ["x", "y", "z"]),
+            ("series/attitude_error_deg", wrap_deg(np.degrees(euler - mu_c)),
+             ["roll", "pitch", "yaw"]),
+            ("series/omega_rpm/measured", rpm * omega, [f"{i} measured" for i in rotors]),
+            ("series/omega_rpm/commanded", rpm * omega_cmd, [f"{i} commanded" for i in rotors]),
+            ("series/qp", iterations, ["guidance iterations", "allocation iterations"])):
+        series_block(rr, rec, path, when, values, names if named else None)
 
 
 def _send_series(rr: Any, rec: Any, r: RunResult, n: int) -> int:
     t = np.asarray(r.time)
     when = [rr.TimeColumn("time", duration=t)]
-    err = (r.get(r.judged("plant.pos")) - r.get("ctrl.pos_ref_s")
-           if r.has("ctrl.pos_ref_s[1]") else r.get(r.judged("plant.pos")) - r.get("ref.pos_ref"))
-    series_block(rr, rec, "series/position_error_mm", when, 1e3 * err, ["x", "y", "z"])
-    att = np.degrees(r.get(r.judged("plant.euler")) - r.get("ctrl.mu_c"))
-    series_block(rr, rec, "series/attitude_error_deg", when, (att + 180.0) % 360.0 - 180.0,
-                 ["roll", "pitch", "yaw"])
-    rpm = 60.0 / (2.0 * np.pi)
-    rotors = [str(i + 1) for i in range(n)]
-    series_block(rr, rec, "series/omega_rpm/measured", when,
-                 rpm * r.get("plant.omega")[:, :n], [f"{i} measured" for i in rotors])
-    series_block(rr, rec, "series/omega_rpm/commanded", when,
-                 rpm * r.get("ctrl.omega_cmd")[:, :n], [f"{i} commanded" for i in rotors])
+    pos = r.get(r.judged("plant.pos"))
+    ref = r.get("ctrl.pos_ref_s") if r.has("ctrl.pos_ref_s[1]") else r.get("ref.pos_ref")
+    _send_panels(rr, rec, when, pos - ref, r.get(r.judged("plant.euler")), r.get("ctrl.mu_c"),
+                 r.get("plant.omega")[:, :n], r.get("ctrl.omega_cmd")[:, :n],
+                 np.column_stack([r.get("ctrl.guid_iter"), r.get("ctrl.alloc_iter")]))
     for servo in ("alpha", "beta"):
         series_block(rr, rec, f"series/servo_deg/{servo}", when,
-                     np.degrees(r.get(f"plant.{servo}")[:, :n]), [f"{servo}_{i}" for i in rotors])
-    series_block(rr, rec, "series/qp", when,
-                 np.column_stack([r.get("ctrl.guid_iter"), r.get("ctrl.alloc_iter")]),
-                 ["guidance iterations", "allocation iterations"])
+                     np.degrees(r.get(f"plant.{servo}")[:, :n]),
+                     [f"{servo}_{i + 1}" for i in range(n)])
     return int(t.size)
 
 
@@ -314,7 +340,7 @@ class LiveView:
                  recording_id: str = "fly", start: Any = (0.0, 0.0, -3.0)) -> None:
         self.rr = _rerun()
         self.af = airframe
-        span = float(np.max(np.linalg.norm(airframe.positions, axis=1)))
+        span = arm_span(airframe)
         self.rec = _open(self.rr, recording_id, save, spawn, blueprint(start, span))
         _scene(self.rr, self.rec, airframe)
         self.next_t = 0.0
@@ -365,30 +391,9 @@ class LiveView:
         omega, alpha, beta, omega_cmd = (a[:, 19 + i * n:19 + (i + 1) * n] for i in range(4))
         iters = a[:, 19 + 4 * n:]
         when = [rr.TimeColumn("time", duration=t)]
-        for path, p, e in (("world/vehicle", pos, euler), ("world/reference", pos_ref, euler_ref),
-                           ("world/commanded", pos, mu_c)):
-            rec.send_columns(path, indexes=when, columns=rr.Transform3D.columns(
-                translation=p, quaternion=quaternion_xyzw(e)))
-        vec = thrust_vectors(af, omega, alpha, beta)
-        rec.send_columns("world/vehicle/thrust", indexes=when, columns=rr.Arrows3D.columns(
-            vectors=vec.reshape(-1, 3),
-            origins=np.broadcast_to(af.positions, vec.shape).reshape(-1, 3)).partition(
-                [n] * t.size))
-        rotors = [str(i + 1) for i in range(n)]
-        rpm = 60.0 / (2.0 * np.pi)
-        att = (np.degrees(euler - mu_c) + 180.0) % 360.0 - 180.0
-        for path, values, names in (
-                ("series/position_error_mm", 1e3 * (pos - pos_s), ["x", "y", "z"]),
-                ("series/attitude_error_deg", att, ["roll", "pitch", "yaw"]),
-                ("series/omega_rpm/measured", rpm * omega, [f"{i} measured" for i in rotors]),
-                ("series/omega_rpm/commanded", rpm * omega_cmd,
-                 [f"{i} commanded" for i in rotors]),
-                ("series/qp", iters, ["guidance iterations", "allocation iterations"])):
-            if not self._named:
-                rec.log(path, rr.SeriesLines(names=names), static=True)
-            rec.send_columns(path, indexes=when, columns=rr.Scalars.columns(
-                scalars=np.asarray(values, float).reshape(-1)).partition(
-                    [values.shape[1]] * t.size))
+        _send_poses(rr, rec, af, when, pos, euler, pos_ref, euler_ref, mu_c, omega, alpha, beta)
+        _send_panels(rr, rec, when, pos - pos_s, euler, mu_c, omega, omega_cmd, iters,
+                     named=not self._named)
         self._named = True
 
     def close(self) -> None:
