@@ -215,7 +215,7 @@ static CtrlDetectParams detect_params(const ControllerModel *m) {
     p.loss_min = m->fault_loss_min, p.fit_max = m->fault_fit_max;
     /* a rotor below a twentieth of its share of the weight has no signature to speak of */
     p.wrench_min = 0.05 * m->mass * fabs(m->g) / m->n_rotors;
-    p.persist = (int)ceil(m->fault_time / m->Ts - 1e-9);
+    p.persist = (int32_t)ceil(m->fault_time / m->Ts - 1e-9);
     if (p.persist < 1) p.persist = 1;
     return p;
 }
@@ -494,8 +494,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
                       m->lost_mask, &s);
     if (m->fault_detect) {
         /* a detection counts from the next sample on (update_rotor_losses) */
-        CtrlDetectParams dp = detect_params(m);
-        ctrl_detect(&dp, &m->rotors, &s, &m->detect, &dout);
+        ctrl_detect(&m->detect_p, &m->rotors, &s, &m->detect, &dout);
         if (dout.detected >= 0)
             fp_log(logger, FP_WARNING, FP_LOG_WARNING,
                    "rotor %d fault detected from the INDI residual: efficiency %.2f estimated",
@@ -615,6 +614,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     /* the reference as given, no jump being shaped; the twin at the reference pose */
     memset(&m->shaping, 0, sizeof m->shaping);
     ctrl_detect_start(&m->detect);
+    m->detect_p = detect_params(m);
     for (i = 0; i < FP_MAX_ROTORS; i++) m->rotor_eff_est[i] = 1.0;
     memset(m->indi_residual, 0, sizeof m->indi_residual);
     m->rotors_detected = 0;

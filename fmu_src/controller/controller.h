@@ -21,6 +21,16 @@ typedef struct {
     double e_pos[3], e_vel[3], e_acc[3], e_mu[3], e_rate[3];
 } CtrlShaping;
 
+/* The detector's constants (detect.c), derived from fixed parameters at initialization. */
+typedef struct {
+    double mass, inertia[3][3], g;
+    double arm;        /* m: the rotors' mean distance from the centre (torque scale) */
+    double loss_min;   /* share of a rotor's efficiency lost before it is indicated */
+    double fit_max;    /* share of the residual its signature may leave unexplained */
+    double wrench_min; /* N: a rotor whose full wrench is below this is not fitted */
+    int32_t persist;   /* samples in a row a rotor must be indicated */
+} CtrlDetectParams;
+
 /* Rotor-fault detection (detect.c): the rotor indicated in the last samples and for how
  * many in a row, each rotor's efficiency estimate (1 until a detection), the rotors
  * detected (bit i-1: rotor i). */
@@ -106,6 +116,7 @@ typedef struct {
     FpPreferredSplit pref_split; /* the preferred configuration's geometry, all rotors */
     CtrlShaping shaping;
     CtrlDetect detect;
+    CtrlDetectParams detect_p;
     double health[FP_MAX_ROTORS]; /* efficiencies in use: rotor_health, or lower if detected */
     CtrlTwin twin;
     double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */

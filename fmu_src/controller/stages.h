@@ -175,14 +175,6 @@ void ctrl_log_losses(const CtrlLosses *l, const FpLogger *logger);
 /* ------------------------------------------------------------------------ */
 /* detect.c                                                                 */
 
-typedef struct {
-    double mass, inertia[3][3], g;
-    double arm;        /* m: the rotors' mean distance from the centre (torque scale) */
-    double loss_min;   /* share of a rotor's efficiency lost before it is indicated */
-    double fit_max;    /* share of the residual its signature may leave unexplained */
-    double wrench_min; /* N: a rotor whose full wrench is below this is not fitted */
-    int persist;       /* samples in a row a rotor must be indicated */
-} CtrlDetectParams;
 
 typedef struct {
     double residual[6]; /* [force (N); torque (N m)], body */
