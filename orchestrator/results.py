@@ -23,13 +23,24 @@ Files (:meth:`RunResult.write`, :meth:`RunResult.read`):
 ``results.parquet`` (the default)
     Apache Parquet, one typed column per signal, zstd-compressed with the byte-stream-split
     encoding for floats: ``time`` float64 (exact), Integer and Boolean outputs int32 (exact),
-    every other signal float32, i.e. the recording rounded to the nearest float32 (relative
-    6e-8: 0.2 um at 3 m, 1e-7 rad, far below any sensor, test bound or plot), which is what
-    makes a 100 s run 11 MB instead of 57.  The run's metadata and the precision of each
-    column are in the file's key-value metadata (``fullpose.meta``, ``fullpose.format``).
-    Written in row groups of :data:`ROW_GROUP` rows, so writing needs memory for one row
-    group only.  Readable as is by pandas, polars, DuckDB, Arrow in every language, MATLAB's
-    ``parquetread`` and PlotJuggler.
+    every other signal float32 at one of two precisions (:meth:`RunResult.precision`):
+
+    - the pose signals that tracking errors are differences of (:data:`POSE_SIGNALS`:
+      position, attitude and their references) keep all 24 bits of a float32, a relative
+      6e-8 (0.2 um at 3 m, 1e-7 rad);
+    - every other signal (rates, accelerations, forces, actuators, diagnostics, compute
+      times) is rounded to :data:`ROUNDED_BITS` significant bits, a relative 1.5e-5 (60 uN
+      of a 4 N force, 0.015 rad/s of 1,000 rad/s, 11 urad of a 0.7 rad servo angle): below
+      a plot's resolution and every test's bound, and the 8 low bits it drops are the noise
+      that no lossless coder shrinks (they made a 100 s run 12.7 MB instead of 7.7).
+
+    Rounding is to nearest-even and idempotent, so a file read back and written again is
+    unchanged.  The run's metadata, the layout version and which columns are rounded are in
+    the file's key-value metadata (``fullpose.meta``, ``fullpose.format``,
+    ``fullpose.precision``).  Written in row groups of :data:`ROW_GROUP` rows, so writing
+    needs memory for one row group only.  Readable as is by pandas, polars, DuckDB, Arrow in
+    every language, MATLAB's ``parquetread`` and PlotJuggler.  For every value to the bit,
+    ``--csv``.
 ``results.csv`` (on request)
     Header of column names, every value in float64 with the shortest representation that
     reads back to the same double (integers as integers): exact, ~20x larger.
@@ -54,14 +65,42 @@ if TYPE_CHECKING:
 
 FORMAT_VERSION = 1
 """Version of the npz layout (read only)."""
-PARQUET_FORMAT = 2
-"""Version of the Parquet layout written here (``fullpose.format`` in the file)."""
+PARQUET_FORMAT = 3
+"""Version of the Parquet layout written here (``fullpose.format`` in the file); 2 (every
+real column in full float32) is still read."""
+READ_FORMATS = frozenset({2, PARQUET_FORMAT})
 RESULTS_FILE = "results.parquet"
 CSV_FILE = "results.csv"
 ROW_GROUP = 65536
 """Rows per Parquet row group (and per CSV chunk): the memory a write needs beyond the data."""
 EXACT_FLOAT = frozenset({"time"})
 """Real columns stored in float64; every other real column is stored in float32."""
+POSE_SIGNALS = frozenset({"plant.pos", "plant.pos_true", "plant.euler", "plant.euler_true",
+                          "plant.quat", "plant.quat_true", "ref.pos_ref", "ref.euler_ref",
+                          "ctrl.pos_ref_s", "ctrl.euler_ref_s"})
+"""Signals kept in full float32: the ones a tracking error is the difference of, where
+millimetres are read off metres (the paper's 2 cm bound at any range a scenario flies)."""
+ROUNDED_BITS = 16
+"""Significant bits kept of every other real signal in ``results.parquet``."""
+
+
+def round_float32(x: np.ndarray, bits: int = ROUNDED_BITS) -> np.ndarray:
+    """float32 values rounded to nearest-even at ``bits`` significant bits (of float32's
+    24); NaN and infinities pass unchanged, and a value that would round past float32's
+    largest finite is truncated instead, so no finite value becomes infinite."""
+    drop = 24 - bits
+    x = np.asarray(x, dtype=np.float32)
+    if drop <= 0:
+        return x
+    u = np.ascontiguousarray(x).view(np.uint32)
+    low = np.uint32((1 << drop) - 1)
+    bias = np.uint32((1 << (drop - 1)) - 1) + ((u >> np.uint32(drop)) & np.uint32(1))
+    out = ((u + bias) & ~low).view(np.float32)
+    finite = np.isfinite(x)
+    if not finite.all() or not np.isfinite(out).all():
+        truncated = (u & ~low).view(np.float32)
+        out = np.where(finite, np.where(np.isfinite(out), out, truncated), x)
+    return out
 
 
 class ResultsFileError(ValueError):
@@ -130,12 +169,27 @@ class RunResult:
         return 8
 
     def precision(self, name: str) -> str:
-        """How a column is stored in ``results.parquet``: ``int32``, ``float64`` (``time``,
-        and any column with a finite value beyond float32's range, e.g. a diverging run's)
-        or ``float32``."""
+        """How a column is stored in ``results.parquet``: ``int32``; ``float64`` (``time``,
+        and any column with a finite value beyond float32's range, e.g. a diverging run's);
+        ``float32`` (the pose signals); ``float32r16`` (every other real column: float32
+        rounded to :data:`ROUNDED_BITS` significant bits)."""
         if name in self.integer:
             return "int32"
-        return "float64" if name in EXACT_FLOAT or name in self._wide() else "float32"
+        if name in EXACT_FLOAT or name in self._wide():
+            return "float64"
+        return "float32" if name.split("[", 1)[0] in POSE_SIGNALS else f"float32r{ROUNDED_BITS}"
+
+    def stored(self, name: str) -> np.ndarray:
+        """One column as ``results.parquet`` holds it (and :meth:`read` gives it back), in
+        float64."""
+        col = self.column(name)
+        kind = self.precision(name)
+        if kind == "int32":
+            return col.astype(np.int32).astype(np.float64)
+        if kind == "float64":
+            return col.copy()
+        bits = 24 if kind == "float32" else ROUNDED_BITS
+        return round_float32(col.astype(np.float32), bits).astype(np.float64)
 
     def _wide(self) -> frozenset[str]:
         wide = self.__dict__.get("_wide_columns")
@@ -163,10 +217,14 @@ class RunResult:
     def _schema(self) -> pa.Schema:
         import pyarrow as pa
 
-        kinds = {"int32": pa.int32(), "float64": pa.float64(), "float32": pa.float32()}
+        kinds = {"int32": pa.int32(), "float64": pa.float64()}
+        rounded = [c for c in self.columns if self.precision(c).startswith("float32r")]
         meta = {"fullpose.format": str(PARQUET_FORMAT),
-                "fullpose.meta": json.dumps(self.meta, default=str)}
-        return pa.schema([pa.field(c, kinds[self.precision(c)]) for c in self.columns],
+                "fullpose.meta": json.dumps(self.meta, default=str),
+                "fullpose.precision": json.dumps(
+                    {"rounded_bits": ROUNDED_BITS, "rounded": rounded})}
+        return pa.schema([pa.field(c, kinds.get(self.precision(c), pa.float32()))
+                          for c in self.columns],
                          metadata=meta)
 
     def _batch(self, schema: pa.Schema, a: int, b: int, exact: bool = False) -> pa.RecordBatch:
@@ -181,8 +239,10 @@ class RunResult:
                 arrays.append(pa.array(col.astype(np.int32)))
             elif exact or pa.types.is_float64(f.type):
                 arrays.append(pa.array(np.ascontiguousarray(col)))
-            else:
+            elif self.precision(f.name) == "float32":
                 arrays.append(pa.array(col.astype(np.float32)))
+            else:
+                arrays.append(pa.array(round_float32(col.astype(np.float32))))
         return pa.RecordBatch.from_arrays(arrays, schema=schema)
 
     def write_parquet(self, path: Path) -> None:
@@ -245,8 +305,8 @@ class RunResult:
 
     @classmethod
     def read_parquet(cls, path: Path) -> RunResult:
-        """Reads back exactly what :meth:`write_parquet` stored (float32 columns widened to
-        float64 exactly)."""
+        """Reads back exactly what :meth:`write_parquet` stored (:meth:`stored`: float32
+        columns widened to float64 exactly)."""
         import pyarrow as pa
         import pyarrow.parquet as pq
 
@@ -258,9 +318,9 @@ class RunResult:
         version = kv.get(b"fullpose.format")
         if version is None:
             raise ResultsFileError(f"{path}: not a fullpose results file (no fullpose.format)")
-        if int(version) != PARQUET_FORMAT:
-            raise ResultsFileError(f"{path}: results format {int(version)}, expected "
-                                   f"{PARQUET_FORMAT}")
+        if int(version) not in READ_FORMATS:
+            raise ResultsFileError(f"{path}: results format {int(version)}, expected one of "
+                                   f"{sorted(READ_FORMATS)}")
         data = np.empty((table.num_rows, table.num_columns))
         integer = set()
         for i, f in enumerate(table.schema):

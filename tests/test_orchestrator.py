@@ -113,8 +113,7 @@ def test_result_files_read_back(tmp_path):
     assert from_parquet.columns == out.result.columns == from_csv.columns
     assert np.array_equal(from_csv.data, out.result.data)  # shortest repr round-trips
     for i, name in enumerate(out.result.columns):  # each column exactly as it claims
-        kept = out.result.data[:, i].astype(out.result.precision(name).replace("int", "float"))
-        assert np.array_equal(from_parquet.data[:, i], kept), name
+        assert np.array_equal(from_parquet.data[:, i], out.result.stored(name)), name
     assert from_parquet.integer == out.result.integer and "ctrl.guid_iter" in out.result.integer
     assert from_parquet.meta["scenario"] == "hover"
     doc = json.loads((tmp_path / "metrics.json").read_text())

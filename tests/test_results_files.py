@@ -16,7 +16,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from orchestrator.results import ROW_GROUP, ResultsFileError, RunResult
+from orchestrator.results import ROW_GROUP, ResultsFileError, RunResult, round_float32
 
 INTS = ("ctrl.guid_iter", "ctrl.feasible")
 
@@ -50,18 +50,42 @@ def test_parquet_is_typed_streamed_and_readable_without_fullpose(tmp_path: Path)
     assert all(types[c] == pa.int32() for c in INTS)
     table = pq.read_table(path)
     assert table.column_names == r.columns
-    for i, name in enumerate(r.columns):
+    for name in r.columns:
         got = table.column(name).to_numpy()
-        want = r.data[:, i].astype({pa.float64(): np.float64, pa.float32(): np.float32,
-                                    pa.int32(): np.int32}[types[name]])
-        assert np.array_equal(got, want), name
+        assert np.array_equal(got.astype(np.float64), r.stored(name)), name
     meta = json.loads(table.schema.metadata[b"fullpose.meta"])
     assert meta == r.meta
-    # float32 keeps a relative 2**-24 (0.2 um at 3 m): below any bound a test or plot has
+    precision = json.loads(table.schema.metadata[b"fullpose.precision"])
+    assert precision == {"rounded_bits": 16, "rounded": ["ctrl.t_step"]}
+    # a position keeps float32's relative 2**-24 (0.2 um at 3 m); the rest is rounded to 16
+    # significant bits, a relative 2**-16: below any bound a test or plot has
     back = RunResult.read(path)
-    np.testing.assert_allclose(back.get("ctrl.t_step"), r.get("ctrl.t_step"),
+    np.testing.assert_allclose(back.get("plant.pos[2]"), r.get("plant.pos[2]"),
                                rtol=2.0**-24, atol=0)
+    np.testing.assert_allclose(back.get("ctrl.t_step"), r.get("ctrl.t_step"),
+                               rtol=2.0**-16, atol=0)
     assert back.integer == r.integer and back.meta == r.meta
+    # rounding is idempotent: what was read back is written back unchanged
+    back.write_parquet(tmp_path / "again.parquet")
+    assert np.array_equal(RunResult.read(tmp_path / "again.parquet").data, back.data)
+
+
+def test_rounding_to_16_bits_against_the_float64_values():
+    rng = np.random.default_rng(3)
+    x = np.concatenate([rng.standard_normal(20000) * 10.0 ** rng.integers(-30, 30, 20000),
+                        [0.0, -0.0, np.inf, -np.inf, np.nan, 3.4028235e38, -3.4028235e38]])
+    x32 = x.astype(np.float32)
+    y = round_float32(x32)
+    normal = np.isfinite(x32) & (np.abs(x32) >= np.finfo(np.float32).tiny)
+    # nearest at 16 bits: within half a unit of the 16th bit, relative 2**-16
+    assert np.all(np.abs(y[normal].astype(np.float64) - x32[normal])
+                  <= 2.0**-16 * np.abs(x32[normal].astype(np.float64)))
+    assert np.all(y.view(np.uint32)[normal] & 0xFF == 0)  # the 8 low bits are gone
+    assert np.isnan(y[-3]) and y[-5] == np.inf and y[-4] == -np.inf
+    assert np.all(np.isfinite(y[-2:])) and math.copysign(1.0, float(y[-6])) == -1.0
+    assert np.array_equal(round_float32(y), y, equal_nan=True)
+    # round half to even: 1 + 2**-16 lies halfway between two 16-bit neighbours
+    assert round_float32(np.float32([1 + 2.0**-16]))[0] == 1.0
 
 
 def test_values_beyond_float32_keep_their_column_in_float64(tmp_path: Path):
@@ -71,7 +95,7 @@ def test_values_beyond_float32_keep_their_column_in_float64(tmp_path: Path):
     back = RunResult.read(tmp_path / "r.parquet")
     assert back.data[8, 1] == 1e300 and back.data[9, 1] == 5e-324  # no inf, no flush to 0
     assert math.copysign(1.0, back.data[7, 1]) == -1.0
-    assert r.precision("ctrl.t_step") == "float32" and np.isnan(back.data[3, 3])
+    assert r.precision("ctrl.t_step") == "float32r16" and np.isnan(back.data[3, 3])
 
 
 def test_csv_is_exact_and_parsed_by_the_csv_module(tmp_path: Path):

@@ -96,15 +96,17 @@ def test_values_match_the_results_file(flown):
     vec = np.stack([np.stack(v) for v in pose["/world/vehicle/thrust:Arrows3D:vectors"]])
     omega = result.get("plant.omega")[k][:, :af.n_rotors]
     eff = result.get("dist.efficiency")[k][:, :af.n_rotors]
+    # (the file keeps 16 significant bits of omega: 2 * 2**-16 relative in omega**2)
     np.testing.assert_allclose(np.linalg.norm(vec, axis=2), af.k_t * omega ** 2 * eff * scale,
-                               rtol=1e-5, atol=1e-6)
+                               rtol=2 * 2.0**-16 + 1e-6, atol=1e-6)
     # the force space: the attainable set's hull, the commanded body force as an arrow
     from controller.polytope_cache import force_sets
 
     hull = frame["/force/attainable_set:Mesh3D:vertex_positions"].dropna().iloc[0]
     np.testing.assert_allclose(np.stack(hull), force_sets(af)[0].vertices, rtol=1e-6)
     cmd = np.stack([v[0] for v in pose["/force/commanded:Arrows3D:vectors"]])
-    np.testing.assert_allclose(cmd, result.get("ctrl.f_b_c")[k], rtol=1e-6, atol=1e-6)
+    np.testing.assert_allclose(cmd, result.get("ctrl.f_b_c")[k], rtol=2.0**-16 + 1e-6,
+                               atol=1e-6)  # (16 significant bits of a force in the file)
     # the position error series in mm against the shaped reference, at every row
     err = frame.dropna(subset=["/series/position_error_mm:Scalars:scalars"])
     z = np.array([v[2] for v in err["/series/position_error_mm:Scalars:scalars"]])  # x, y, z

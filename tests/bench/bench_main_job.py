@@ -112,9 +112,9 @@ def main() -> None:
             back = type(r).read(path) if read else None
             rt = time.perf_counter() - t0
             same = back is not None and all(
-                np.array_equal(back.data[:, i], r.data[:, i].astype(
-                    r.precision(c).replace("int", "float") if name.endswith("parquet")
-                    else np.float64), equal_nan=True) for i, c in enumerate(r.columns))
+                np.array_equal(back.data[:, i], r.stored(c) if name.endswith("parquet")
+                               else r.data[:, i], equal_nan=True)
+                for i, c in enumerate(r.columns))
             print(f"  {label:28s} write {wt:5.2f} s, {path.stat().st_size / 1e6:6.1f} MB, "
                   f"read {rt:5.2f} s, {'reads back what it claims' if same else 'DIFFERS'}")
 
