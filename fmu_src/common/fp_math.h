@@ -13,6 +13,12 @@ static inline int fp_all_finite(const double *v, size_t n) {
     return 1;
 }
 
+/* x limited to [lo, hi] (lo <= hi); NaN stays NaN, so a non-finite result is never hidden
+ * behind a bound (fmin/fmax would return the bound) and the compiler needs no call. */
+static inline double fp_clamp(double x, double lo, double hi) {
+    return x < lo ? lo : (x > hi ? hi : x);
+}
+
 static inline void v3_cross(const double a[3], const double b[3], double out[3]) {
     double x = a[1] * b[2] - a[2] * b[1];
     double y = a[2] * b[0] - a[0] * b[2];

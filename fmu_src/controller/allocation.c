@@ -6,6 +6,7 @@
 #include <string.h>
 
 #include "fp_clock.h"
+#include "fp_math.h"
 #include "stages.h"
 
 /* Preferred configuration for the rotors still working: the minimum-norm split over
@@ -74,6 +75,8 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
         for (j = 0; j < nv; j++) w->A[i * nv + j] = p->W_nu[i] * b2[i * nv + j];
         w->b[i] = p->W_nu[i] * dnu_c[i];
     }
+    /* the preference rows: scale[k] on the diagonal, zero elsewhere */
+    memset(&w->A[6 * nv], 0, (size_t)(nv * nv) * sizeof(double));
     scale[0] = scale[1] = p->w_pref;
     scale[2] = p->w_pref * p->pref_omega_scale;
     for (i = 0; i < n; i++) {
@@ -88,9 +91,8 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
         }
         for (k = 0; k < 3; k++) {
             int col = 3 * i + k, row = 6 + col;
-            memset(&w->A[row * nv], 0, (size_t)nv * sizeof(double));
             w->A[row * nv + col] = scale[k];
-            w->b[row] = scale[k] * (fmin(fmax(pref[k], lo[k]), hi[k]) - um[k]);
+            w->b[row] = scale[k] * (fp_clamp(pref[k], lo[k], hi[k]) - um[k]);
             w->lb[col] = lo[k] - um[k];
             w->ub[col] = hi[k] - um[k];
         }
@@ -111,9 +113,9 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
             a_cmd[i] = b_cmd[i] = w_cmd[i] = 0.0;
             continue;
         }
-        a_cmd[i] = fmin(fmax(s->a_m[i] + w->x[3 * i], rs->alpha_min[i]), rs->alpha_max[i]);
-        b_cmd[i] = fmin(fmax(s->b_m[i] + w->x[3 * i + 1], rs->beta_min[i]), rs->beta_max[i]);
-        w_cmd[i] = fmin(fmax(s->w_m[i] + w->x[3 * i + 2], rs->omega_min), rs->omega_max);
+        a_cmd[i] = fp_clamp(s->a_m[i] + w->x[3 * i], rs->alpha_min[i], rs->alpha_max[i]);
+        b_cmd[i] = fp_clamp(s->b_m[i] + w->x[3 * i + 1], rs->beta_min[i], rs->beta_max[i]);
+        w_cmd[i] = fp_clamp(s->w_m[i] + w->x[3 * i + 2], rs->omega_min, rs->omega_max);
         if ((lost_mask >> i) & 1) continue; /* a stopped dead rotor is not saturated */
         if (rs->alpha_max[i] > rs->alpha_min[i] &&
             (a_cmd[i] <= rs->alpha_min[i] + 1e-9 || a_cmd[i] >= rs->alpha_max[i] - 1e-9))

@@ -19,6 +19,7 @@
  */
 #include "controller.h"
 
+#include <float.h>
 #include <math.h>
 #include <stddef.h>
 #include <stdio.h>
@@ -350,30 +351,68 @@ static const char *element_name(const FpVar *row, int i, char *buf, size_t size)
     return buf;
 }
 
-static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
-    static const int rows[] = {CV_pos_ref, CV_euler_ref, CV_vel_ref, CV_acc_ref,
-                               CV_euler_rate_ref, CV_pos, CV_vel, CV_acc, CV_euler, CV_rate,
-                               CV_omega, CV_alpha, CV_beta, CV_rotor_health, CV_pose_age};
-    const double *inputs[15];
-    int counts[15] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0, 1};
-    int i, k, n = m->n_rotors;
+/* The inputs checked every sample, in order, and each one's element count. */
+static int checked_inputs(const ControllerModel *m, const double *inputs[CTRL_N_CHECKED_INPUTS],
+                          int counts[CTRL_N_CHECKED_INPUTS]) {
+    static const int c[CTRL_N_CHECKED_INPUTS] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0, 1};
+    int n = m->n_rotors;
+    memcpy(counts, c, sizeof c);
     inputs[0] = m->pos_ref, inputs[1] = m->euler_ref, inputs[2] = m->vel_ref;
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
     inputs[6] = m->vel, inputs[7] = m->acc, inputs[8] = m->euler, inputs[9] = m->rate;
     inputs[10] = m->omega, inputs[11] = m->alpha, inputs[12] = m->beta;
     inputs[13] = m->rotor_health, inputs[14] = &m->pose_age;
     counts[10] = counts[11] = counts[12] = counts[13] = n;
-    for (k = 0; k < 15; k++) {
-        const FpVar *row = &controller_vars[rows[k]];
+    return CTRL_N_CHECKED_INPUTS;
+}
+
+static const int checked_rows[CTRL_N_CHECKED_INPUTS] = {
+    CV_pos_ref, CV_euler_ref, CV_vel_ref, CV_acc_ref, CV_euler_rate_ref, CV_pos, CV_vel,
+    CV_acc, CV_euler, CV_rate, CV_omega, CV_alpha, CV_beta, CV_rotor_health, CV_pose_age};
+
+/* The plausible interval of input k's element i beyond its declared range. */
+static void extra_bounds(const ControllerModel *m, int k, int i, double *a, double *b) {
+    *a = -HUGE_VAL, *b = HUGE_VAL;
+    if (checked_rows[k] == CV_omega) {
+        *a = -m->omega_max, *b = 2.0 * m->omega_max;
+    } else if (checked_rows[k] == CV_alpha || checked_rows[k] == CV_beta) {
+        int al = checked_rows[k] == CV_alpha;
+        *a = (al ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
+        *b = (al ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
+    }
+}
+
+/* in_lo/in_hi: each element's declared range and plausible interval as one closed,
+ * finite interval (an open bound moved to the next double inside, infinities excluded), so
+ * that v is usable exactly when in_lo <= v <= in_hi (NaN fails both). */
+static void derive_input_bounds(ControllerModel *m) {
+    int k, i;
+    for (k = 0; k < CTRL_N_CHECKED_INPUTS; k++) {
+        const FpRange *r = &controller_vars[checked_rows[k]].range;
+        for (i = 0; i < FP_MAX_ROTORS; i++) {
+            double a, b, lo = -DBL_MAX, hi = DBL_MAX;
+            extra_bounds(m, k, i, &a, &b);
+            if (r->flags & FP_RANGE_LO)
+                lo = (r->flags & FP_RANGE_LO_OPEN) ? nextafter(r->lo, HUGE_VAL) : r->lo;
+            if (r->flags & FP_RANGE_HI)
+                hi = (r->flags & FP_RANGE_HI_OPEN) ? nextafter(r->hi, -HUGE_VAL) : r->hi;
+            m->in_lo[k][i] = fmax(fmax(lo, a), -DBL_MAX);
+            m->in_hi[k][i] = fmin(fmin(hi, b), DBL_MAX);
+        }
+    }
+}
+
+/* Why an input is unusable, in words (the slow path: only when the check failed). */
+static int inputs_usable_why(const ControllerModel *m, char *why, size_t size) {
+    const double *inputs[CTRL_N_CHECKED_INPUTS];
+    int counts[CTRL_N_CHECKED_INPUTS];
+    int i, k, n_in = checked_inputs(m, inputs, counts);
+    for (k = 0; k < n_in; k++) {
+        const FpVar *row = &controller_vars[checked_rows[k]];
         for (i = 0; i < counts[k]; i++) {
-            double v = inputs[k][i], a = -HUGE_VAL, b = HUGE_VAL;
+            double v = inputs[k][i], a, b;
             char range[96], name[48];
-            if (rows[k] == CV_omega) {
-                a = -m->omega_max, b = 2.0 * m->omega_max;
-            } else if (rows[k] == CV_alpha || rows[k] == CV_beta) {
-                a = (rows[k] == CV_alpha ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
-                b = (rows[k] == CV_alpha ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
-            }
+            extra_bounds(m, k, i, &a, &b);
             if (!isfinite(v)) {
                 snprintf(why, size, "input %s = %g is not finite",
                          element_name(row, i, name, sizeof name), v);
@@ -393,6 +432,16 @@ static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
         }
     }
     return 1;
+}
+
+static int inputs_usable(const ControllerModel *m, char *why, size_t size) {
+    const double *inputs[CTRL_N_CHECKED_INPUTS];
+    int counts[CTRL_N_CHECKED_INPUTS];
+    int i, k, n_in = checked_inputs(m, inputs, counts), ok = 1;
+    for (k = 0; k < n_in; k++)
+        for (i = 0; i < counts[k]; i++)
+            ok &= inputs[k][i] >= m->in_lo[k][i] && inputs[k][i] <= m->in_hi[k][i];
+    return ok ? 1 : inputs_usable_why(m, why, size);
 }
 
 /* Unusable inputs: hold the last command (the sample is skipped, filters and blocks keep
@@ -587,6 +636,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
         return FP_ERROR;
     derive_acc_limits(m);
     memcpy(m->ref_acc_limit, m->acc_limit, sizeof m->ref_acc_limit);
+    derive_input_bounds(m);
     if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "initialization: %s", why);
         return FP_ERROR;
@@ -669,7 +719,10 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
 }
 
 static FpStatus controller_tunables_changed(void *model, const FpLogger *logger) {
-    return ctrl_check_tunables((const ControllerModel *)model, logger) ? FP_ERROR : FP_OK;
+    ControllerModel *m = (ControllerModel *)model;
+    if (ctrl_check_tunables(m, logger)) return FP_ERROR;
+    derive_input_bounds(m); /* (limits that bound the inputs may be among them) */
+    return FP_OK;
 }
 
 /*

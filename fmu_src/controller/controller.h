@@ -11,6 +11,7 @@
 #include "multirotor.h"
 #include "wls.h"
 
+#define CTRL_N_CHECKED_INPUTS 15 /* the inputs checked every sample (controller.c) */
 #define CTRL_N_FILTERS (24 + 3 * FP_MAX_ROTORS) /* measurements, pos/vel/euler refs, actuators */
 
 /* The reference shaping's state (reference.c): the last input and the error state, the
@@ -107,6 +108,9 @@ typedef struct {
     int32_t hover_ok[FP_MAX_ROTORS + 1];   /* hover force inside: [0] nominal, [i] rotor i lost */
     int32_t lost_mask;                     /* rotors treated as lost (bit i-1: rotor i) */
     int32_t holding;                       /* samples held since an unusable input (0: none) */
+    /* every input element's usable interval, closed and finite (derive_input_bounds): the
+     * per-sample check is two comparisons each */
+    double in_lo[CTRL_N_CHECKED_INPUTS][FP_MAX_ROTORS], in_hi[CTRL_N_CHECKED_INPUTS][FP_MAX_ROTORS];
     double grid_t0;                        /* the sample grid: instants grid_t0 + k Ts */
     int64_t samples_run;                   /* k of the next sample: the grid instants done */
     int32_t warned_coarse;                 /* the h > Ts warning was given */

@@ -129,21 +129,18 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     w->n_cons = n_cons;
 }
 
-/* The constraints active at the QP's solution (guid_flags). */
+/* The constraints active at the QP's solution (guid_flags): the solver's final working set,
+ * whose constraints hold with equality at x (no second pass over the polytope's rows). */
 static int32_t active_constraints(const FpWls *w) {
-    const double *x = w->x;
     int32_t flags = 0;
-    int j, k;
-    for (k = 0; k < w->n_cons; k++) {
-        double v = -w->d[k];
-        for (j = 0; j < NV; j++) v += w->C[k * NV + j] * x[j];
-        if (v > -1e-9 * (1.0 + fabs(w->d[k]))) {
+    int k;
+    for (k = 0; k < w->n_cons; k++)
+        if (w->cons_ws[k]) {
             flags |= 1;
             break; /* one is enough */
         }
-    }
-    if (x[3] <= w->lb[3] + 1e-12 || x[3] >= w->ub[3] - 1e-12) flags |= 2;
-    if (x[4] <= w->lb[4] + 1e-12 || x[4] >= w->ub[4] - 1e-12) flags |= 4;
+    if (w->bound_ws[3] != 0) flags |= 2;
+    if (w->bound_ws[4] != 0) flags |= 4;
     return flags;
 }
 
