@@ -11,12 +11,13 @@ disturbance step, sensor noise; ``--duration`` s each, designs hinf and baseline
 
   - the old path, fresh FMUs for every case (``reuse=False``), 1 worker;
   - FMUs instantiated once per worker and reset between cases: 1 worker (in process),
-    2 local worker processes, 2 workers of a local Dask cluster (2 processes x 1 thread,
-    ``sweep.DASK_CONFIG``, started and its workers' imports done before the clock starts;
-    the idle CPU of a default cluster and of that one printed beside);
+    2 local worker processes, 1 and 2 workers of a local Dask cluster (processes of 1
+    thread, ``sweep.DASK_CONFIG``, started and its workers' imports done before the clock
+    starts; the idle CPU of a default cluster and of that one printed beside);
 
   with runs/s, runs/s and real-time factor per worker, per worker against the loop
-  (target >= 80 %) and 2 workers against 1 (target >= 1.9x).
+  (target >= 80 %) and 2 workers against 1 (target >= 1.9x): against the in-process worker,
+  and for Dask also against the 1-worker Dask cluster (the same path, one worker more).
 
 The figures need a quiet machine: the load average before and after is printed.
 
@@ -101,24 +102,27 @@ def measure(label: str, n_workers: int, small: int, large: int, duration: float,
                  statistics.fmean(r["wall_time"] for r in rows), cpu)
 
 
-def dask_sweeps(small: int, large: int, duration: float) -> Sweep | None:
-    """The sweeps on a LocalCluster with ``sweep.DASK_CONFIG``; the idle background of a
-    default one and of that one."""
+def dask_sweeps(small: int, large: int, duration: float) -> tuple[Sweep, Sweep] | None:
+    """The sweeps on a LocalCluster with ``sweep.DASK_CONFIG``, of 1 and of 2 workers (1
+    thread each); the idle background of a default one and of that one."""
     try:
         import dask
         from dask.distributed import Client, LocalCluster
     except ImportError:
         return None
-    for label, config in (("default", {}), ("sweep.DASK_CONFIG", sweep.DASK_CONFIG)):
+    out = []
+    for label, config, n in (("default", {}, 2), ("sweep.DASK_CONFIG", sweep.DASK_CONFIG, 1),
+                             ("sweep.DASK_CONFIG", sweep.DASK_CONFIG, 2)):
         with dask.config.set(config), LocalCluster(
-                n_workers=2, processes=True, threads_per_worker=1,
+                n_workers=n, processes=True, threads_per_worker=1,
                 dashboard_address=None) as cluster, Client(cluster) as client:
             client.run(lambda: __import__("orchestrator.sweep"))  # imports, not FMUs
-            idle_background(client, label)
+            if n == 2:
+                idle_background(client, label)
             if config:
-                return measure("reused FMUs, Dask 2x1, DASK_CONFIG", 2, small, large,
-                               duration, dask=client)
-    return None
+                out.append(measure(f"reused FMUs, Dask {n}x1, DASK_CONFIG", n, small, large,
+                                   duration, dask=client))
+    return out[0], out[1]
 
 
 def idle_background(client: Any, label: str, seconds: float = 2.0) -> None:
@@ -179,11 +183,17 @@ def main() -> None:
     report(one, d, rtf_loop, None)
     pool = measure("reused FMUs, 2 local processes", 2, small, n, d, workers=2)
     report(pool, d, rtf_loop, one)
-    dask = dask_sweeps(small, n, d)
-    if dask is None:
+    both = dask_sweeps(small, n, d)
+    dask = None
+    if both is None:
         print("dask.distributed not installed: no Dask figures")
     else:
+        dask_one, dask = both
+        report(dask_one, d, rtf_loop, None)
         report(dask, d, rtf_loop, one)
+        print(f"Dask 2x1 vs Dask 1x1 (the same path, 1 worker more): whole call "
+              f"{dask.runs / dask.wall / (dask_one.runs / dask_one.wall):.2f}x, marginal "
+              f"{dask.marginal / dask_one.marginal:.2f}x")
     bound = ", ".join(f"{name} {2 * one.cpu / one.runs / (s.cpu / s.runs):.2f}x"
                       for name, s in (("2 local processes", pool), ("Dask", dask))
                       if s is not None)
