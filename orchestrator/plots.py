@@ -662,9 +662,9 @@ def disturbance_timing_figure(result: RunResult) -> Figure:
             ax.set_ylim(bottom=HIST_BASELINE)
             # minor ticks at 2 and 5 of each decade, unlabelled: 8 per decade, each labelled
             # on an axis spanning one decade, cost half of the figure's drawing time
-            for axis in (ax.xaxis, ax.yaxis):
-                axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
-                axis.set_minor_formatter(NullFormatter())
+            for log_axis in (ax.xaxis, ax.yaxis):
+                log_axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
+                log_axis.set_minor_formatter(NullFormatter())
             ax.set_xlabel(f"{label} solve time [us]")
             ax.set_ylabel("samples")
             ax.set_title(f"{label}: {us.size} solves")
