@@ -43,11 +43,14 @@ HANDOFF_BYTES = 512 * 2**20
 """Runs up to this size reach the workers as a copy in shared memory (~2 min of 500 Hz
 recording); larger ones through their written ``results.parquet``, so a long run never
 needs a second copy of itself in memory."""
-AFFINITY = {"force_set": 0, "forces": 0, "disturbance_timing": 0, "tracking": 1,
-            "actuators": 1}
-"""Which worker draws which figure: the two with force sets (they import scipy for the
-slices) on the worker that draws the force-set figure during the run; ~1 s of drawing each
-after it (measured: tracking 0.55 + actuators 0.4 vs forces 0.6 + disturbances 0.35 CPU s)."""
+AFFINITY = {"force_set": 1, "forces": 1, "actuators": 1, "tracking": 0,
+            "disturbance_timing": 0}
+"""Which worker draws which figure.  The force-set figure goes to the forked worker, idle
+while the run steps, and is drawn during the loop; it imports scipy.optimize for the slices
+(0.33 s), so the other figure with force sets follows it there warm.  After the loop each
+worker has ~0.4 s of drawing (measured warm: forces 0.24 + actuators 0.18 against tracking
+0.26 + disturbance_timing 0.13 CPU s); the first worker, the zygote, also serves the
+main process's first messages."""
 RUN_FIGURES = ("tracking", "actuators", "forces", "disturbance_timing")
 """The figures of every run (``orchestrator.plots``), here so that naming them needs no
 matplotlib."""

@@ -9,6 +9,8 @@ from __future__ import annotations
 import csv
 import json
 import math
+import subprocess
+import sys
 from pathlib import Path
 
 import numpy as np
@@ -143,3 +145,35 @@ def test_foreign_parquet_is_refused(tmp_path: Path):
         RunResult.read(path)
     with pytest.raises(ResultsFileError, match=r"no results\.parquet"):
         RunResult.read(tmp_path)
+
+
+def test_writing_and_reading_results_imports_no_pandas(tmp_path: Path):
+    """pyarrow's numpy conversions import pandas when it is installed (half a second of
+    the main job): the results files go through the values buffers instead."""
+    pytest.importorskip("pandas")  # (where pandas is absent there is nothing to avoid)
+    code = f"""
+import sys
+from tests.test_results_files import sample
+r = sample(1000)
+r.write_parquet(r"{tmp_path}/r.parquet")
+r.write_csv(r"{tmp_path}/r.csv")
+from orchestrator.results import RunResult
+RunResult.read(r"{tmp_path}/r.parquet")
+RunResult.read(r"{tmp_path}/r.csv")
+print("pandas" in sys.modules)
+"""
+    res = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         cwd=Path(__file__).resolve().parents[1])
+    assert res.returncode == 0, res.stderr
+    assert res.stdout.strip() == "False"
+
+
+def test_a_foreign_column_with_nulls_or_text_is_refused_by_name(tmp_path: Path):
+    table = pa.table({"time": pa.array([0.0, 0.002, None]), "x": pa.array([1.0, 2.0, 3.0])},
+                     metadata={"fullpose.format": "3"})
+    pq.write_table(table, tmp_path / "nulls.parquet")
+    with pytest.raises(ResultsFileError, match=r"column 'time' has 1 empty values"):
+        RunResult.read(tmp_path / "nulls.parquet")
+    (tmp_path / "text.csv").write_text("time,x\n0,a\n0.002,b\n")
+    with pytest.raises(ResultsFileError, match=r"column 'x' is not numeric"):
+        RunResult.read(tmp_path / "text.csv")
