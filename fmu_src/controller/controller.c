@@ -181,6 +181,7 @@ static CtrlForceSet force_set_in_use(const ControllerModel *m) {
         fs.n = m->fail_poly_n[i - 1];
         fs.fz[0] = m->fail_fz[i - 1][0];
         fs.fz[1] = m->fail_fz[i - 1][1];
+        fs.id = i;
         return fs;
     }
     fs.A = (const double(*)[3])m->poly_A;
@@ -188,6 +189,7 @@ static CtrlForceSet force_set_in_use(const ControllerModel *m) {
     fs.n = m->poly_n;
     fs.fz[0] = m->fz_min;
     fs.fz[1] = m->fz_max;
+    fs.id = 0;
     return fs;
 }
 
@@ -555,6 +557,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     gst.x_pos = m->blk[BLK_POS];
     gst.x_vel = m->blk[BLK_VEL];
     gst.qp = &m->guid;
+    gst.c_rows = &m->guid_c_rows;
     ctrl_guidance(&gp, &fs, &gin, &s, &gst, &g);
     /* 3. stabilization */
     sp = stabilization_params(m);
@@ -684,6 +687,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
                    "initial measurements must be finite (filter slot %d)", i + 1);
             return FP_ERROR;
         }
+    m->guid_c_rows = 0; /* (the twin's: its memset above) */
     if (fp_wls_setup(&m->guid, 5, 8, m->poly_n) != FP_OK ||
         fp_wls_setup(&m->twin_qp, 5, 8, m->poly_n) != FP_OK ||
         fp_wls_setup(&m->alloc, 3 * n, 6 + 3 * n, 0) != FP_OK) {

@@ -44,6 +44,7 @@ typedef struct {
 typedef struct {
     double mu[3], f[3];
     int32_t active; /* its last sample solved the QP (the reference pose was infeasible) */
+    int32_t c_rows; /* which force set's rows its QP's C holds (build_qp; 0: none yet) */
 } CtrlTwin;
 
 typedef struct {
@@ -125,6 +126,7 @@ typedef struct {
     CtrlTwin twin;
     double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */
     FpWls guid, alloc, twin_qp;
+    int32_t guid_c_rows; /* which force set's rows guid's C holds (build_qp; 0: none yet) */
 } ControllerModel;
 
 const FpModelInfo *controller_model_info(void);

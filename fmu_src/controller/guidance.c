@@ -65,9 +65,13 @@ static void outer_loop(const CtrlGuidanceParams *p, const CtrlGuidanceInputs *in
  * vehicle, the reference twin's last pose for the feed-forward (ctrl_guidance_twin). */
 static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
                      const double mu_ref[3], const double mu0[3], const double f0[3],
-                     const OuterIndi *o, double f_bz_ref, FpWls *w) {
+                     const OuterIndi *o, double f_bz_ref, int32_t *c_rows, FpWls *w) {
     double g_mat[3][NV], sg = sqrt(p->gamma_opt);
     int i, j, k, n_cons = 0;
+    /* C's rows depend on the force set and the constraint's form alone: written when
+     * those change, only the offsets d every sample */
+    int32_t key = 2 * (fs->id + 1) + (p->force_constraint != 0);
+    int rows_known = *c_rows == key;
     /* G = d(R f_b)/d[f_b, phi, theta] at the filtered measurement (eq. 14) */
     {
         double gp[3], gt[3];
@@ -107,8 +111,10 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
         /* joint: A_poly (f_b_m + df) <= b_poly */
         for (k = 0; k < fs->n; k++, n_cons++) {
             double *row = &w->C[n_cons * NV];
-            row[0] = fs->A[k][0], row[1] = fs->A[k][1], row[2] = fs->A[k][2];
-            row[3] = row[4] = 0.0;
+            if (!rows_known) {
+                row[0] = fs->A[k][0], row[1] = fs->A[k][1], row[2] = fs->A[k][2];
+                row[3] = row[4] = 0.0;
+            }
             w->d[n_cons] = fs->d[k] - v3_dot(fs->A[k], f0);
         }
     } else {
@@ -117,9 +123,11 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
         for (k = 0; k < fs->n; k++) {
             double ax = fs->A[k][0], ay = fs->A[k][1];
             if (ax * ax + ay * ay < 1e-18) continue;
-            for (j = 0; j < NV; j++) w->C[n_cons * NV + j] = 0.0;
-            w->C[n_cons * NV] = ax;
-            w->C[n_cons * NV + 1] = ay;
+            if (!rows_known) {
+                for (j = 0; j < NV; j++) w->C[n_cons * NV + j] = 0.0;
+                w->C[n_cons * NV] = ax;
+                w->C[n_cons * NV + 1] = ay;
+            }
             w->d[n_cons] = fs->d[k] - fs->A[k][2] * fz - ax * f0[0] - ay * f0[1];
             n_cons++;
         }
@@ -127,6 +135,7 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
         w->ub[2] = fs->fz[1] - f0[2];
     }
     w->n_cons = n_cons;
+    *c_rows = key;
 }
 
 /* The constraints active at the QP's solution (guid_flags): the solver's final working set,
@@ -176,7 +185,7 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
             o.f_p[i] = r_ref[0][i] * o.f_w_ref[0] + r_ref[1][i] * o.f_w_ref[1] +
                        r_ref[2][i] * o.f_w_ref[2];
     }
-    build_qp(p, fs, in->mu_ref, s->mu_m, s->f_b_m, &o, out->f_b_ref[2], w);
+    build_qp(p, fs, in->mu_ref, s->mu_m, s->f_b_m, &o, out->f_b_ref[2], st->c_rows, w);
     t0 = p->timing ? fp_clock_seconds() : 0.0;
     fp_wls_solve_brief(w, p->max_iter, &res);
     if (p->timing) out->t_solve = fp_clock_seconds() - t0;
@@ -227,7 +236,7 @@ void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     m3_mul_v(o.r, f0, rf);
     for (i = 0; i < 3; i++) o.dacc[i] = (o.f_w_ref[i] - rf[i]) / p->mass;
     f_bz = o.r[2] * o.f_w_ref[0] + o.r[5] * o.f_w_ref[1] + o.r[8] * o.f_w_ref[2];
-    build_qp(p, fs, mu_ref, mu0, f0, &o, f_bz, w);
+    build_qp(p, fs, mu_ref, mu0, f0, &o, f_bz, &tw->c_rows, w);
     fp_wls_solve_brief(w, p->max_iter, &res);
     for (i = 0; i < 3; i++) tw->f[i] = f0[i] + w->x[i];
     tw->mu[0] = mu0[0] + w->x[3];

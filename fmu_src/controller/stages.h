@@ -143,6 +143,7 @@ typedef struct {
     const double *d;
     int n;        /* facets */
     double fz[2]; /* its f_bz range [min, max] */
+    int32_t id;   /* which set: 0 nominal, i after losing rotor i (its rows never change) */
 } CtrlForceSet;
 
 /*
@@ -208,6 +209,7 @@ typedef struct {
 typedef struct {
     double *x_pos, *x_vel; /* states of the K_xi and K_xidot blocks, 3 each */
     FpWls *qp;             /* the guidance QP; its working set warm-starts the next sample */
+    int32_t *c_rows;       /* which force set's rows qp's C holds (0: none yet) */
 } CtrlGuidanceState;
 
 typedef struct {
