@@ -32,7 +32,7 @@ Files (:meth:`RunResult.write`, :meth:`RunResult.read`):
       times) is rounded to :data:`ROUNDED_BITS` significant bits, a relative 1.5e-5 (60 uN
       of a 4 N force, 0.015 rad/s of 1,000 rad/s, 11 urad of a 0.7 rad servo angle): below
       a plot's resolution and every test's bound, and the 8 low bits it drops are the noise
-      that no lossless coder shrinks (they made a 100 s run 12.7 MB instead of 7.7).
+      that no lossless coder shrinks (they made a 100 s run 12.7 MB instead of 7.8).
 
     Rounding is to nearest-even and idempotent, so a file read back and written again is
     unchanged.  The run's metadata, the layout version and which columns are rounded are in
