@@ -384,6 +384,8 @@ def _numpy_into(column: Any, out: np.ndarray, path: Path, name: str) -> None:
     is not numeric or holds nulls (not a results file of ours) is refused by name."""
     k = 0
     for chunk in column.chunks:
+        if len(chunk) == 0:  # (a header-only CSV's columns have no type)
+            continue
         dtype = _NUMPY_OF.get(str(chunk.type))
         if dtype is None:
             raise ResultsFileError(f"{path}: column {name!r} is not numeric ({chunk.type})")

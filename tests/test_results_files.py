@@ -177,3 +177,16 @@ def test_a_foreign_column_with_nulls_or_text_is_refused_by_name(tmp_path: Path):
     (tmp_path / "text.csv").write_text("time,x\n0,a\n0.002,b\n")
     with pytest.raises(ResultsFileError, match=r"column 'x' is not numeric"):
         RunResult.read(tmp_path / "text.csv")
+
+
+@pytest.mark.parametrize("rows", [0, 1])
+def test_runs_of_no_row_and_one_row_round_trip(tmp_path: Path, rows: int):
+    data = np.array([[0.0, 3.0 + 1e-9, 4.0, 1.0]])[:rows]
+    r = RunResult(["time", "plant.pos[1]", *INTS], data, integer=frozenset(INTS))
+    for name in ("r.parquet", "r.csv"):
+        getattr(r, "write_" + name.split(".")[1])(tmp_path / name)
+        back = RunResult.read(tmp_path / name)
+        assert back.columns == r.columns and back.data.shape == r.data.shape, name
+        stored = np.stack([r.stored(c) for c in r.columns], axis=1) if rows else r.data
+        assert np.array_equal(back.data, stored if name.endswith("parquet") else r.data,
+                              equal_nan=True)
