@@ -73,6 +73,32 @@ static inline void rot_z(double a, double r[3][3]) {
     r[2][0] = 0; r[2][1] = 0; r[2][2] = 1;
 }
 
+/* R_B^W = Rz(psi) Ry(theta) Rx(phi) (row-major) and its partial derivatives in phi and
+ * theta, from one sin and cos of each angle (the products of the elementary rotations
+ * written out: d/dphi turns R's columns [c1 c2 c3] into [0 c3 -c2]).  Either derivative may
+ * be NULL. */
+static inline void rot_zyx_jacobian(const double e[3], double r[9], double dr_dphi[9],
+                                    double dr_dtheta[9]) {
+    double sp = sin(e[0]), cp = cos(e[0]), st = sin(e[1]), ct = cos(e[1]);
+    double ss = sin(e[2]), cs = cos(e[2]);
+    r[0] = ct * cs, r[1] = sp * st * cs - cp * ss, r[2] = cp * st * cs + sp * ss;
+    r[3] = ct * ss, r[4] = sp * st * ss + cp * cs, r[5] = cp * st * ss - sp * cs;
+    r[6] = -st, r[7] = sp * ct, r[8] = cp * ct;
+    if (dr_dphi != NULL) {
+        int i;
+        for (i = 0; i < 3; i++) {
+            dr_dphi[3 * i] = 0.0;
+            dr_dphi[3 * i + 1] = r[3 * i + 2];
+            dr_dphi[3 * i + 2] = -r[3 * i + 1];
+        }
+    }
+    if (dr_dtheta != NULL) {
+        dr_dtheta[0] = -st * cs, dr_dtheta[1] = sp * ct * cs, dr_dtheta[2] = cp * ct * cs;
+        dr_dtheta[3] = -st * ss, dr_dtheta[4] = sp * ct * ss, dr_dtheta[5] = cp * ct * ss;
+        dr_dtheta[6] = -ct, dr_dtheta[7] = -sp * st, dr_dtheta[8] = -cp * st;
+    }
+}
+
 /* Quaternion [w, x, y, z] of R_B^W = Rz(psi) Ry(theta) Rx(phi). */
 static inline void quat_from_euler(const double e[3], double q[4]) {
     double cr = cos(0.5 * e[0]), sr = sin(0.5 * e[0]);

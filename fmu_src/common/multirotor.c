@@ -41,10 +41,13 @@ void fp_rotor_trig_tilts(const FpRotorSet *rs, const double alpha[], const doubl
                          FpRotorTrig *tr) {
     int i;
     for (i = 0; i < rs->n && i < FP_MAX_ROTORS; i++) {
-        tr->sa[i] = sin(alpha[i]);
-        tr->ca[i] = cos(alpha[i]);
-        tr->sb[i] = sin(beta[i]);
-        tr->cb[i] = cos(beta[i]);
+        /* read once: a store to tr could alias alpha or beta, and a reload would keep the
+         * compiler from taking each sin and cos pair in one call */
+        double a = alpha[i], b = beta[i];
+        tr->sa[i] = sin(a);
+        tr->ca[i] = cos(a);
+        tr->sb[i] = sin(b);
+        tr->cb[i] = cos(b);
     }
 }
 

@@ -31,27 +31,26 @@ void ctrl_detect_start(CtrlDetect *x) {
 
 void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const CtrlFiltered *s,
                  CtrlDetect *x, CtrlDetectOut *out) {
-    double q[4], r[3][3], fw[3], iw[3], wiw[3], w[6], res[6];
+    const double *r = s->r_m; /* R(mu_m), row-major */
+    double fw[3], iw[3], wiw[3], res[6];
     double scale[6], rr = 0.0, best_u = INFINITY, best_d = 0.0;
     int i, j, best = -1;
     /* the body force the accelerometer says, and the torque the gyro says */
-    quat_from_euler(s->mu_m, q);
-    rot_from_quat(q, r);
     for (i = 0; i < 3; i++) fw[i] = p->mass * (s->acc_m[i] - (i == 2 ? p->g : 0.0));
     m3_mul_v(&p->inertia[0][0], s->rate_m, iw);
     v3_cross(s->rate_m, iw, wiw);
     m3_mul_v(&p->inertia[0][0], s->ang_acc_m, iw);
     for (i = 0; i < 3; i++) {
-        res[i] = r[0][i] * fw[0] + r[1][i] * fw[1] + r[2][i] * fw[2] - s->f_b_m[i];
+        res[i] = r[i] * fw[0] + r[3 + i] * fw[1] + r[6 + i] * fw[2] - s->f_b_m[i];
         res[3 + i] = iw[i] + wiw[i] - s->tau_b_m[i];
         scale[i] = 1.0;
         scale[3 + i] = 1.0 / (p->arm * p->arm);
     }
     for (j = 0; j < 6; j++) rr += scale[j] * res[j] * res[j];
     for (i = 0; i < rs->n && i < FP_MAX_ROTORS; i++) {
+        const double *w = s->w_rotor[i];
         double ww = 0.0, rw = 0.0, d, u;
         if (!(s->eff[i] > 0.0)) continue; /* lost already: nothing more to lose */
-        fp_rotor_wrench_one(rs, &s->trig, i, s->w_m[i], w);
         for (j = 0; j < 6; j++) {
             ww += scale[j] * w[j] * w[j];
             rw += scale[j] * res[j] * w[j];

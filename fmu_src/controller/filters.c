@@ -167,5 +167,16 @@ void ctrl_read_filters(const double x[CTRL_N_FILTERS][2], const FpRotorSet *roto
     memcpy(s->trig.sg, mounts->sg, sizeof s->trig.sg);
     memcpy(s->trig.cg, mounts->cg, sizeof s->trig.cg);
     fp_rotor_trig_tilts(rotors, s->a_m, s->b_m, &s->trig);
-    fp_rotor_wrench_trig(rotors, &s->trig, s->w_m, s->eff, s->f_b_m, s->tau_b_m);
+    /* nu_m as the sum of each rotor's wrench at full efficiency, which the detector fits */
+    for (i = 0; i < 3; i++) s->f_b_m[i] = s->tau_b_m[i] = 0.0;
+    for (i = 0; i < rotors->n && i < FP_MAX_ROTORS; i++) {
+        const double *w = s->w_rotor[i];
+        int j;
+        fp_rotor_wrench_one(rotors, &s->trig, i, s->w_m[i], s->w_rotor[i]);
+        for (j = 0; j < 3; j++) {
+            s->f_b_m[j] += s->eff[i] * w[j];
+            s->tau_b_m[j] += s->eff[i] * w[3 + j];
+        }
+    }
+    rot_zyx_jacobian(s->mu_m, s->r_m, s->dr_dphi_m, s->dr_dtheta_m);
 }

@@ -22,25 +22,6 @@ typedef struct {
     double f_p[3];                         /* R(mu_ref)^T f_w_ref: body force at mu_ref */
 } OuterIndi;
 
-/* R = Rz(psi) Ry(theta) Rx(phi) and its partial derivatives in phi and theta. */
-static void attitude_jacobian(const double e[3], double r[9], double dr_dphi[9],
-                              double dr_dtheta[9]) {
-    double rx[3][3], ry[3][3], rz[3][3], drx[3][3], dry[3][3], t[9];
-    double cp = cos(e[0]), sp = sin(e[0]), ct = cos(e[1]), st = sin(e[1]);
-    rot_x(e[0], rx);
-    rot_y(e[1], ry);
-    rot_z(e[2], rz);
-    memset(drx, 0, sizeof drx);
-    memset(dry, 0, sizeof dry);
-    drx[1][1] = -sp, drx[1][2] = -cp, drx[2][1] = cp, drx[2][2] = -sp;
-    dry[0][0] = -st, dry[0][2] = ct, dry[2][0] = -ct, dry[2][2] = -st;
-    m3_mul(&rz[0][0], &ry[0][0], t);
-    m3_mul(t, &rx[0][0], r);
-    m3_mul(t, &drx[0][0], dr_dphi);
-    m3_mul(&rz[0][0], &dry[0][0], t);
-    m3_mul(t, &rx[0][0], dr_dtheta);
-}
-
 /* K_xi and K_xidot with feed-forward: acc_c, and dacc = acc_c - acc_m.
  * Position and velocity references pass through the measurement filter H(s) before they
  * meet the filtered measurements: with the same delay on both sides the feedback terms
@@ -170,7 +151,9 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     double rf[3], t0;
     int i;
     outer_loop(p, in, s, st, out->acc_c, o.dacc);
-    attitude_jacobian(s->mu_m, o.r, o.dr_dphi, o.dr_dtheta);
+    memcpy(o.r, s->r_m, sizeof o.r);
+    memcpy(o.dr_dphi, s->dr_dphi_m, sizeof o.dr_dphi);
+    memcpy(o.dr_dtheta, s->dr_dtheta_m, sizeof o.dr_dtheta);
     /* eq. (20)-(21) */
     m3_mul_v(o.r, s->f_b_m, rf);
     for (i = 0; i < 3; i++) o.f_w_ref[i] = p->mass * o.dacc[i] + rf[i];
@@ -178,12 +161,11 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
         out->f_b_ref[i] = o.r[i] * o.f_w_ref[0] + o.r[3 + i] * o.f_w_ref[1] +
                           o.r[6 + i] * o.f_w_ref[2];
     {
-        double q[4], r_ref[3][3];
-        quat_from_euler(in->mu_ref, q);
-        rot_from_quat(q, r_ref);
+        double r_ref[9];
+        rot_zyx_jacobian(in->mu_ref, r_ref, NULL, NULL);
         for (i = 0; i < 3; i++)
-            o.f_p[i] = r_ref[0][i] * o.f_w_ref[0] + r_ref[1][i] * o.f_w_ref[1] +
-                       r_ref[2][i] * o.f_w_ref[2];
+            o.f_p[i] = r_ref[i] * o.f_w_ref[0] + r_ref[3 + i] * o.f_w_ref[1] +
+                       r_ref[6 + i] * o.f_w_ref[2];
     }
     build_qp(p, fs, in->mu_ref, s->mu_m, s->f_b_m, &o, out->f_b_ref[2], st->c_rows, w);
     t0 = p->timing ? fp_clock_seconds() : 0.0;
@@ -215,14 +197,13 @@ void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
                         CtrlTwin *tw, FpWls *w, double mu_ff[3]) {
     OuterIndi o;
     FpWlsResult res;
-    double q[4], r_ref[3][3], mu0[3], f0[3], rf[3], f_bz;
+    double r_ref[9], mu0[3], f0[3], rf[3], f_bz;
     int i;
     for (i = 0; i < 3; i++) o.f_w_ref[i] = p->mass * (acc_ref[i] - (i == 2 ? g : 0.0));
-    quat_from_euler(mu_ref, q);
-    rot_from_quat(q, r_ref);
+    rot_zyx_jacobian(mu_ref, r_ref, NULL, NULL);
     for (i = 0; i < 3; i++)
-        o.f_p[i] = r_ref[0][i] * o.f_w_ref[0] + r_ref[1][i] * o.f_w_ref[1] +
-                   r_ref[2][i] * o.f_w_ref[2];
+        o.f_p[i] = r_ref[i] * o.f_w_ref[0] + r_ref[3 + i] * o.f_w_ref[1] +
+                   r_ref[6 + i] * o.f_w_ref[2];
     if (reference_feasible(fs, o.f_p)) {
         memcpy(mu_ff, mu_ref, 3 * sizeof(double));
         memcpy(tw->mu, mu_ref, sizeof tw->mu);
@@ -232,7 +213,7 @@ void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     }
     mu0[0] = tw->mu[0], mu0[1] = tw->mu[1], mu0[2] = mu_ref[2];
     memcpy(f0, tw->f, sizeof f0);
-    attitude_jacobian(mu0, o.r, o.dr_dphi, o.dr_dtheta);
+    rot_zyx_jacobian(mu0, o.r, o.dr_dphi, o.dr_dtheta);
     m3_mul_v(o.r, f0, rf);
     for (i = 0; i < 3; i++) o.dacc[i] = (o.f_w_ref[i] - rf[i]) / p->mass;
     f_bz = o.r[2] * o.f_w_ref[0] + o.r[5] * o.f_w_ref[1] + o.r[8] * o.f_w_ref[2];

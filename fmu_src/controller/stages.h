@@ -40,7 +40,9 @@ enum { F_POS = 0, F_VEL = 3, F_ACC = 6, F_EULER = 9, F_RATE = 12, F_POS_REF = 15
 enum { BLK_POS = 0, BLK_VEL = 1, BLK_ATT = 2, BLK_RATE = 3 };
 
 static inline double ctrl_wrap_pi(double a) {
-    a = fmod(a + CTRL_PI, 2.0 * CTRL_PI);
+    double b = a + CTRL_PI;
+    if (b >= 0.0 && b < 2.0 * CTRL_PI) return b - CTRL_PI; /* fmod(b, 2 pi) is b: no call */
+    a = fmod(b, 2.0 * CTRL_PI);
     if (a < 0.0) a += 2.0 * CTRL_PI;
     return a - CTRL_PI;
 }
@@ -125,7 +127,11 @@ typedef struct {
     double a_m[FP_MAX_ROTORS], b_m[FP_MAX_ROTORS], w_m[FP_MAX_ROTORS]; /* alpha, beta, omega */
     double eff[FP_MAX_ROTORS];               /* known rotor efficiency, 0 for lost rotors */
     double f_b_m[3], tau_b_m[3];             /* nu_m: the rotor wrench at a_m, b_m, w_m */
+    double w_rotor[FP_MAX_ROTORS][6]; /* each rotor's own wrench at full efficiency */
     FpRotorTrig trig;                        /* sin, cos of a_m, b_m and the azimuths */
+    /* R(mu_m) (body to world, row-major) and its derivatives in phi and theta, once per
+     * sample for the guidance and the detector */
+    double r_m[9], dr_dphi_m[9], dr_dtheta_m[9];
     /* the references delayed by H(s) like the measurements */
     double pos_ref_f[3], vel_ref_f[3], mu_ref_f[3];
 } CtrlFiltered;
