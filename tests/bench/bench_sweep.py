@@ -17,7 +17,10 @@ disturbance step, sensor noise; ``--duration`` s each, designs hinf and baseline
 
   with runs/s, runs/s and real-time factor per worker, per worker against the loop
   (target >= 80 %) and 2 workers against 1 (target >= 1.9x): against the in-process worker,
-  and for Dask also against the 1-worker Dask cluster (the same path, one worker more).
+  and for Dask also against the 1-worker Dask cluster (the same path, one worker more);
+* then ``--rounds`` rounds (default 3) of the 1- and 2-worker sweeps timed back to back, and
+  the ratios' median and range over the rounds: on a VM whose speed drifts by tens of per
+  cent within minutes, a ratio of two sweeps timed a minute apart carries that drift.
 
 The figures need a quiet machine: the load average before and after is printed.
 
@@ -125,6 +128,48 @@ def dask_sweeps(small: int, large: int, duration: float) -> tuple[Sweep, Sweep] 
     return out[0], out[1]
 
 
+def interleaved(rounds: int, small: int, large: int, duration: float) -> None:
+    """The 1- and 2-worker sweeps again, ``rounds`` times, each round timing them back to
+    back (in process, 2 local processes, then Dask 1 x 1 and 2 x 1, each cluster started
+    for its sweep: a forked pool beside a live cluster's threads could deadlock), so that
+    the machine's drift between sweeps falls on a ratio's two terms alike; the ratios per
+    round, their median and range."""
+    import importlib.util
+
+    have_dask = importlib.util.find_spec("distributed") is not None
+    ratios: dict[str, list[tuple[float, float]]] = {}
+
+    def ratio(name: str, a: Sweep, b: Sweep) -> None:
+        ratios.setdefault(name, []).append(
+            (a.runs / a.wall / (b.runs / b.wall), a.marginal / b.marginal))
+
+    def on_dask(n_workers: int) -> Sweep:
+        import dask
+        from dask.distributed import Client, LocalCluster
+
+        kw = {"processes": True, "threads_per_worker": 1, "dashboard_address": None}
+        with dask.config.set(sweep.DASK_CONFIG), \
+                LocalCluster(n_workers=n_workers, **kw) as cluster, Client(cluster) as k:
+            k.run(lambda: __import__("orchestrator.sweep"))
+            return measure(f"Dask {n_workers}x1", n_workers, small, large, duration, dask=k)
+
+    for _ in range(rounds):
+        one = measure("in process", 1, small, large, duration)
+        pool = measure("2 local processes", 2, small, large, duration, workers=2)
+        ratio("2 local processes / in process", pool, one)
+        if have_dask:
+            d1, d2 = on_dask(1), on_dask(2)
+            ratio("Dask 2x1 / in process", d2, one)
+            ratio("Dask 2x1 / Dask 1x1", d2, d1)
+    print(f"2 workers vs 1, timed back to back in each of {rounds} rounds (whole call, "
+          "marginal; median [range]):")
+    for name, vals in ratios.items():
+        whole, marg = zip(*vals, strict=True)
+        print(f"  {name:34s} whole {statistics.median(whole):5.2f}x "
+              f"[{min(whole):.2f}-{max(whole):.2f}]   marginal {statistics.median(marg):5.2f}x "
+              f"[{min(marg):.2f}-{max(marg):.2f}]")
+
+
 def idle_background(client: Any, label: str, seconds: float = 2.0) -> None:
     """What an idle LocalCluster burns (heartbeats, monitors, the workers' profilers): the
     cores it takes from the work on a 2-core machine."""
@@ -159,6 +204,9 @@ def main() -> None:
     parser.add_argument("--loop-runs", type=int, default=10,
                         help="single runs that give the loop speed (default 10)")
     parser.add_argument("--duration", type=float, default=6.0, help="s per run (default 6)")
+    parser.add_argument("--rounds", type=int, default=3,
+                        help="rounds of the 1- and 2-worker sweeps timed back to back, for "
+                             "ratios the machine's drift does not skew (default 3; 0: none)")
     args = parser.parse_args()
     d, n = args.duration, args.cases
     small = max(1, n // 6)
@@ -194,6 +242,8 @@ def main() -> None:
         print(f"Dask 2x1 vs Dask 1x1 (the same path, 1 worker more): whole call "
               f"{dask.runs / dask.wall / (dask_one.runs / dask_one.wall):.2f}x, marginal "
               f"{dask.marginal / dask_one.marginal:.2f}x")
+    if args.rounds > 0:
+        interleaved(args.rounds, small, n, d)
     bound = ", ".join(f"{name} {2 * one.cpu / one.runs / (s.cpu / s.runs):.2f}x"
                       for name, s in (("2 local processes", pool), ("Dask", dask))
                       if s is not None)
