@@ -182,14 +182,7 @@ class RunResult:
     def stored(self, name: str) -> np.ndarray:
         """One column as ``results.parquet`` holds it (and :meth:`read` gives it back), in
         float64."""
-        col = self.column(name)
-        kind = self.precision(name)
-        if kind == "int32":
-            return col.astype(np.int32).astype(np.float64)
-        if kind == "float64":
-            return col.copy()
-        bits = 24 if kind == "float32" else ROUNDED_BITS
-        return round_float32(col.astype(np.float32), bits).astype(np.float64)
+        return _as_stored(self.column(name), self.precision(name)).astype(np.float64)
 
     def _wide(self) -> frozenset[str]:
         wide = self.__dict__.get("_wide_columns")
@@ -234,18 +227,8 @@ class RunResult:
         import pyarrow as pa
 
         block = self.data[a:b]
-        arrays = []
-        for i, f in enumerate(schema):
-            kind = self.precision(f.name)
-            col = block[:, i]
-            if kind == "int32":
-                arrays.append(_arrow(col.astype(np.int32)))
-            elif kind == "float64":
-                arrays.append(_arrow(col))
-            elif kind == "float32":
-                arrays.append(_arrow(col.astype(np.float32)))
-            else:
-                arrays.append(_arrow(round_float32(col.astype(np.float32))))
+        arrays = [_arrow(_as_stored(block[:, i], self.precision(f.name)))
+                  for i, f in enumerate(schema)]
         return pa.RecordBatch.from_arrays(arrays, schema=schema)
 
     def write_parquet(self, path: Path) -> None:
@@ -369,6 +352,17 @@ _NUMPY_OF = {"double": np.float64, "float": np.float32, "int64": np.int64, "int3
              "int16": np.int16, "int8": np.int8, "uint64": np.uint64, "uint32": np.uint32,
              "uint16": np.uint16, "uint8": np.uint8}
 """numpy's type of each Arrow numeric type, by its name (``str(pa.float32())`` is "float")."""
+
+
+def _as_stored(col: np.ndarray, kind: str) -> np.ndarray:
+    """A column in the type and precision ``kind`` (:meth:`RunResult.precision`) gives it in
+    ``results.parquet``."""
+    if kind == "int32":
+        return col.astype(np.int32)
+    if kind == "float64":
+        return np.ascontiguousarray(col, dtype=np.float64)
+    single = col.astype(np.float32)
+    return single if kind == "float32" else round_float32(single)
 
 
 def _arrow(values: np.ndarray) -> pa.Array:

@@ -484,7 +484,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlShapingParams shp;
     CtrlShapingInputs shin;
     CtrlShapedRef r;
-    double mu_in[3], mu_ff[3], mu_rate_ff[3], mu_acc_ff[3], pos_in[3], vel_in[3];
+    double mu_in[3], mu_ff[3], mu_rate_ff[3], mu_acc_ff[3], pos_in[3], vel_in[3], r_ref[9];
     double age = m->inputs_age;
     double dtau_c[3], rate_c[3], dnu_c[6], t_start = m->timing ? fp_clock_seconds() : 0.0;
     /* what a sample changes besides its outputs: restored when the sample is discarded */
@@ -524,7 +524,8 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     ctrl_shape_reference(&shp, &shin, &m->shaping, &r);
     fs = force_set_in_use(m);
     gp = guidance_params(m);
-    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, m->g, &m->twin, &m->twin_qp, mu_ff);
+    rot_zyx_jacobian(r.mu, r_ref, NULL, NULL); /* the twin's and the guidance's R(mu_ref) */
+    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, r_ref, m->g, &m->twin, &m->twin_qp, mu_ff);
     for (i = 0; i < 3; i++) /* the twin's rate wherever it departs from the reference */
         mu_rate_ff[i] = m->twin.active || twin_before.active
                             ? ctrl_wrap_pi(mu_ff[i] - m->mu_ff[i]) / m->Ts
@@ -554,6 +555,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     /* 2. guidance */
     gin.acc_ref = r.acc;
     gin.mu_ref = r.mu;
+    gin.r_ref = r_ref;
     gst.x_pos = m->blk[BLK_POS];
     gst.x_vel = m->blk[BLK_VEL];
     gst.qp = &m->guid;

@@ -16,7 +16,7 @@ enum { NV = 5 }; /* QP variables [dfx, dfy, dfz, dphi, dtheta] */
 
 /* Outer INDI at the filtered measurement. */
 typedef struct {
-    double r[9], dr_dphi[9], dr_dtheta[9]; /* R(mu_m) and its partial derivatives */
+    const double *r, *dr_dphi, *dr_dtheta; /* R(mu_m) and its partial derivatives (9 each) */
     double dacc[3];                        /* acc_c - acc_m */
     double f_w_ref[3];                     /* world force the reference needs, eq. (20) */
     double f_p[3];                         /* R(mu_ref)^T f_w_ref: body force at mu_ref */
@@ -151,22 +151,16 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     double rf[3], t0;
     int i;
     outer_loop(p, in, s, st, out->acc_c, o.dacc);
-    memcpy(o.r, s->r_m, sizeof o.r);
-    memcpy(o.dr_dphi, s->dr_dphi_m, sizeof o.dr_dphi);
-    memcpy(o.dr_dtheta, s->dr_dtheta_m, sizeof o.dr_dtheta);
+    o.r = s->r_m, o.dr_dphi = s->dr_dphi_m, o.dr_dtheta = s->dr_dtheta_m;
     /* eq. (20)-(21) */
     m3_mul_v(o.r, s->f_b_m, rf);
     for (i = 0; i < 3; i++) o.f_w_ref[i] = p->mass * o.dacc[i] + rf[i];
     for (i = 0; i < 3; i++)
         out->f_b_ref[i] = o.r[i] * o.f_w_ref[0] + o.r[3 + i] * o.f_w_ref[1] +
                           o.r[6 + i] * o.f_w_ref[2];
-    {
-        double r_ref[9];
-        rot_zyx_jacobian(in->mu_ref, r_ref, NULL, NULL);
-        for (i = 0; i < 3; i++)
-            o.f_p[i] = r_ref[i] * o.f_w_ref[0] + r_ref[3 + i] * o.f_w_ref[1] +
-                       r_ref[6 + i] * o.f_w_ref[2];
-    }
+    for (i = 0; i < 3; i++)
+        o.f_p[i] = in->r_ref[i] * o.f_w_ref[0] + in->r_ref[3 + i] * o.f_w_ref[1] +
+                   in->r_ref[6 + i] * o.f_w_ref[2];
     build_qp(p, fs, in->mu_ref, s->mu_m, s->f_b_m, &o, out->f_b_ref[2], st->c_rows, w);
     t0 = p->timing ? fp_clock_seconds() : 0.0;
     fp_wls_solve_brief(w, p->max_iter, &res);
@@ -193,14 +187,14 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
  * QP is solved.
  */
 void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
-                        const double acc_ref[3], const double mu_ref[3], double g,
-                        CtrlTwin *tw, FpWls *w, double mu_ff[3]) {
+                        const double acc_ref[3], const double mu_ref[3],
+                        const double r_ref[9], double g, CtrlTwin *tw, FpWls *w,
+                        double mu_ff[3]) {
     OuterIndi o;
     FpWlsResult res;
-    double r_ref[9], mu0[3], f0[3], rf[3], f_bz;
+    double r[9], dr_dphi[9], dr_dtheta[9], mu0[3], f0[3], rf[3], f_bz;
     int i;
     for (i = 0; i < 3; i++) o.f_w_ref[i] = p->mass * (acc_ref[i] - (i == 2 ? g : 0.0));
-    rot_zyx_jacobian(mu_ref, r_ref, NULL, NULL);
     for (i = 0; i < 3; i++)
         o.f_p[i] = r_ref[i] * o.f_w_ref[0] + r_ref[3 + i] * o.f_w_ref[1] +
                    r_ref[6 + i] * o.f_w_ref[2];
@@ -213,7 +207,8 @@ void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
     }
     mu0[0] = tw->mu[0], mu0[1] = tw->mu[1], mu0[2] = mu_ref[2];
     memcpy(f0, tw->f, sizeof f0);
-    rot_zyx_jacobian(mu0, o.r, o.dr_dphi, o.dr_dtheta);
+    rot_zyx_jacobian(mu0, r, dr_dphi, dr_dtheta);
+    o.r = r, o.dr_dphi = dr_dphi, o.dr_dtheta = dr_dtheta;
     m3_mul_v(o.r, f0, rf);
     for (i = 0; i < 3; i++) o.dacc[i] = (o.f_w_ref[i] - rf[i]) / p->mass;
     f_bz = o.r[2] * o.f_w_ref[0] + o.r[5] * o.f_w_ref[1] + o.r[8] * o.f_w_ref[2];

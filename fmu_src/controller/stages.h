@@ -210,6 +210,7 @@ typedef struct {
 typedef struct {
     const double *acc_ref; /* acceleration feed-forward (unfiltered) */
     const double *mu_ref;  /* reference attitude */
+    const double *r_ref;   /* R(mu_ref), row-major (computed once for the twin and this) */
 } CtrlGuidanceInputs;
 
 typedef struct {
@@ -236,10 +237,12 @@ void ctrl_guidance(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
                    CtrlGuidanceOut *out);
 
 /* The feed-forward attitude mu_ff: the guidance's answer for a vehicle on the reference
- * (acc_ref, mu_ref) exactly; tw carries its pose, w its QP (warm-started). */
+ * (acc_ref, mu_ref; r_ref = R(mu_ref)) exactly; tw carries its pose, w its QP
+ * (warm-started). */
 void ctrl_guidance_twin(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
-                        const double acc_ref[3], const double mu_ref[3], double g,
-                        CtrlTwin *tw, FpWls *w, double mu_ff[3]);
+                        const double acc_ref[3], const double mu_ref[3],
+                        const double r_ref[9], double g, CtrlTwin *tw, FpWls *w,
+                        double mu_ff[3]);
 
 /* ------------------------------------------------------------------------ */
 /* stabilization.c                                                          */
