@@ -21,6 +21,7 @@ SIGNATURES: dict[str, list[object]] = {
     "fp_wls_setup_api": [_VP, _I, _I, _I],
     "fp_wls_set_data_api": [_VP, _DP, _DP, _DP, _DP, _DP, _DP],
     "fp_wls_set_start_api": [_VP, _DP, _I8P],
+    "fp_wls_keep_rows_api": [_VP],
     "fp_wls_get_working_set_api": [_VP, _I8P],
     "fp_wls_solve_api": [_VP, _I, _DP, _I32P, _DP],
     "fp_wls_bench_api": [_VP, _I, _I, _DP, _DP, _I32P, _DP],

@@ -18,6 +18,7 @@ from controller.native import solver
 
 GUIDANCE = 0
 ALLOCATION = 1
+TWIN = 2
 _CAP = 96 * 32  # larger than any packed array of the solver caps
 
 
@@ -35,7 +36,7 @@ class RecordedQP:
 
 
 def qp_from_state(state: bytes, which: int) -> RecordedQP:
-    """Extract the last QP (GUIDANCE or ALLOCATION) from a serialized controller state."""
+    """Extract the last QP (GUIDANCE, ALLOCATION or TWIN) from a serialized controller state."""
     dims = np.zeros(3, dtype=np.int32)
     bufs = [np.zeros(_CAP) for _ in range(7)]
     dp = ctypes.POINTER(ctypes.c_double)

@@ -101,6 +101,13 @@ class WlsSolver:
         arr = _vector(x0, self.n_vars, 0.0, "x0")
         solver().fp_wls_set_start_api(self._buf, _dptr(arr), None)
 
+    def keep_rows(self) -> None:
+        """Tell the next solve that C is exactly the last solve's, as the controller does while
+        its force set is constant: the solve keeps the rows' checks and norms and reads only
+        d.  Any :meth:`set_data` with a C cancels it; it holds for one solve."""
+        if solver().fp_wls_keep_rows_api(self._buf) != 0:
+            raise RuntimeError("fp_wls_keep_rows failed")
+
     def reset(self) -> None:
         """Forget the working set: the next solve starts cold."""
         self.working_set = np.zeros(self.n_vars + self.n_cons, dtype=np.int8)
@@ -124,11 +131,13 @@ class WlsSolver:
         cc: NDArray[np.float64] | None
         dd: NDArray[np.float64] | None
         if p > 0:
-            if C is None or d is None:
-                raise ValueError(f"C and d are needed for {p} constraints")
-            cc = np.ascontiguousarray(np.asarray(C, dtype=np.float64))
-            if cc.shape != (p, n):
-                raise ValueError(f"C must be {p}x{n}, got {cc.shape}")
+            if d is None:
+                raise ValueError(f"d is needed for {p} constraints")
+            cc = None  # C None: the stored rows stay (a constant set, see keep_rows)
+            if C is not None:
+                cc = np.ascontiguousarray(np.asarray(C, dtype=np.float64))
+                if cc.shape != (p, n):
+                    raise ValueError(f"C must be {p}x{n}, got {cc.shape}")
             dd = _vector(d, p, 0.0, "d")
         else:
             cc = dd = None  # no equality rows: NULL pointers

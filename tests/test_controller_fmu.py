@@ -14,7 +14,7 @@ from fmpy.validation import validate_fmu
 
 import plant
 from controller import controller_fmu
-from controller.qp_record import ALLOCATION, GUIDANCE, qp_from_state
+from controller.qp_record import ALLOCATION, GUIDANCE, TWIN, qp_from_state
 from orchestrator.fmu import FmuInstance
 
 H = 0.002
@@ -103,6 +103,27 @@ def test_recorded_qps_agree_with_piqp(make_ctrl, piqp_solve):
         assert np.all(qp.x >= qp.lb - 1e-9) and np.all(qp.x <= qp.ub + 1e-9)
         if qp.C.size:
             assert np.all(qp.C @ qp.x <= qp.d + 1e-9)
+
+
+def test_reference_twin_qp_agrees_with_piqp(make_ctrl, piqp_solve):
+    """An attitude the force set cannot hold level (roll 0.9 rad at zero acceleration): the
+    reference twin solves its QP every sample, each one the optimum piqp finds."""
+    c = make_ctrl({"euler_ref[1]": 0.9})
+    mu_ff, ref = c.signal("mu_ff"), c.signal("euler_ref_s")
+    for k in range(20):
+        c.step(H)
+        assert not np.array_equal(c.read(mu_ff), c.read(ref))  # the twin departs from it
+        if k % 5 != 4:
+            continue
+        qp = qp_from_state(bytes(c.slave.serializeFMUstate(c.slave.getFMUstate())), TWIN)
+        assert qp.C.shape[0] > 0
+        status, x_piqp = piqp_solve(qp.A, qp.b, qp.lb, qp.ub, qp.C, qp.d)
+        assert status == piqp.PIQP_SOLVED
+        theirs = np.sum((qp.A @ x_piqp - qp.b) ** 2)
+        ours = np.sum((qp.A @ qp.x - qp.b) ** 2)
+        assert ours <= theirs * (1 + 1e-6) + 1e-9
+        assert np.all(qp.C @ qp.x <= qp.d + 1e-9)
+        assert np.all(qp.x >= qp.lb - 1e-9) and np.all(qp.x <= qp.ub + 1e-9)
 
 
 # ---------------------------------------------------------------------------

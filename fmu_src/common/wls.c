@@ -425,6 +425,7 @@ FpStatus fp_wls_set_data(FpWls *w, const double *A, const double *b, const doubl
     if (lb != NULL) memcpy(w->lb, lb, n * sizeof(double));
     if (ub != NULL) memcpy(w->ub, ub, n * sizeof(double));
     if (C != NULL && p > 0) memcpy(w->C, C, p * n * sizeof(double));
+    w->c_unchanged = 0;
     if (d != NULL && p > 0) memcpy(w->d, d, p * sizeof(double));
     return FP_OK;
 }
@@ -517,7 +518,7 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
     Ctx ctx, *c = &ctx;
     int n, i, j, iter = 0, it1 = 0, warm = 0, crossed = 0, zero_row_infeasible = 0, rc;
     double fscale = 1.0, colsq[FP_WLS_MAX_VARS], sq4[4];
-    int diag_tail = 0, m0;
+    int diag_tail = 0, m0, reuse, all_used;
 
     if (w == NULL) return FP_ERROR;
     if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
@@ -538,7 +539,20 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
      * entry by entry (a NaN fails the comparison).  The norm, its square root and 1 / norm
      * are taken from the last solve when the row's sum of squares is the same (a constant
      * force set), as vnorm would give them. */
-    for (i = 0; i < w->n_cons; i++) {
+    /* C as the last solve had it (the caller says so, and that solve kept every row's
+     * norm): only d is read; a d that is not a plain finite number takes the full pass */
+    reuse = w->c_unchanged && k->c_rows_ok == w->n_cons && k->c_cols_ok == n;
+    w->c_unchanged = 0;
+    for (i = 0; reuse && i < w->n_cons; i++) {
+        double ad = fabs(w->d[i]);
+        if (!(ad <= BIG)) break;
+        k->use[i] = 1;
+        if (ad / k->cnorm[i] > fscale) fscale = ad / k->cnorm[i];
+    }
+    if (reuse && i < w->n_cons) reuse = 0, fscale = 1.0;
+    k->c_rows_ok = k->c_cols_ok = -1;
+    all_used = 1;
+    for (i = 0; !reuse && i < w->n_cons; i++) {
         const double *row = w->C + i * n;
         double sq, cn;
         if (i % 4 == 0) sumsq4(row, n, w->n_cons - i < 4 ? w->n_cons - i : 4, n, sq4);
@@ -570,6 +584,8 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
         k->use[i] = 1;
         if (fabs(w->d[i]) / cn > fscale) fscale = fabs(w->d[i]) / cn;
     }
+    for (i = 0; !reuse && i < w->n_cons; i++) all_used &= k->use[i];
+    if (all_used) k->c_rows_ok = w->n_cons, k->c_cols_ok = n;
 
     for (j = 0; j < n; j++)
         if (w->lb[j] > w->ub[j]) crossed = 1;

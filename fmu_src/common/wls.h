@@ -125,6 +125,9 @@ typedef struct {
     int8_t state[FP_WLS_NV1];
     int8_t act[FP_WLS_MAX_CONS];
     int8_t use[FP_WLS_MAX_CONS];
+    /* the last solve found every row of its n_cons x n_vars C usable and kept its norm in
+     * csq, cnorm, cinv: c_rows_ok = n_cons, c_cols_ok = n_vars (else -1) */
+    int32_t c_rows_ok, c_cols_ok;
 } FpWlsWork;
 
 typedef struct {
@@ -137,6 +140,11 @@ typedef struct {
     double ub[FP_WLS_MAX_VARS];
     double C[FP_WLS_MAX_CONS * FP_WLS_MAX_VARS];
     double d[FP_WLS_MAX_CONS];
+    /* 1 when C (and the sizes) are exactly the last solve's: a constant set's rows, rewritten
+     * only when the set changes.  The solve then keeps the last solve's checks and norms of
+     * the rows instead of reading C again (d is checked every time).  Set by the caller
+     * before each solve that it applies to; every solve and fp_wls_set_data clear it. */
+    int32_t c_unchanged;
     /* Solution of the last solve (always finite). */
     double x[FP_WLS_MAX_VARS];
     /* Working set: bound_ws[j] = -1 at lb, +1 at ub, 0 free; cons_ws[i] = 1 active. */

@@ -378,6 +378,28 @@ static int diag_tail_step(Ctx *c, double *y) {
     return rc >= 0 ? rc : diag_tail_primal(c, y);
 }
 
+/* AZ = A_F Z when A ends in a diagonal block (Ctx.diag_tail): the dense rows as products,
+ * the diagonal row of variable v only the one term d_v Z(q_v, :) where v is free (free
+ * variable q_v), zero where it is fixed.  The same values as the general product, whose
+ * other terms are zeros (0.0 + keeps its +0.0 for a zero term). */
+static void az_diag_tail(Ctx *c, int nz) {
+    FpWlsWork *k = c->k;
+    const FpWls *w = c->w;
+    int nf = c->nf, n = c->n, m0 = c->m0, i, j, q, pos[FP_WLS_MAX_VARS];
+    for (i = 0; i < n; i++) pos[i] = -1;
+    for (q = 0; q < nf; q++) pos[k->free_idx[q]] = q;
+    for (j = 0; j < nz; j++) {
+        for (i = 0; i < m0; i++) {
+            const double *a = w->A + i * n;
+            double s = 0.0;
+            for (q = 0; q < nf; q++) s += a[k->free_idx[q]] * ZM(q, j);
+            AZ(i, j) = s;
+        }
+        for (i = 0; i < n; i++)
+            AZ(m0 + i, j) = pos[i] < 0 ? 0.0 : 0.0 + w->A[(m0 + i) * n + i] * ZM(pos[i], j);
+    }
+}
+
 /* Step p (full length nv, zero on fixed variables) to the face minimiser.
  * Needs factor_ws (and uses the current x).  Returns 0 if not finite. */
 int wls_compute_step(Ctx *c) {
@@ -398,19 +420,23 @@ int wls_compute_step(Ctx *c) {
     if (nw > 0) build_z(c);
     residual(c);
     /* AZ = A_F Z */
-    for (j = 0; j < nz; j++) {
-        for (i = 0; i < nr; i++) {
-            double s = 0.0;
-            if (c->ph1) {
-                for (q = 0; q < nf; q++)
-                    if (k->free_idx[q] == c->n) s = nw > 0 ? ZM(q, j) : (q == j ? 1.0 : 0.0);
-            } else if (nw > 0) {
-                const double *a = c->w->A + i * c->n;
-                for (q = 0; q < nf; q++) s += a[k->free_idx[q]] * ZM(q, j);
-            } else {
-                s = c->w->A[i * c->n + k->free_idx[j]];
+    if (!c->ph1 && nw > 0 && c->diag_tail) {
+        az_diag_tail(c, nz);
+    } else {
+        for (j = 0; j < nz; j++) {
+            for (i = 0; i < nr; i++) {
+                double s = 0.0;
+                if (c->ph1) {
+                    for (q = 0; q < nf; q++)
+                        if (k->free_idx[q] == c->n) s = nw > 0 ? ZM(q, j) : (q == j ? 1.0 : 0.0);
+                } else if (nw > 0) {
+                    const double *a = c->w->A + i * c->n;
+                    for (q = 0; q < nf; q++) s += a[k->free_idx[q]] * ZM(q, j);
+                } else {
+                    s = c->w->A[i * c->n + k->free_idx[j]];
+                }
+                AZ(i, j) = s;
             }
-            AZ(i, j) = s;
         }
     }
     ls_minnorm(c, nr, nz, c->ph1 ? 1.0 : c->anorm, y);

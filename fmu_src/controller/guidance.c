@@ -116,6 +116,7 @@ static void build_qp(const CtrlGuidanceParams *p, const CtrlForceSet *fs,
         w->ub[2] = fs->fz[1] - f0[2];
     }
     w->n_cons = n_cons;
+    w->c_unchanged = rows_known; /* the solver keeps the rows' norms */
     *c_rows = key;
 }
 

@@ -49,6 +49,13 @@ FP_API int fp_wls_set_start_api(void *buffer, const double *x0, const int8_t *ws
     return FP_OK;
 }
 
+FP_API int fp_wls_keep_rows_api(void *buffer) {
+    FpWls *w = (FpWls *)buffer;
+    if (!wls_sizes_ok(w)) return FP_ERROR;
+    w->c_unchanged = 1;
+    return FP_OK;
+}
+
 FP_API int fp_wls_get_working_set_api(const void *buffer, int8_t *ws) {
     const FpWls *w = (const FpWls *)buffer;
     if (!wls_sizes_ok(w) || ws == NULL) return FP_ERROR;
@@ -93,7 +100,9 @@ static double fp_now_ns(void) {
 
 /* Benchmark: solve the stored problem `repeats` times, each time from the same
  * start (the x and working set stored on entry), and write each solve's wall
- * time in ns to ns_out[repeats] (fp_wls_solve_brief, as the controller solves); x, info
+ * time in ns to ns_out[repeats] (fp_wls_solve_brief, as the controller solves; from the
+ * second solve on with C's rows kept, as the controller's guidance with a constant force
+ * set); x, info
  * and fout as fp_wls_solve_api for the last solve.  The struct is left as after the last solve. */
 FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_out, double *x,
                             int32_t *info, double *fout) {
@@ -113,6 +122,7 @@ FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_
         memcpy(w->x, x0, sizeof x0);
         memcpy(w->bound_ws, bws, sizeof bws);
         memcpy(w->cons_ws, cws, sizeof cws);
+        w->c_unchanged = r > 0; /* as the controller's constant force set: rows kept */
         t0 = fp_now_ns();
         st = fp_wls_solve_brief(w, max_iter, &res); /* as the controller solves */
         t1 = fp_now_ns();
@@ -128,8 +138,8 @@ FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_
 }
 
 /*
- * The last guidance (which = 0) or inner-allocation (which = 1) QP of a
- * FullPoseController, read from its serialized FMU state (fmi2SerializeFMUstate):
+ * The last guidance (which = 0), inner-allocation (which = 1) or reference-twin (which = 2)
+ * QP of a FullPoseController, read from its serialized FMU state (fmi2SerializeFMUstate):
  * the model struct is the tail of the serialized bytes.  dims receives
  * [n_vars, n_rows, n_cons]; the arrays are packed row-major with row length
  * n_vars and must hold the solver caps (FP_WLS_MAX_*).  x is the solution the
@@ -142,9 +152,9 @@ FP_API int fp_controller_state_qp(const unsigned char *state, long size, int whi
     const FpWls *w;
     static const size_t model_size = sizeof(ControllerModel);
     size_t nv, nr, nc;
-    if (state == NULL || size < (long)model_size || (which != 0 && which != 1)) return FP_ERROR;
+    if (state == NULL || size < (long)model_size || (which < 0 || which > 2)) return FP_ERROR;
     m = (const ControllerModel *)(const void *)(state + (size_t)size - model_size);
-    w = which == 0 ? &m->guid : &m->alloc;
+    w = which == 0 ? &m->guid : which == 1 ? &m->alloc : &m->twin_qp;
     if (w->n_vars < 1 || w->n_vars > FP_WLS_MAX_VARS || w->n_rows < 0 ||
         w->n_rows > FP_WLS_MAX_ROWS || w->n_cons < 0 || w->n_cons > FP_WLS_MAX_CONS)
         return FP_ERROR;

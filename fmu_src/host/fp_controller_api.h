@@ -33,6 +33,10 @@ FP_API int fp_wls_set_data_api(void *buffer, const double *A, const double *b, c
  * keeps it). */
 FP_API int fp_wls_set_start_api(void *buffer, const double *x0, const int8_t *ws);
 
+/* The next solve's C is exactly the last solve's (FpWls.c_unchanged): it keeps the rows'
+ * checks and norms and reads only d. */
+FP_API int fp_wls_keep_rows_api(void *buffer);
+
 /* The working set of the last solve into ws[n_vars + n_cons]. */
 FP_API int fp_wls_get_working_set_api(const void *buffer, int8_t *ws);
 
@@ -42,14 +46,15 @@ FP_API int fp_wls_solve_api(void *buffer, int max_iter, double *x, int32_t *info
 
 /* Benchmark: solve the stored problem `repeats` times, each time from the same start (the
  * x and working set stored on entry), and write each solve's wall time in ns to
- * ns_out[repeats]; x, info and fout as fp_wls_solve_api for the last solve.  The struct
+ * ns_out[repeats] (from the second solve on with C's rows kept, as the controller solves
+ * with a constant force set); x, info and fout as fp_wls_solve_api for the last solve.  The struct
  * is left as after the last solve. */
 FP_API int fp_wls_bench_api(void *buffer, int max_iter, int repeats, double *ns_out, double *x,
                             int32_t *info, double *fout);
 
 /*
- * The last guidance (which = 0) or inner-allocation (which = 1) QP of a
- * FullPoseController, read from its serialized FMU state (fmi2SerializeFMUstate):
+ * The last guidance (which = 0), inner-allocation (which = 1) or reference-twin (which = 2)
+ * QP of a FullPoseController, read from its serialized FMU state (fmi2SerializeFMUstate):
  * the model struct is the tail of the serialized bytes.  dims receives
  * [n_vars, n_rows, n_cons]; the arrays are packed row-major with row length
  * n_vars and must hold the solver caps (FP_WLS_MAX_*).  x is the solution the
