@@ -498,7 +498,6 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
     fp_wls_prefetch(&m->guid);
     fp_wls_prefetch(&m->alloc);
-    if (m->twin.active) fp_wls_prefetch(&m->twin_qp); /* likely to solve again */
     update_rotor_losses(m, logger);
     memcpy(filt_before, m->filt, sizeof filt_before);
     memcpy(blk_before, m->blk, sizeof blk_before);
