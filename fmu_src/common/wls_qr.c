@@ -311,32 +311,32 @@ static int diag_tail_primal(Ctx *c, double *y) {
  * min ||M_F y - r_M||^2 + ||D_F y - r_D||^2, M_F the m0 dense rows on the free variables,
  * D_F their diagonal rows (the fixed variables' rows are constant over F).  With z = D_F y
  * and E = M_F D_F^-1 the minimiser is z = r_D + E' lam, where lam = r_M - E z (the dense
- * rows' residual) solves the m0-column least-squares problem
- *     min || [E'; I] lam - [-r_D; r_M] ||
- * (its normal equations are (I + E E') lam = r_M - E r_D, the optimality condition).  Its
- * Householder QR has m0 reflectors instead of nf (6 against up to 18 in the allocation):
- * column j below the diagonal is non-zero only in rows j..nf+j (E' rows j.., identity rows
- * 0..j, the later identity rows untouched so far), so each reflector spans nf + 1 rows; and
- * [E'; I] has full column rank whatever E is (no pivoting).  No normal equations are formed,
- * but the dual problem's residual is z itself, so the error in z grows like eps ||E||^2 (as
- * in the normal equations) when the dense rows are nearly met: the dual form is taken only
- * for ||E||_F^2 <= DUAL_E2_MAX (the allocation's E is ~400, the guidance's ~5e3), else
- * diag_tail_primal.  Returns 1 (y set), 0 (the caller takes the general path) when some
- * |d_q| is at the general path's rank cut-off, -1 when E is too large. */
+ * rows' residual) solves
+ *     (I + E E') lam = r_M - E r_D,
+ * an m0 x m0 system (6 in the allocation, against up to 18 free variables) whose matrix is
+ * >= I: positive definite whatever E is, every Cholesky pivot >= 1.  Its error: the
+ * right-hand side is a difference of terms up to ||E|| ||r_D||, and z = r_D + E' lam
+ * carries that rounding times ||E||, so z's relative error grows like eps ||E||^2 when the
+ * dense rows are nearly met (the QR of [E'; I], used before, has the same order, the dual
+ * problem's residual being z itself; its chain of reflectors made the control sample 2-6 %
+ * slower in the closed loop).  The dual form is taken only for ||E||_F^2 <= DUAL_E2_MAX (the
+ * allocation's ||E||_F^2 is ~2e5, the guidance's ~3e7), else diag_tail_primal.  Returns 1
+ * (y set), 0 (the caller takes the general path) when some |d_q| is at the general path's
+ * rank cut-off, -1 when E is too large (or rounding ate a pivot). */
 static int diag_tail_dual(Ctx *c, double *y) {
     FpWlsWork *k = c->k;
     const FpWls *w = c->w;
     int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
-    double *r = k->r, *rt, dinv[NV1], e2 = 0.0;
-    if (m0 + 1 > NV1) return -1; /* AZ holds NV1 columns: [E'; I] and the right-hand side */
-    rt = &AZ(0, m0);            /* the right-hand side, column m0 */
+    double *r = k->r, dinv[NV1], rd[NV1], lam[NV1], g[NV1 * NV1], e2 = 0.0;
+    if (m0 + 1 > NV1) return -1; /* AZ holds NV1 columns */
     for (q = 0; q < nf; q++) {
         int v = k->free_idx[q];
         double dq = w->A[(m0 + v) * n + v];
         if (!(fabs(dq) > TOL_RANK * c->anorm)) return 0;
         dinv[q] = 1.0 / dq;
+        rd[q] = r[m0 + v];
     }
-    /* AZ rows 0..nf-1: E' (free variable q in row q), rows nf..nf+m0-1: the identity */
+    /* AZ column i: row i of E (free variable q in row q) */
     for (i = 0; i < m0; i++) {
         const double *a = w->A + i * n;
         double *col = &AZ(0, i);
@@ -344,28 +344,62 @@ static int diag_tail_dual(Ctx *c, double *y) {
             col[q] = a[k->free_idx[q]] * dinv[q];
             e2 += col[q] * col[q];
         }
-        for (q = 0; q < m0; q++) col[nf + q] = q == i ? 1.0 : 0.0;
-        rt[nf + i] = r[i];
     }
     if (!(e2 <= DUAL_E2_MAX)) return -1;
-    for (q = 0; q < nf; q++) rt[q] = -r[m0 + k->free_idx[q]];
+    /* G = I + E E' (row-major, lower triangle) and lam's right-hand side r_M - E r_D, four
+     * entries of a row side by side (independent sums, each element of row i read once) */
+    for (i = 0; i < m0; i++) {
+        const double *ei = &AZ(0, i);
+        double s = r[i];
+        for (j = 0; j + 4 <= i + 1; j += 4) {
+            const double *e0 = &AZ(0, j), *e1 = e0 + LDA, *e2r = e1 + LDA, *e3 = e2r + LDA;
+            double t0 = 0.0, t1 = 0.0, t2 = 0.0, t3 = 0.0;
+            for (q = 0; q < nf; q++) {
+                double x = ei[q];
+                t0 += x * e0[q], t1 += x * e1[q], t2 += x * e2r[q], t3 += x * e3[q];
+            }
+            g[i * m0 + j] = t0, g[i * m0 + j + 1] = t1, g[i * m0 + j + 2] = t2;
+            g[i * m0 + j + 3] = t3;
+        }
+        for (; j <= i; j++) {
+            const double *ej = &AZ(0, j);
+            double t = 0.0;
+            for (q = 0; q < nf; q++) t += ei[q] * ej[q];
+            g[i * m0 + j] = t;
+        }
+        g[i * m0 + i] += 1.0;
+        for (q = 0; q < nf; q++) s -= ei[q] * rd[q];
+        lam[i] = s;
+    }
+    /* Cholesky G = L L' in place (G >= I: every pivot >= 1 in exact arithmetic), then
+     * L L' lam = rhs */
     for (j = 0; j < m0; j++) {
-        double tau;
-        house_make(&AZ(j, j), nf + 1, &tau);
-        house_apply_cols(&AZ(j + 1, j), nf + 1, tau, &AZ(j, j + 1), m0 - j, LDA);
+        double d = g[j * m0 + j];
+        for (q = 0; q < j; q++) d -= g[j * m0 + q] * g[j * m0 + q];
+        if (!(d >= 0.5)) return -1; /* rounding has eaten the identity: the primal form */
+        d = sqrt(d);
+        g[j * m0 + j] = d;
+        for (i = j + 1; i < m0; i++) {
+            double t = g[i * m0 + j];
+            for (q = 0; q < j; q++) t -= g[i * m0 + q] * g[j * m0 + q];
+            g[i * m0 + j] = t / d;
+        }
     }
-    for (j = m0 - 1; j >= 0; j--) { /* R lam = (Q' t)[0:m0], by columns; lam into rt */
-        const double *rj = &AZ(0, j);
-        double lj = rt[j] / rj[j];
-        rt[j] = lj;
-        for (q = 0; q < j; q++) rt[q] -= rj[q] * lj;
+    for (i = 0; i < m0; i++) {
+        double t = lam[i];
+        for (q = 0; q < i; q++) t -= g[i * m0 + q] * lam[q];
+        lam[i] = t / g[i * m0 + i];
     }
-    /* y = D_F^-1 (r_D + M_F' lam D_F^-1) */
+    for (i = m0 - 1; i >= 0; i--) {
+        double t = lam[i];
+        for (q = i + 1; q < m0; q++) t -= g[q * m0 + i] * lam[q];
+        lam[i] = t / g[i * m0 + i];
+    }
+    /* z = r_D + E' lam, y = D_F^-1 z */
     for (q = 0; q < nf; q++) {
-        int v = k->free_idx[q];
-        double s = 0.0;
-        for (i = 0; i < m0; i++) s += w->A[i * n + v] * rt[i];
-        y[q] = (r[m0 + v] + s * dinv[q]) * dinv[q];
+        double s = rd[q];
+        for (i = 0; i < m0; i++) s += AZ(q, i) * lam[i];
+        y[q] = s * dinv[q];
     }
     return 1;
 }
