@@ -547,7 +547,7 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
         double ad = fabs(w->d[i]);
         if (!(ad <= BIG)) break;
         k->use[i] = 1;
-        if (ad / k->cnorm[i] > fscale) fscale = ad / k->cnorm[i];
+        if (ad * k->cinv[i] > fscale) fscale = ad * k->cinv[i];
     }
     if (reuse && i < w->n_cons) reuse = 0, fscale = 1.0;
     k->c_rows_ok = k->c_cols_ok = -1;
@@ -582,7 +582,8 @@ static FpStatus solve(FpWls *w, int max_iter, FpWlsResult *out, int stats) {
             continue;
         }
         k->use[i] = 1;
-        if (fabs(w->d[i]) / cn > fscale) fscale = fabs(w->d[i]) / cn;
+        /* the offset in row-norm units; times 1 / norm: no division per row */
+        if (fabs(w->d[i]) * k->cinv[i] > fscale) fscale = fabs(w->d[i]) * k->cinv[i];
     }
     for (i = 0; !reuse && i < w->n_cons; i++) all_used &= k->use[i];
     if (all_used) k->c_rows_ok = w->n_cons, k->c_cols_ok = n;
