@@ -75,8 +75,8 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
         for (j = 0; j < nv; j++) w->A[i * nv + j] = p->W_nu[i] * b2[i * nv + j];
         w->b[i] = p->W_nu[i] * dnu_c[i];
     }
-    /* the preference rows: scale[k] on the diagonal, zero elsewhere */
-    memset(&w->A[6 * nv], 0, (size_t)(nv * nv) * sizeof(double));
+    /* the preference rows: scale[k] on the diagonal, zero elsewhere (zeroed by fp_wls_setup
+     * at initialization, never written off the diagonal since) */
     scale[0] = scale[1] = p->w_pref;
     scale[2] = p->w_pref * p->pref_omega_scale;
     for (i = 0; i < n; i++) {
