@@ -73,29 +73,31 @@ static inline double cval(const Ctx *c, int i, int j) {
 
 static inline double dval(const Ctx *c, int i) { return c->w->d[i] * c->k->cinv[i]; }
 
-/* sum_j cval(c, i, j) x[j], in that order (the same arithmetic as the plain loop, without
- * a branch per element). */
+/* sum_j cval(c, i, j) x[j]: the unscaled row's product times the row's 1 / norm (one
+ * multiplication per row, not per element), then the phase-1 -t term. */
 static inline double crow_dot(const Ctx *c, int i, const double *x) {
-    const double *row = c->w->C + i * c->n, ci = c->k->cinv[i];
+    const double *row = c->w->C + i * c->n;
     double s = 0.0;
     int j;
-    for (j = 0; j < c->n; j++) s += row[j] * ci * x[j];
+    for (j = 0; j < c->n; j++) s += row[j] * x[j];
+    s *= c->k->cinv[i];
     for (; j < c->nv; j++) s += -1.0 * x[j];
     return s;
 }
 
-/* crow_dot of the four rows i..i+3 side by side (each summed in the same order). */
+/* crow_dot of the four rows i..i+3 side by side (each the same arithmetic as crow_dot). */
 static inline void crow_dot4(const Ctx *c, int i, const double *x, double s[4]) {
     const double *r0 = c->w->C + i * c->n, *r1 = r0 + c->n, *r2 = r1 + c->n, *r3 = r2 + c->n;
     const double *ci = c->k->cinv + i;
     double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
     int j;
     for (j = 0; j < c->n; j++) {
-        s0 += r0[j] * ci[0] * x[j];
-        s1 += r1[j] * ci[1] * x[j];
-        s2 += r2[j] * ci[2] * x[j];
-        s3 += r3[j] * ci[3] * x[j];
+        s0 += r0[j] * x[j];
+        s1 += r1[j] * x[j];
+        s2 += r2[j] * x[j];
+        s3 += r3[j] * x[j];
     }
+    s0 *= ci[0], s1 *= ci[1], s2 *= ci[2], s3 *= ci[3];
     for (; j < c->nv; j++) {
         s0 += -1.0 * x[j];
         s1 += -1.0 * x[j];
