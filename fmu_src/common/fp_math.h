@@ -19,6 +19,40 @@ static inline double fp_clamp(double x, double lo, double hi) {
     return x < lo ? lo : (x > hi ? hi : x);
 }
 
+/* Cholesky factor L of the SPD n x n row-major matrix a in place (its lower triangle; the
+ * upper one is not read).  0 when a pivot is not above min_pivot (or NaN), else 1. */
+static inline int fp_chol_factor(double *a, int n, double min_pivot) {
+    int i, j, k;
+    for (j = 0; j < n; j++) {
+        double d = a[j * n + j];
+        for (k = 0; k < j; k++) d -= a[j * n + k] * a[j * n + k];
+        if (!(d > min_pivot)) return 0;
+        d = sqrt(d);
+        a[j * n + j] = d;
+        for (i = j + 1; i < n; i++) {
+            double s = a[i * n + j];
+            for (k = 0; k < j; k++) s -= a[i * n + k] * a[j * n + k];
+            a[i * n + j] = s / d;
+        }
+    }
+    return 1;
+}
+
+/* Solve L L' x = b in place with a factor from fp_chol_factor. */
+static inline void fp_chol_backsolve(const double *l, int n, double *b) {
+    int i, k;
+    for (i = 0; i < n; i++) {
+        double s = b[i];
+        for (k = 0; k < i; k++) s -= l[i * n + k] * b[k];
+        b[i] = s / l[i * n + i];
+    }
+    for (i = n - 1; i >= 0; i--) {
+        double s = b[i];
+        for (k = i + 1; k < n; k++) s -= l[k * n + i] * b[k];
+        b[i] = s / l[i * n + i];
+    }
+}
+
 static inline void v3_cross(const double a[3], const double b[3], double out[3]) {
     double x = a[1] * b[2] - a[2] * b[1];
     double y = a[2] * b[0] - a[0] * b[2];

@@ -258,36 +258,11 @@ int fp_rotor_tilts(const FpRotorSet *rs, int i) {
 }
 
 FpStatus fp_cholesky_factor(double *a, int n) {
-    int i, j, k;
     if (n < 1 || n > 32) return FP_ERROR;
-    for (j = 0; j < n; j++) {
-        double d = a[j * n + j];
-        for (k = 0; k < j; k++) d -= a[j * n + k] * a[j * n + k];
-        if (!(d > 0.0)) return FP_ERROR;
-        d = sqrt(d);
-        a[j * n + j] = d;
-        for (i = j + 1; i < n; i++) {
-            double s = a[i * n + j];
-            for (k = 0; k < j; k++) s -= a[i * n + k] * a[j * n + k];
-            a[i * n + j] = s / d;
-        }
-    }
-    return FP_OK;
+    return fp_chol_factor(a, n, 0.0) ? FP_OK : FP_ERROR;
 }
 
-void fp_cholesky_backsolve(const double *l, int n, double *b) {
-    int i, k;
-    for (i = 0; i < n; i++) {
-        double s = b[i];
-        for (k = 0; k < i; k++) s -= l[i * n + k] * b[k];
-        b[i] = s / l[i * n + i];
-    }
-    for (i = n - 1; i >= 0; i--) {
-        double s = b[i];
-        for (k = i + 1; k < n; k++) s -= l[k * n + i] * b[k];
-        b[i] = s / l[i * n + i];
-    }
-}
+void fp_cholesky_backsolve(const double *l, int n, double *b) { fp_chol_backsolve(l, n, b); }
 
 FpStatus fp_cholesky_solve(double *a, int n, double *b) {
     if (fp_cholesky_factor(a, n) != FP_OK) return FP_ERROR;

@@ -4,6 +4,7 @@
  * step on the face (QR with column pivoting and a complete orthogonal decomposition for a
  * rank-deficient A_F Z), and the decomposition of a vector on the working set (multipliers).
  */
+#include "fp_math.h"
 #include "wls_internal.h"
 
 #define LDZ FP_WLS_NV1      /* leading dimension of qm and z (column-major) */
@@ -371,30 +372,10 @@ static int diag_tail_dual(Ctx *c, double *y) {
         for (q = 0; q < nf; q++) s -= ei[q] * rd[q];
         lam[i] = s;
     }
-    /* Cholesky G = L L' in place (G >= I: every pivot >= 1 in exact arithmetic), then
-     * L L' lam = rhs */
-    for (j = 0; j < m0; j++) {
-        double d = g[j * m0 + j];
-        for (q = 0; q < j; q++) d -= g[j * m0 + q] * g[j * m0 + q];
-        if (!(d >= 0.5)) return -1; /* rounding has eaten the identity: the primal form */
-        d = sqrt(d);
-        g[j * m0 + j] = d;
-        for (i = j + 1; i < m0; i++) {
-            double t = g[i * m0 + j];
-            for (q = 0; q < j; q++) t -= g[i * m0 + q] * g[j * m0 + q];
-            g[i * m0 + j] = t / d;
-        }
-    }
-    for (i = 0; i < m0; i++) {
-        double t = lam[i];
-        for (q = 0; q < i; q++) t -= g[i * m0 + q] * lam[q];
-        lam[i] = t / g[i * m0 + i];
-    }
-    for (i = m0 - 1; i >= 0; i--) {
-        double t = lam[i];
-        for (q = i + 1; q < m0; q++) t -= g[q * m0 + i] * lam[q];
-        lam[i] = t / g[i * m0 + i];
-    }
+    /* Cholesky G = L L' (G >= I: every pivot >= 1 in exact arithmetic; one at or below 1/2
+     * means rounding has eaten the identity: the primal form), then L L' lam = rhs */
+    if (!fp_chol_factor(g, m0, 0.5)) return -1;
+    fp_chol_backsolve(g, m0, lam);
     /* z = r_D + E' lam, y = D_F^-1 z */
     for (q = 0; q < nf; q++) {
         double s = rd[q];
