@@ -136,6 +136,50 @@ static int ratio_step(Ctx *c, int *moved) {
 
 /* Multipliers at the face minimiser (needs factor_ws for the current set).
  * Returns the global index of the constraint to drop, or -1 if none. */
+/* pick_drop on a face without active rows of C: only the variables at a bound have
+ * multipliers, mu_j = -+g_j, so only their gradient entries and error scales are formed,
+ * each with the very sums pick_drop forms for every variable (the same rows in the same
+ * order: the same bits); the free variables' columns are skipped. */
+static int pick_drop_bounds(Ctx *c, double xn) {
+    FpWlsWork *k = c->k;
+    const FpWls *w = c->w;
+    int nv = c->nv, n = c->n, nr = nrows(c), i, j, drop = -1;
+    int dense = c->diag_tail ? c->m0 : nr;
+    double worst = -1.0, ei[FP_WLS_MAX_ROWS], an4[4];
+    residual(c);
+    for (i = 0; i < dense; i++) {
+        const double *a = w->A + i * n;
+        if (i % 4 == 0) vnorm4(a, n, dense - i < 4 ? dense - i : 4, nv, an4);
+        ei[i] = fabs(k->r[i]) + fabs(w->b[i]) + an4[i % 4] * xn;
+    }
+    for (j = 0; j < nv; j++) {
+        double g = 0.0, gsj = 0.0, tolj, mu;
+        if (k->state[j] != ST_LB && k->state[j] != ST_UB) continue;
+        for (i = 0; i < dense; i++) {
+            double a = w->A[i * n + j];
+            g += a * (-2.0 * k->r[i]);
+            gsj += 2.0 * fabs(a) * ei[i];
+        }
+        if (dense < nr) { /* the diagonal row of variable j */
+            const double *dj = w->A + (dense + j) * n + j;
+            double an = vnorm(dj, 1);
+            double e = fabs(k->r[dense + j]) + fabs(w->b[dense + j]) + an * xn;
+            g += *dj * (-2.0 * k->r[dense + j]);
+            gsj += 2.0 * fabs(*dj) * e;
+        }
+        tolj = TOL_MULT * gsj;
+        if (!(tolj > DBL_MIN)) tolj = DBL_MIN;
+        mu = k->state[j] == ST_UB ? -g : g;
+        if (c->bland) {
+            if (mu < -tolj) return j;
+        } else if (mu / tolj < worst) {
+            worst = mu / tolj;
+            drop = j;
+        }
+    }
+    return drop;
+}
+
 static int pick_drop(Ctx *c) {
     FpWlsWork *k = c->k;
     int nv = c->nv, nw = c->nw, nr = nrows(c), i, j, q, drop = -1;
@@ -149,6 +193,7 @@ static int pick_drop(Ctx *c) {
         for (j = 0; j < nv; j++) fixed |= k->state[j] == ST_LB || k->state[j] == ST_UB;
         if (!fixed) return -1;
     }
+    if (!c->ph1 && nw == 0) return pick_drop_bounds(c, xn);
     /* gradient g = -2 A' r, and the scale of its rounding error:
      * 2 sum_i ||a_i|| (|r_i| + |b_i| + ||a_i|| ||x||), per variable with |a_ij| for the
      * first ||a_i|| */
