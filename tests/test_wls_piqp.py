@@ -839,6 +839,26 @@ def test_solver_instance_follows_a_sequence():
     assert np.mean(its) < 2.0
 
 
+def test_diagonal_tail_faces_with_facets_at_every_weight():
+    """A face with an active facet on an A that ends in a diagonal block is solved by a QR
+    without pivoting (its A_F Z has full rank); diagonal weights down at the rank cut-off
+    (1e-13 of the dense rows, which cannot span the face alone) send it back to the
+    pivoting QR.  Both against piqp."""
+    rng = np.random.default_rng(5)
+    for weight in (1.0, 1e-3, 1e-13):
+        for _ in range(60):
+            n, m0 = 5, 3
+            dense = rng.standard_normal((m0, n)) * 50.0
+            diag = np.diag(rng.uniform(0.5, 2.0, n) * weight)
+            A = np.vstack([dense, diag])
+            b = rng.standard_normal(m0 + n) * 10.0
+            C = rng.standard_normal((4, n))
+            C /= np.linalg.norm(C, axis=1, keepdims=True)
+            d = C @ rng.uniform(-1.0, 1.0, n) + rng.uniform(0.01, 0.1, 4)  # a feasible point
+            # bounds far out: a flat direction (weights 1e-13) stays bounded for piqp
+            check_problem(_problem(A, b, np.full(n, -1e3), np.full(n, 1e3), C, d))
+
+
 def _same(a: wls.WlsResult, b: wls.WlsResult) -> None:
     assert (a.status, a.iterations, a.phase1_iterations) == (b.status, b.iterations,
                                                              b.phase1_iterations)

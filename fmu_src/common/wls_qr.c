@@ -234,6 +234,32 @@ static int ls_minnorm(Ctx *c, int nr, int nz, double anorm, double *y) {
     return kr;
 }
 
+/* min ||AZ y - r|| for an AZ of full column rank (nr >= nz), as a face with active rows of C
+ * has when A ends in a diagonal block: D_F Z has full rank (Z's columns orthonormal, every
+ * d_j non-zero), so no column needs choosing or cutting and the QR goes without pivoting.
+ * AZ and r destroyed.  Returns 0, y unset, when a diagonal of R is at the rank cut-off of
+ * ls_minnorm anyway (rounding); the caller then rebuilds AZ and r and takes ls_minnorm. */
+static int ls_full_rank(Ctx *c, int nr, int nz, double *y) {
+    FpWlsWork *k = c->k;
+    double *r = k->r, cut = c->anorm;
+    int i, j;
+    if (nz > nr) return 0;
+    for (i = 0; i < nz; i++) {
+        house_make(&AZ(i, i), nr - i, &k->tau_a[i]);
+        house_apply_cols(&AZ(i + 1, i), nr - i, k->tau_a[i], &AZ(i, i + 1), nz - i - 1, LDA);
+        house_apply(&AZ(i + 1, i), nr - i, k->tau_a[i], r + i);
+        if (fabs(AZ(i, i)) > cut) cut = fabs(AZ(i, i));
+    }
+    cut *= TOL_RANK;
+    for (i = nz - 1; i >= 0; i--) {
+        double s = r[i];
+        if (!(fabs(AZ(i, i)) > cut)) return 0;
+        for (j = i + 1; j < nz; j++) s -= AZ(i, j) * y[j];
+        y[i] = s / AZ(i, i);
+    }
+    return 1;
+}
+
 /* The primal form of the face step below (diag_tail_step), for an E too large for the dual
  * form: min ||A_F y - r|| with A_F = [M_F; D_F], M_F the m0 dense rows, D_F the free variables'
  * diagonal rows (the fixed variables' rows are constant over F).  Householder QR of
@@ -437,6 +463,11 @@ int wls_compute_step(Ctx *c) {
     /* AZ = A_F Z */
     if (!c->ph1 && nw > 0 && c->diag_tail) {
         az_diag_tail(c, nz);
+        if (!ls_full_rank(c, nr, nz, y)) {
+            residual(c); /* both destroyed by the attempt */
+            az_diag_tail(c, nz);
+            ls_minnorm(c, nr, nz, c->anorm, y);
+        }
     } else {
         for (j = 0; j < nz; j++) {
             for (i = 0; i < nr; i++) {
@@ -453,8 +484,8 @@ int wls_compute_step(Ctx *c) {
                 AZ(i, j) = s;
             }
         }
+        ls_minnorm(c, nr, nz, c->ph1 ? 1.0 : c->anorm, y);
     }
-    ls_minnorm(c, nr, nz, c->ph1 ? 1.0 : c->anorm, y);
     if (nw > 0) {
         for (q = 0; q < nf; q++) {
             double s = 0.0;
