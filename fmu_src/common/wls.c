@@ -136,50 +136,6 @@ static int ratio_step(Ctx *c, int *moved) {
 
 /* Multipliers at the face minimiser (needs factor_ws for the current set).
  * Returns the global index of the constraint to drop, or -1 if none. */
-/* pick_drop on a face without active rows of C: only the variables at a bound have
- * multipliers, mu_j = -+g_j, so only their gradient entries and error scales are formed,
- * each with the very sums pick_drop forms for every variable (the same rows in the same
- * order: the same bits); the free variables' columns are skipped. */
-static int pick_drop_bounds(Ctx *c, double xn) {
-    FpWlsWork *k = c->k;
-    const FpWls *w = c->w;
-    int nv = c->nv, n = c->n, nr = nrows(c), i, j, drop = -1;
-    int dense = c->diag_tail ? c->m0 : nr;
-    double worst = -1.0, ei[FP_WLS_MAX_ROWS], an4[4];
-    residual(c);
-    for (i = 0; i < dense; i++) {
-        const double *a = w->A + i * n;
-        if (i % 4 == 0) vnorm4(a, n, dense - i < 4 ? dense - i : 4, nv, an4);
-        ei[i] = fabs(k->r[i]) + fabs(w->b[i]) + an4[i % 4] * xn;
-    }
-    for (j = 0; j < nv; j++) {
-        double g = 0.0, gsj = 0.0, tolj, mu;
-        if (k->state[j] != ST_LB && k->state[j] != ST_UB) continue;
-        for (i = 0; i < dense; i++) {
-            double a = w->A[i * n + j];
-            g += a * (-2.0 * k->r[i]);
-            gsj += 2.0 * fabs(a) * ei[i];
-        }
-        if (dense < nr) { /* the diagonal row of variable j */
-            const double *dj = w->A + (dense + j) * n + j;
-            double an = vnorm(dj, 1);
-            double e = fabs(k->r[dense + j]) + fabs(w->b[dense + j]) + an * xn;
-            g += *dj * (-2.0 * k->r[dense + j]);
-            gsj += 2.0 * fabs(*dj) * e;
-        }
-        tolj = TOL_MULT * gsj;
-        if (!(tolj > DBL_MIN)) tolj = DBL_MIN;
-        mu = k->state[j] == ST_UB ? -g : g;
-        if (c->bland) {
-            if (mu < -tolj) return j;
-        } else if (mu / tolj < worst) {
-            worst = mu / tolj;
-            drop = j;
-        }
-    }
-    return drop;
-}
-
 static int pick_drop(Ctx *c) {
     FpWlsWork *k = c->k;
     int nv = c->nv, nw = c->nw, nr = nrows(c), i, j, q, drop = -1;
@@ -193,7 +149,6 @@ static int pick_drop(Ctx *c) {
         for (j = 0; j < nv; j++) fixed |= k->state[j] == ST_LB || k->state[j] == ST_UB;
         if (!fixed) return -1;
     }
-    if (!c->ph1 && nw == 0) return pick_drop_bounds(c, xn);
     /* gradient g = -2 A' r, and the scale of its rounding error:
      * 2 sum_i ||a_i|| (|r_i| + |b_i| + ||a_i|| ||x||), per variable with |a_ij| for the
      * first ||a_i|| */
@@ -204,29 +159,42 @@ static int pick_drop(Ctx *c) {
         gs = 2.0 * (fabs(k->r[0]) + xn);
         for (j = 0; j < nv; j++) gsj[j] = gs;
     } else {
-        for (j = 0; j < nv; j++) k->g[j] = 0.0;
+        /* without an active row only the variables at a bound have multipliers (mu_j =
+         * -+g_j): their columns alone, each entry the same sum as with every column (the
+         * allocation's face: a few of 18); gs, which only the rows' multipliers use, then
+         * not at all */
+        int cols[FP_WLS_MAX_VARS + 1], ncol = 0;
         double an4[4];
         /* a diagonal tail's rows have one non-zero each: only its terms (the zero terms
          * change no sum; each entry still sums over the rows in order) */
         int dense = c->diag_tail ? c->m0 : nr;
+        for (j = 0; j < nv; j++) {
+            k->g[j] = 0.0;
+            if (nw > 0 || k->state[j] == ST_LB || k->state[j] == ST_UB) cols[ncol++] = j;
+        }
         for (i = 0; i < dense; i++) {
             const double *a = c->w->A + i * c->n;
             double ri = -2.0 * k->r[i], an;
             if (i % 4 == 0) vnorm4(a, c->n, dense - i < 4 ? dense - i : 4, nv, an4);
             an = an4[i % 4];
             double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
-            for (j = 0; j < nv; j++) {
+            for (q = 0; q < ncol; q++) {
+                j = cols[q];
                 k->g[j] += a[j] * ri;
                 gsj[j] += 2.0 * fabs(a[j]) * ei;
             }
             gs += 2.0 * an * ei;
         }
-        for (; i < nr; i++) {
-            const double *dj = c->w->A + i * c->n + (i - dense);
-            double an = vnorm(dj, 1); /* = vnorm of the row */
-            double ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
-            k->g[i - dense] += *dj * (-2.0 * k->r[i]);
-            gsj[i - dense] += 2.0 * fabs(*dj) * ei;
+        for (q = 0; dense < nr && q < ncol; q++) { /* the diagonal row of each column */
+            const double *dj;
+            double an, ei;
+            j = cols[q];
+            i = dense + j;
+            dj = c->w->A + i * c->n + j;
+            an = vnorm(dj, 1); /* = vnorm of the row */
+            ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
+            k->g[j] += *dj * (-2.0 * k->r[i]);
+            gsj[j] += 2.0 * fabs(*dj) * ei;
             gs += 2.0 * an * ei;
         }
     }
@@ -236,9 +204,14 @@ static int pick_drop(Ctx *c) {
         tolj[j] = TOL_MULT * gsj[j];
         if (!(tolj[j] > DBL_MIN)) tolj[j] = DBL_MIN;
     }
-    /* stationarity: -g = sum lam c + sum mu n (+ z = 0 at the face minimiser) */
-    for (j = 0; j < nv; j++) k->nvec[j] = -k->g[j];
-    wls_decompose(c, k->nvec, k->zvec, lam, mu);
+    /* stationarity: -g = sum lam c + sum mu n (+ z = 0 at the face minimiser); with no
+     * active row that is mu_j = -g_j at an upper bound, g_j at a lower one */
+    if (nw > 0) {
+        for (j = 0; j < nv; j++) k->nvec[j] = -k->g[j];
+        wls_decompose(c, k->nvec, k->zvec, lam, mu);
+    } else {
+        for (j = 0; j < nv; j++) mu[j] = k->state[j] == ST_UB ? -k->g[j] : k->g[j];
+    }
     /* the most negative multiplier relative to its own tolerance */
     worst = -1.0;
     for (j = 0; j < nv; j++) {
@@ -470,8 +443,8 @@ FpStatus fp_wls_set_data(FpWls *w, const double *A, const double *b, const doubl
     if (lb != NULL) memcpy(w->lb, lb, n * sizeof(double));
     if (ub != NULL) memcpy(w->ub, ub, n * sizeof(double));
     if (C != NULL && p > 0) memcpy(w->C, C, p * n * sizeof(double));
-    w->c_unchanged = 0;
     if (d != NULL && p > 0) memcpy(w->d, d, p * sizeof(double));
+    w->c_unchanged = 0;
     return FP_OK;
 }
 
