@@ -18,9 +18,11 @@ disturbance step, sensor noise; ``--duration`` s each, designs hinf and baseline
   with runs/s, runs/s and real-time factor per worker, per worker against the loop
   (target >= 80 %) and 2 workers against 1 (target >= 1.9x): against the in-process worker,
   and for Dask also against the 1-worker Dask cluster (the same path, one worker more);
-* then ``--rounds`` rounds (default 3) of the 1- and 2-worker sweeps timed back to back, and
-  the ratios' median and range over the rounds: on a VM whose speed drifts by tens of per
-  cent within minutes, a ratio of two sweeps timed a minute apart carries that drift.
+* then ``--rounds`` rounds (default 5) of the 1- and 2-worker sweeps timed back to back, each
+  right after its own measure of the single-run loop, and the ratios' median and range over
+  the rounds (2 workers against 1, per worker against the loop): on a VM whose speed drifts
+  by tens of per cent within minutes, a ratio of two figures timed a minute apart carries
+  that drift.
 
 The figures need a quiet machine: the load average before and after is printed.
 
@@ -128,20 +130,29 @@ def dask_sweeps(small: int, large: int, duration: float) -> tuple[Sweep, Sweep] 
     return out[0], out[1]
 
 
-def interleaved(rounds: int, small: int, large: int, duration: float) -> None:
+def interleaved(rounds: int, small: int, large: int, duration: float, loop_runs: int) -> None:
     """The 1- and 2-worker sweeps again, ``rounds`` times, each round timing them back to
     back (in process, 2 local processes, then Dask 1 x 1 and 2 x 1, each cluster started
-    for its sweep: a forked pool beside a live cluster's threads could deadlock), so that
-    the machine's drift between sweeps falls on a ratio's two terms alike; the ratios per
-    round, their median and range."""
+    for its sweep: a forked pool beside a live cluster's threads could deadlock), each
+    sweep right after ``loop_runs`` single runs, so that the machine's drift falls on a
+    ratio's two terms alike; the ratios' median and range over the rounds."""
     import importlib.util
 
     have_dask = importlib.util.find_spec("distributed") is not None
     ratios: dict[str, list[tuple[float, float]]] = {}
+    vs_loop: dict[str, list[float]] = {}
 
     def ratio(name: str, a: Sweep, b: Sweep) -> None:
         ratios.setdefault(name, []).append(
             (a.runs / a.wall / (b.runs / b.wall), a.marginal / b.marginal))
+
+    def paired(label: str, n_workers: int, **kw: Any) -> Sweep:
+        """The sweep right after the single-run loop's speed: its marginal RTF per worker
+        against the loop's, both timed within seconds."""
+        rtf_loop = loop_rtf(loop_runs, duration)[0]
+        s = measure(label, n_workers, small, large, duration, **kw)
+        vs_loop.setdefault(label, []).append(duration * s.marginal / n_workers / rtf_loop)
+        return s
 
     def on_dask(n_workers: int) -> Sweep:
         import dask
@@ -151,11 +162,11 @@ def interleaved(rounds: int, small: int, large: int, duration: float) -> None:
         with dask.config.set(sweep.DASK_CONFIG), \
                 LocalCluster(n_workers=n_workers, **kw) as cluster, Client(cluster) as k:
             k.run(lambda: __import__("orchestrator.sweep"))
-            return measure(f"Dask {n_workers}x1", n_workers, small, large, duration, dask=k)
+            return paired(f"Dask {n_workers}x1", n_workers, dask=k)
 
     for _ in range(rounds):
-        one = measure("in process", 1, small, large, duration)
-        pool = measure("2 local processes", 2, small, large, duration, workers=2)
+        one = paired("in process", 1)
+        pool = paired("2 local processes", 2, workers=2)
         ratio("2 local processes / in process", pool, one)
         if have_dask:
             d1, d2 = on_dask(1), on_dask(2)
@@ -168,6 +179,11 @@ def interleaved(rounds: int, small: int, large: int, duration: float) -> None:
         print(f"  {name:34s} whole {statistics.median(whole):5.2f}x "
               f"[{min(whole):.2f}-{max(whole):.2f}]   marginal {statistics.median(marg):5.2f}x "
               f"[{min(marg):.2f}-{max(marg):.2f}]")
+    print(f"per worker against the single-run loop timed just before each sweep ({loop_runs} "
+          f"runs), marginal RTF per worker / loop RTF, median [range] over {rounds} rounds:")
+    for name, fracs in vs_loop.items():
+        print(f"  {name:34s} {100 * statistics.median(fracs):5.0f} % "
+              f"[{100 * min(fracs):.0f}-{100 * max(fracs):.0f}]")
 
 
 def idle_background(client: Any, label: str, seconds: float = 2.0) -> None:
@@ -204,9 +220,9 @@ def main() -> None:
     parser.add_argument("--loop-runs", type=int, default=10,
                         help="single runs that give the loop speed (default 10)")
     parser.add_argument("--duration", type=float, default=6.0, help="s per run (default 6)")
-    parser.add_argument("--rounds", type=int, default=3,
+    parser.add_argument("--rounds", type=int, default=5,
                         help="rounds of the 1- and 2-worker sweeps timed back to back, for "
-                             "ratios the machine's drift does not skew (default 3; 0: none)")
+                             "ratios the machine's drift does not skew (default 5; 0: none)")
     args = parser.parse_args()
     d, n = args.duration, args.cases
     small = max(1, n // 6)
@@ -243,7 +259,7 @@ def main() -> None:
               f"{dask.runs / dask.wall / (dask_one.runs / dask_one.wall):.2f}x, marginal "
               f"{dask.marginal / dask_one.marginal:.2f}x")
     if args.rounds > 0:
-        interleaved(args.rounds, small, n, d)
+        interleaved(args.rounds, small, n, d, min(args.loop_runs, 6))
     bound = ", ".join(f"{name} {2 * one.cpu / one.runs / (s.cpu / s.runs):.2f}x"
                       for name, s in (("2 local processes", pool), ("Dask", dask))
                       if s is not None)
