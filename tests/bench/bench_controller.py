@@ -5,10 +5,17 @@ Flies the paper's first scenario (hover with varying orientation, infeasible str
 included) in closed loop with the plant FMU, the controller timing itself (parameter
 ``timing``: clock_gettime around the sample and around each QP solve).  With ``--old-fmu``
 a second controller, built from an earlier commit (tests/bench/build_old_controller.sh),
-runs in the same loop on the very same inputs, the two called in alternating order at
-every sample, so that machine load falls on both alike.  Prints, from one run:
+is timed two ways: alone, each build flying the scenario by itself with the plant as in a
+user's co-simulation, in ``--rounds`` rounds whose order alternates (new-old, old-new, ...)
+so that the machine's drift falls on both alike; and in turn, both in the same loop on the
+very same inputs, called in alternating order at every sample (each sample then runs right
+after the other build's, whose code and data have just passed through the caches).
+Prints, from one run:
   - the controller sample time inside the FMU, old and new side by side (mean, p50, p99,
-    max, ratio new/old), and whether the two builds gave the same commands;
+    max, ratio new/old), alone (pooled over the rounds, and per round) and in turn, and
+    whether the two builds gave the same commands; like for like, the samples where the
+    new build's reference twin solved no QP (the old build has no twin) apart from those
+    where it did;
   - guidance and inner-allocation QP solve times in the loop (warm) and iterations;
   - the very same QPs (read back from the new controller's FMU state) re-solved by our
     solver, cold (empty working set, x = 0) and warm (the optimal working set), by DAQP
@@ -37,7 +44,7 @@ from orchestrator.fmu import FmuInstance
 from plant import plant_fmu
 
 try:
-    import daqp
+    import daqp  # type: ignore[import-not-found]
 except ImportError:  # a test extra: pip install ".[test]"
     daqp = None
 
@@ -115,6 +122,8 @@ def fly(seconds: float, every: int | None, old_fmu: Path | None) -> dict:
     out["cmd_diff"] = 0.0
     out["commands"] = np.empty((n, len(new.fmu.read(new.u))))
     out["guid_qps"], out["alloc_qps"] = [], []
+    out["twin"] = np.zeros(n, dtype=bool)
+    twin = new.fmu.signal(["mu_ff", "euler_ref_s"]) if every is not None else None
     for k in range(n):
         meas, ref = plant.read(y_p), scenario1(k * H)
         if old is None:
@@ -134,16 +143,71 @@ def fly(seconds: float, every: int | None, old_fmu: Path | None) -> dict:
         plant.step(H)
         out["guid_iter"][k] = new.fmu.get("guid_iter")
         out["alloc_iter"][k] = new.fmu.get("alloc_iter")
+        if twin is not None:  # the twin's attitude departs from the reference: its QP ran
+            v = new.fmu.read(twin)
+            out["twin"][k] = bool(np.any(v[:3] != v[3:]))
         if every is not None and k % every == 0:
             state = bytes(new.fmu.slave.serializeFMUstate(new.fmu.slave.getFMUstate()))
             out["guid_qps"].append(qp_from_state(state, GUIDANCE))
             out["alloc_qps"].append(qp_from_state(state, ALLOCATION))
-    for c in (plant, new.fmu, old.fmu if old is not None else None):
-        if c is not None:
-            c.close()
+    for inst in (plant, new.fmu, old.fmu if old is not None else None):
+        if inst is not None:
+            inst.close()
     if old is None:
         del out["old"]
     return out
+
+
+def fly_alone(fmu: Path, seconds: float) -> np.ndarray:
+    """One closed-loop flight of one controller by itself with the plant (the master and
+    the plant run between its samples, as in a user's co-simulation): its sample times, us."""
+    plant = FmuInstance(plant_fmu(), "plant")
+    plant.initialize(parameters={"pos0[3]": -3.0})
+    y_p, u_p = plant.signal(MEAS), plant.signal(CMDS)
+    ctrl = Controller(fmu, "controller")
+    ctrl.start(plant.read(y_p), scenario1(0.0))
+    us = np.empty(round(seconds / H))
+    for k in range(us.size):
+        us[k] = ctrl.sample(plant.read(y_p), scenario1(k * H))[0]
+        plant.write(u_p, ctrl.fmu.read(ctrl.u))
+        plant.step(H)
+    plant.close()
+    ctrl.fmu.close()
+    return us
+
+
+def alone(new_fmu: Path, old_fmu: Path, seconds: float, rounds: int,
+          twin: np.ndarray) -> dict[str, float]:
+    """Each build flown alone, ``rounds`` times in alternating order; prints the pooled
+    figures, the per-round ratios, and like for like on ``twin`` (the samples where the new
+    build's twin solved its QP: a function of the reference alone, the same samples in
+    every flight); returns the pooled sample summaries' ratio new/old."""
+    runs: dict[str, list[np.ndarray]] = {"new": [], "old": []}
+    for r in range(rounds):
+        order = (("new", new_fmu), ("old", old_fmu))
+        for who, fmu in order if r % 2 == 0 else order[::-1]:
+            runs[who].append(fly_alone(fmu, seconds))
+    new, old = np.concatenate(runs["new"]), np.concatenate(runs["old"])
+    print(f"alone (each build flown by itself with the plant, {rounds} rounds of "
+          f"{seconds:g} s, the order alternating), pooled:")
+    o, nw = stats("OLD controller sample", old), stats("NEW controller sample", new)
+    ratio_line("new / old, controller sample", nw, o)
+    per = [(summary(a)["mean"] / summary(b)["mean"], summary(a)["p99"] / summary(b)["p99"])
+           for a, b in zip(runs["new"], runs["old"], strict=True)]
+    print("  new / old per round: mean " + " ".join(f"{m:.2f}" for m, _ in per)
+          + ", p99 " + " ".join(f"{q:.2f}" for _, q in per))
+    mask = np.tile(twin, rounds)
+    if mask.any() and (~mask).any():
+        same_o, same_n = summary(old[~mask]), summary(new[~mask])
+        print(f"  like for like, the {100 * (~mask).mean():.0f} % of samples where the twin "
+              f"solved no QP: new / old mean {same_n['mean'] / same_o['mean']:.2f}, "
+              f"p99 {same_n['p99'] / same_o['p99']:.2f}")
+        tw = summary(new[mask])
+        print(f"  the twin's {100 * mask.mean():.0f} % (a second guidance QP the old build "
+              f"does not solve): NEW mean {tw['mean']:.2f} p99 {tw['p99']:.2f} us; "
+              f"new / old mean {tw['mean'] / summary(old[mask])['mean']:.2f}, "
+              f"p99 {tw['p99'] / summary(old[mask])['p99']:.2f}")
+    return {k: nw[k] / o[k] for k in nw}
 
 
 # --------------------------------------------------------------------------- #
@@ -279,6 +343,8 @@ def main() -> None:
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--seconds", type=float, default=20.0)
     parser.add_argument("--every", type=int, default=10, help="record every N-th QP")
+    parser.add_argument("--rounds", type=int, default=4,
+                        help="flights of each build alone, the order alternating (default 4)")
     parser.add_argument("--old-fmu", type=Path, default=None,
                         help="FullPoseController.fmu of an earlier commit "
                              "(tests/bench/build_old_controller.sh COMMIT OUTDIR)")
@@ -296,6 +362,9 @@ def main() -> None:
     print("inside the FMU (clock_gettime around the work), microseconds:")
     new = {what: rec["new"][:, i] for i, what in enumerate(("step", "guid", "alloc"))}
     if "old" in rec:
+        by_alone = alone(controller_fmu(), args.old_fmu, args.seconds, args.rounds,
+                         recorded["twin"])
+        print("in turn (both in one loop on the same inputs, alternating who goes first):")
         old = {what: rec["old"][:, i] for i, what in enumerate(("step", "guid", "alloc"))}
         for what, label in (("step", "controller sample"), ("guid", "guidance QP (warm)"),
                             ("alloc", "inner allocation QP (warm)")):
@@ -304,7 +373,8 @@ def main() -> None:
             ratio_line(f"new / old, {label}", nw, o)
         print(f"  old and new commands, largest difference over the run: {rec['cmd_diff']:.3g}")
         step_new, step_old = summary(new["step"]), summary(old["step"])
-        print(f"target: new/old <= 0.5 at mean and p99: mean "
+        print(f"target: new/old <= 0.5 at mean and p99: alone (pooled) mean "
+              f"{by_alone['mean']:.2f}, p99 {by_alone['p99']:.2f}; in turn mean "
               f"{step_new['mean'] / step_old['mean']:.2f}, p99 "
               f"{step_new['p99'] / step_old['p99']:.2f}")
     else:
