@@ -132,10 +132,11 @@ def dask_sweeps(small: int, large: int, duration: float) -> tuple[Sweep, Sweep] 
 
 def interleaved(rounds: int, small: int, large: int, duration: float, loop_runs: int) -> None:
     """The 1- and 2-worker sweeps again, ``rounds`` times, each round timing them back to
-    back (in process, 2 local processes, then Dask 1 x 1 and 2 x 1, each cluster started
-    for its sweep: a forked pool beside a live cluster's threads could deadlock), each
-    sweep right after ``loop_runs`` single runs, so that the machine's drift falls on a
-    ratio's two terms alike; the ratios' median and range over the rounds."""
+    back (in process and 2 local processes, then Dask 1 x 1 and 2 x 1, each cluster
+    started for its sweep: a forked pool beside a live cluster's threads could deadlock;
+    every other round in the opposite order), each sweep right after ``loop_runs`` single
+    runs, so that the machine's drift falls on a ratio's two terms alike; the ratios'
+    median and range over the rounds."""
     import importlib.util
 
     have_dask = importlib.util.find_spec("distributed") is not None
@@ -164,12 +165,21 @@ def interleaved(rounds: int, small: int, large: int, duration: float, loop_runs:
             k.run(lambda: __import__("orchestrator.sweep"))
             return paired(f"Dask {n_workers}x1", n_workers, dask=k)
 
-    for _ in range(rounds):
-        one = paired("in process", 1)
-        pool = paired("2 local processes", 2, workers=2)
+    for r in range(rounds):
+        # the order alternates from round to round (1 then 2 workers, then 2 then 1), so
+        # that a drift in one direction does not favour either side of a ratio
+        if r % 2 == 0:
+            one = paired("in process", 1)
+            pool = paired("2 local processes", 2, workers=2)
+        else:
+            pool = paired("2 local processes", 2, workers=2)
+            one = paired("in process", 1)
         ratio("2 local processes / in process", pool, one)
         if have_dask:
-            d1, d2 = on_dask(1), on_dask(2)
+            if r % 2 == 0:
+                d1, d2 = on_dask(1), on_dask(2)
+            else:
+                d2, d1 = on_dask(2), on_dask(1)
             ratio("Dask 2x1 / in process", d2, one)
             ratio("Dask 2x1 / Dask 1x1", d2, d1)
     print(f"2 workers vs 1, timed back to back in each of {rounds} rounds (whole call, "
