@@ -29,6 +29,7 @@ command inputs in the ``ctrl`` block and holds whatever the caller wrote there.
 from __future__ import annotations
 
 import ctypes
+import mmap
 from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
@@ -157,6 +158,28 @@ class Connections:
             ctrl_int=(), ctrl_bool=())
 
 
+SMALL_PAGES_FROM = 32 * 2**20
+"""Recordings of this many bytes or more (~48 s of the paper hexacopter at 500 Hz) get
+their own anonymous mapping, with 4 KiB pages (:func:`zeroed`)."""
+
+
+def zeroed(shape: tuple[int, int]) -> np.ndarray:
+    """A zeroed float64 matrix.  From ``SMALL_PAGES_FROM`` bytes on, in an anonymous mapping
+    of its own that asks the kernel for no transparent huge pages: numpy asks for them for
+    every array of 4 MiB or more, and where the kernel has to compact memory to find them
+    the first touch of a 70 MB recording stalled for 0.1-0.65 s instead of ~30 ms
+    (docs/orchestrator.md), whatever numpy's setting in the program that runs.  glibc maps
+    blocks this large afresh for every allocation anyway; smaller ones come from numpy, whose
+    memory glibc reuses from run to run (a sweep's recordings)."""
+    size = shape[0] * shape[1] * 8
+    if size < SMALL_PAGES_FROM or not hasattr(mmap, "MADV_NOHUGEPAGE"):  # (Linux's alone)
+        return np.zeros(shape)
+    # private, as numpy's memory is; zero-filled; unmapped when the last view of it goes
+    buf = mmap.mmap(-1, size, flags=mmap.MAP_PRIVATE)
+    buf.madvise(mmap.MADV_NOHUGEPAGE)  # (also where THP is "always")
+    return np.frombuffer(buf, dtype=np.float64).reshape(shape)
+
+
 class Recording:
     """The matrices of a run (``rows`` rows plus a spare one: Jacobi's u_{-1}) and typed
     views of their blocks; ``columns`` / ``int_columns`` name every column.  With ``file``
@@ -182,7 +205,7 @@ class Recording:
         # one matrix with room for the integer outputs at the end of each row: the result
         # (``result_data``) is this matrix, not a copy of it
         shape = (rows + 1, len(self.columns) + len(self.int_columns))
-        self._full: np.ndarray = (np.zeros(shape) if file is None else
+        self._full: np.ndarray = (zeroed(shape) if file is None else
                                   np.lib.format.open_memmap(file, mode="w+", dtype=np.float64,
                                                              shape=shape))
         self.data = self._full[:, :len(self.columns)]

@@ -104,12 +104,9 @@ DASK_CONFIG: dict[str, Any] = {
     # Dask's nanny gives its workers MALLOC_TRIM_THRESHOLD_=65536, which also fixes glibc's
     # mmap threshold at 128 KiB: every run's arrays then come as fresh zeroed pages (1,193
     # page faults and 1.6 ms of kernel time per 6 s run, measured).  glibc's own behaviour
-    # for arrays below 32 MiB; the BLAS thread pins as Dask sets them; numpy's huge-page
-    # hint off, as in the fullpose command (orchestrator/__init__.py), also in workers a
-    # `dask worker` command starts.
+    # for arrays below 32 MiB; the BLAS thread pins as Dask sets them.
     "distributed.nanny.pre-spawn-environ": {
         "MALLOC_TRIM_THRESHOLD_": 2**30, "MALLOC_MMAP_THRESHOLD_": 2**25,
-        "NUMPY_MADVISE_HUGEPAGE": 0,
         "OMP_NUM_THREADS": 1, "MKL_NUM_THREADS": 1, "OPENBLAS_NUM_THREADS": 1},
 }
 """Dask settings for a cluster that runs sweeps: ``with dask.config.set(DASK_CONFIG):`` around

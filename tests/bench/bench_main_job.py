@@ -20,9 +20,6 @@ import tempfile
 import time
 from pathlib import Path
 
-import orchestrator  # noqa: F401  (before numpy, as in the fullpose command: its page setting)
-
-# isort: split
 import numpy as np
 
 
