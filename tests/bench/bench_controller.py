@@ -196,8 +196,9 @@ def alone(new_fmu: Path, old_fmu: Path, seconds: float, rounds: int,
           f"{seconds:g} s, the order alternating), pooled:")
     o, nw = stats("OLD controller sample", old), stats("NEW controller sample", new)
     ratio_line("new / old, controller sample", nw, o)
-    per = [(summary(a)["mean"] / summary(b)["mean"], summary(a)["p99"] / summary(b)["p99"])
-           for a, b in zip(runs["new"], runs["old"], strict=True)]
+    by_round = {who: [summary(x) for x in xs] for who, xs in runs.items()}
+    per = [(a["mean"] / b["mean"], a["p99"] / b["p99"])
+           for a, b in zip(by_round["new"], by_round["old"], strict=True)]
     med = {"mean": float(np.median([m for m, _ in per])),
            "p99": float(np.median([q for _, q in per]))}
     print("  new / old per round: mean " + " ".join(f"{m:.2f}" for m, _ in per)
