@@ -25,6 +25,8 @@ SIGNATURES: dict[str, list[object]] = {
     "fp_wls_get_working_set_api": [_VP, _I8P],
     "fp_wls_solve_api": [_VP, _I, _DP, _I32P, _DP],
     "fp_wls_bench_api": [_VP, _I, _I, _DP, _DP, _I32P, _DP],
+    "fp_derive_force_set_api": [_VP, _I, _I, _DP, _DP, _I32P, _DP, ctypes.c_char_p,
+                                _I],
     "fp_controller_state_qp": [ctypes.c_char_p, ctypes.c_long, _I, _I32P, _DP, _DP, _DP, _DP,
                                _DP, _DP, _DP],
 }

@@ -1,21 +1,22 @@
-"""The controller's polytope parameters of an airframe, computed once and kept on disk.
+"""The design tool's force sets of an airframe, shipped or computed once and kept on disk.
 
-S(0) and the single-failure sets take seconds of scipy work per airframe, yet depend only
-on the airframe's numbers and on the generator's code.  Every run passes them to the
-controller FMU explicitly (never relying on the FMU's built-in defaults matching the
-airframe), so they are cached by content: the key is a SHA-256 of the airframe's FMU
-parameters and of the generator modules' source, so an edited airframe or a changed
-algorithm can never be served a stale set.
+The controller FMU derives S(0) and every single-failure set from its airframe parameters
+at initialization (fmu_src/controller/derive_sets.c), in milliseconds.  The scipy design tool
+(:mod:`controller.force_sets`, a finer servo grid) is its oracle and computes the sets the
+figures, the 3-D view and ``fullpose force-set`` show: the attainable force set and S(0) as
+whole :class:`~controller.force_sets.Polytope` objects, which take seconds per airframe.
+They depend only on the rotors (:data:`SET_PARAMETERS`) and on the generator's code, so
+they are cached by content: the key is a SHA-256 of those numbers and of the generator
+modules' source, so an edited rotor or a changed algorithm can never be served a stale set,
+while a change of mass, inertia or time constant keeps them.
 
 The shipped airframes' sets are generated at design time and shipped beside this module
 (``controller/airframe_sets/<airframe>.json``, written by ``python -m
-controller.shipped_sets``): they serve an airframe whose numbers are exactly the shipped ones,
-so a first run on a new machine computes nothing.  Their freshness against the generator is a
-test (``--check`` compares them as sets, the way ``polytope_defaults`` does).
-
-The plots' attainable force set and S(0) are kept the same way (:func:`force_sets`): whole
-:class:`~controller.force_sets.Polytope` objects, serialized as JSON (``repr`` floats, so
-they read back bit-identical).
+controller.shipped_sets``, with the single-failure sets as controller parameters): they serve
+an airframe whose rotor numbers are exactly the shipped ones, so a first run on a new machine
+computes nothing, and runs pass them to the controller (:func:`design_set_parameters`).
+Their freshness against the generator is a test (``--check``).  Polytopes are serialized as
+JSON (``repr`` floats, so they read back bit-identical).
 
 Location: ``$FULLPOSE_CACHE_DIR`` if set, else the platform's user cache folder
 (``%LOCALAPPDATA%\\fullpose\\cache``, ``~/Library/Caches/fullpose``,
@@ -28,19 +29,17 @@ from __future__ import annotations
 import hashlib
 import importlib.util
 import json
-import math
 import os
 import sys
 import tempfile
 import threading
-from collections.abc import Callable
 from functools import cache
 from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from controller.fmu_parameters import Parameters, failure_parameters, s0_parameters
+from controller.fmu_parameters import Parameters, s0_parameters
 from plant import Airframe
 
 if TYPE_CHECKING:
@@ -49,7 +48,7 @@ if TYPE_CHECKING:
 _GENERATORS = ("controller.force_sets", "controller.failures", "controller.fmu_parameters",
                "controller.polytope_cache", "plant.effectiveness")
 """The modules whose code decides the sets: their source is part of every key."""
-_FORMAT = 1
+_FORMAT = 2
 SHIPPED_DIR = Path(__file__).resolve().parent / "airframe_sets"
 """Design-time sets of the shipped airframes, one JSON file per airframe name."""
 
@@ -79,39 +78,30 @@ def _generator_digest() -> str:
     return h.hexdigest()
 
 
+SET_PARAMETERS = ("n_rotors", "k_t", "k_d", "omega_min", "omega_max", "rotor_pos", "rotor_dir",
+                  "rotor_gamma", "alpha_min", "alpha_max", "beta_min", "beta_max")
+"""The airframe parameters the force sets depend on (eq. 5-6: the rotors and their limits);
+mass, inertia, gravity and the actuator time constants do not enter them."""
+
+
 def _numbers(airframe: Airframe) -> dict[str, Any]:
+    """The airframe's numbers that decide its force sets (:data:`SET_PARAMETERS`)."""
     return {k: (v if isinstance(v, (bool, int)) else repr(float(v)))
-            for k, v in sorted(airframe.fmu_parameters().items())}
+            for k, v in sorted(airframe.fmu_parameters().items())
+            if k.split("[")[0] in SET_PARAMETERS}
 
 
 def cache_key(kind: str, airframe: Airframe) -> str:
     """Content address of one kind of polytope parameters of an airframe."""
     doc = {"format": _FORMAT, "kind": kind, "generator": _generator_digest(),
-           "airframe": _numbers(airframe)}
+           "rotors": _numbers(airframe)}
     return hashlib.sha256(json.dumps(doc, sort_keys=True).encode()).hexdigest()
 
 
-def airframe_digest(airframe: Airframe) -> str:
-    """SHA-256 of the airframe's numbers alone: what a shipped set file is valid for."""
+def rotors_digest(airframe: Airframe) -> str:
+    """SHA-256 of the numbers the force sets depend on: what a shipped set file is valid
+    for (a heavier vehicle with the same rotors keeps its sets)."""
     return hashlib.sha256(json.dumps(_numbers(airframe), sort_keys=True).encode()).hexdigest()
-
-
-def _read(path: Path) -> Parameters | None:
-    try:
-        doc = json.loads(path.read_text(encoding="utf-8"))
-    except (OSError, ValueError):
-        return None
-    params = doc.get("parameters") if isinstance(doc, dict) else None
-    if not isinstance(params, dict):
-        return None
-    for v in params.values():
-        if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
-            return None
-    return params
-
-
-def _write(path: Path, params: Parameters) -> None:
-    _write_doc(path, {"parameters": params})
 
 
 def _write_doc(path: Path, doc: dict[str, Any]) -> None:
@@ -125,29 +115,17 @@ def _write_doc(path: Path, doc: dict[str, Any]) -> None:
         pass  # a read-only cache folder costs the next run the computation, nothing else
 
 
-def cached_parameters(kind: str, airframe: Airframe,
-                      compute: Callable[[Airframe], Parameters]) -> Parameters:
-    """``compute(airframe)``, or its stored result for an airframe with the same numbers."""
-    path = cache_dir() / f"{kind}-{cache_key(kind, airframe)}.json"
-    found = _read(path)
-    if found is not None:
-        return found
-    params = compute(airframe)
-    _write(path, params)
-    return params
-
-
-def polytope_parameters(airframe: Airframe) -> Parameters:
-    """``poly_n``, ``poly_A[i,j]``, ``poly_b[i]``: the airframe's S(0) for the controller."""
-    return s0_parameters(cached_polytope("s0", airframe))
-
-
-def failure_set_parameters(airframe: Airframe) -> Parameters:
-    """The ``fail_poly_*`` parameters: S(0) after each single-rotor loss."""
+def design_set_parameters(airframe: Airframe) -> Parameters:
+    """The controller's ``poly_*`` and ``fail_poly_*`` parameters from the design tool, for
+    an airframe whose rotors are a shipped airframe's (its design-time sets, computed at a
+    finer servo grid than the controller's own derivation); empty for any other airframe,
+    whose controller derives every set itself at initialization."""
     found = shipped(airframe)
-    if found is not None:
-        return dict(found["failures"])
-    return cached_parameters("failures", airframe, _failure_parameters)
+    if found is None:
+        return {}
+    params = dict(s0_parameters(polytope_from_doc(found["s0"])))
+    params.update(found["failures"])
+    return params
 
 
 # -- whole polytopes -----------------------------------------------------------
@@ -205,16 +183,32 @@ def shipped_path(name: str) -> Path:
     return SHIPPED_DIR / f"{name}.json"
 
 
+@cache
+def _shipped_index() -> dict[str, Path]:
+    """Shipped set files by the rotors digest they record (read once per process)."""
+    index: dict[str, Path] = {}
+    for path in sorted(SHIPPED_DIR.glob("*.json")):
+        try:
+            digest = json.loads(path.read_text(encoding="utf-8")).get("rotors_digest")
+        except (OSError, ValueError, AttributeError):
+            continue
+        if isinstance(digest, str):
+            index.setdefault(digest, path)
+    return index
+
+
 def shipped(airframe: Airframe) -> dict[str, Any] | None:
-    """The design-time sets of a shipped airframe, when ``airframe`` has exactly its numbers."""
-    path = shipped_path(airframe.name)
-    if not path.is_file():
+    """The design-time sets of the shipped airframe whose rotors ``airframe`` has exactly
+    (whatever its name, mass or inertia), or None."""
+    digest = rotors_digest(airframe)
+    path = _shipped_index().get(digest)
+    if path is None:
         return None
     try:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError):
         return None
-    if not isinstance(doc, dict) or doc.get("airframe_digest") != airframe_digest(airframe):
+    if not isinstance(doc, dict) or doc.get("rotors_digest") != digest:
         return None
     return doc
 
@@ -227,7 +221,7 @@ _MEMO_SIZE = 16
 def cached_polytope(kind: str, airframe: Airframe) -> Polytope:
     """The shipped polytope, else the cached one, else computed (and cached); the same
     object for equal airframe numbers within a process."""
-    key = (kind, airframe_digest(airframe))
+    key = (kind, rotors_digest(airframe))
     with _MEMO_LOCK:
         hit = _MEMO.get(key)
     if hit is None:
@@ -256,9 +250,3 @@ def _load_polytope(kind: str, airframe: Airframe) -> Polytope:
 def force_sets(airframe: Airframe) -> tuple[Polytope, Polytope]:
     """(AFS, S(0)) of an airframe: shipped, cached or computed (see the module docstring)."""
     return cached_polytope("afs", airframe), cached_polytope("s0", airframe)
-
-
-def _failure_parameters(airframe: Airframe) -> Parameters:
-    from controller.failures import failure_polytopes
-
-    return failure_parameters(failure_polytopes(airframe))

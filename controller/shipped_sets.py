@@ -6,8 +6,9 @@
 
 Each file, ``controller/airframe_sets/<airframe>.json``, holds the airframe's attainable force
 set and S(0) as whole polytopes and the controller's single-failure parameters, for the
-airframe numbers whose SHA-256 it records (``airframe_digest``): an airframe with any other
-number is never served them (``controller.polytope_cache``).
+rotor numbers whose SHA-256 it records (``rotors_digest``: the numbers the sets depend on,
+``controller.polytope_cache.SET_PARAMETERS``): an airframe with other rotors is never served
+them, while a heavier vehicle with the same rotors is (``controller.polytope_cache``).
 
 ``--check`` asks, for each shipped facet, whether its offset is the one computed now for its
 normal (:func:`controller.force_sets.facet_problem`), not whether the polytope is the same:
@@ -33,10 +34,10 @@ from controller.fmu_parameters import FAIL_FACETS, failure_parameters
 from controller.force_sets import facet_problem
 from controller.polytope_cache import (
     POLYTOPE_KINDS,
-    airframe_digest,
     compute_polytope,
     polytope_doc,
     polytope_from_doc,
+    rotors_digest,
     shipped_path,
 )
 from plant.airframe import Airframe, list_airframes, load_airframe
@@ -46,8 +47,8 @@ COMMAND = "python -m controller.shipped_sets"
 
 def generate(af: Airframe) -> dict[str, Any]:
     """The shipped document of one airframe, computed now."""
-    doc: dict[str, Any] = {"format": 1, "generated_by": COMMAND, "airframe": af.name,
-                           "airframe_digest": airframe_digest(af)}
+    doc: dict[str, Any] = {"format": 2, "generated_by": COMMAND, "airframe": af.name,
+                           "rotors_digest": rotors_digest(af)}
     for kind in POLYTOPE_KINDS:
         doc[kind] = polytope_doc(compute_polytope(kind, af))
     doc["failures"] = failure_parameters(failure_polytopes(af))
@@ -75,8 +76,8 @@ def check(af: Airframe) -> list[str]:
         doc = json.loads(path.read_text(encoding="utf-8"))
     except (OSError, ValueError) as e:
         return [f"{path}: cannot read it ({e}); run {COMMAND} {af.name}"]
-    if doc.get("airframe_digest") != airframe_digest(af):
-        return [f"{path}: made for other airframe numbers; run {COMMAND} {af.name}"]
+    if doc.get("rotors_digest") != rotors_digest(af):
+        return [f"{path}: made for other rotor numbers; run {COMMAND} {af.name}"]
     problems = []
     for kind in POLYTOPE_KINDS:
         shipped = polytope_from_doc(doc[kind])

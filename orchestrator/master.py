@@ -247,7 +247,7 @@ class CoSimulation:
         if refs0 is None:
             refs0 = sc.references(np.zeros(1))
         pose = Pose.of(refs0["pos_ref"][0], refs0["euler_ref"][0], refs0["vel_ref"][0])
-        return start_values(sc.airframe, pose, failures=bool(sc.faults), timing=self.timing,
+        return start_values(sc.airframe, pose, timing=self.timing,
                             plant_overrides=sc.plant_parameters,
                             controller_overrides=sc.controller_parameters)
 

@@ -5,10 +5,11 @@ cases, the open-loop hover demo and the SSP export all build their parameters he
 
 * plant: the airframe's numbers (``Airframe.fmu_parameters``), the initial pose, then the
   caller's overrides;
-* controller: the airframe numbers the controller also has (the names both FMUs share), the
-  airframe's S(0) (always passed explicitly, computed once per airframe content by
-  ``controller.polytope_cache``), with ``failures`` also S(0) after each single-rotor loss,
-  the design's gains (``controller.fmu_parameters.block_parameters``; None keeps the gains
+* controller: the airframe numbers the controller also has (the names both FMUs share); for
+  an airframe with a shipped airframe's rotors, that airframe's design-time S(0) and
+  single-failure sets (``controller.polytope_cache.design_set_parameters``), for any other
+  nothing: the controller derives them from its airframe parameters at initialization; the
+  design's gains (``controller.fmu_parameters.block_parameters``; None keeps the gains
   compiled into the FMU, i.e. the shipped synthesis), then the caller's overrides.
 """
 
@@ -18,7 +19,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
 
 from controller import controller_fmu
-from controller.polytope_cache import failure_set_parameters, polytope_parameters
+from controller.polytope_cache import design_set_parameters
 from plant import Airframe
 from plant.model_description import fmu_variables
 
@@ -66,23 +67,21 @@ def plant_start_values(airframe: Airframe, pose: Pose = Pose(), *,
     return params
 
 
-def controller_start_values(airframe: Airframe, *, failures: bool = False,
+def controller_start_values(airframe: Airframe, *,
                             design: Mapping[str, float] | None = None,
                             overrides: Mapping[str, Value] | None = None) -> dict[str, Value]:
-    """The controller's: shared airframe numbers, S(0) (and the single-failure sets), the
-    design's gains, then ``overrides``."""
+    """The controller's: shared airframe numbers, the design-time force sets where the rotors
+    are a shipped airframe's, the design's gains, then ``overrides``."""
     variables = fmu_variables(controller_fmu())
     params: dict[str, Value] = {k: v for k, v in airframe.fmu_parameters().items()
                                 if k in variables and variables[k].causality == "parameter"}
-    params.update(polytope_parameters(airframe))
-    if failures:
-        params.update(failure_set_parameters(airframe))
+    params.update(design_set_parameters(airframe))
     params.update(design or {})
     params.update(overrides or {})
     return params
 
 
-def start_values(airframe: Airframe, pose: Pose = Pose(), *, failures: bool = False,
+def start_values(airframe: Airframe, pose: Pose = Pose(), *,
                  design: Mapping[str, float] | None = None, timing: bool = False,
                  plant_overrides: Mapping[str, Value] | None = None,
                  controller_overrides: Mapping[str, Value] | None = None) -> StartValues:
@@ -91,6 +90,6 @@ def start_values(airframe: Airframe, pose: Pose = Pose(), *, failures: bool = Fa
     return StartValues(
         plant=plant_start_values(airframe, pose, overrides={"timing": timing,
                                                             **(plant_overrides or {})}),
-        controller=controller_start_values(airframe, failures=failures, design=design,
+        controller=controller_start_values(airframe, design=design,
                                            overrides={"timing": timing,
                                                       **(controller_overrides or {})}))

@@ -47,6 +47,11 @@ class RotorSet:
     def n(self) -> int:
         return int(self.positions.shape[0])
 
+    def native_buffer(self) -> ctypes.Array[ctypes.c_char]:
+        """The rotor set as the C core's ``FpRotorSet`` (``fp_rotor_set_init``), for the
+        host libraries that take one."""
+        return self._buffer()
+
     def _buffer(self) -> ctypes.Array[ctypes.c_char]:
         lib = multirotor()
         buf = ctypes.create_string_buffer(lib.fp_rotor_set_size())

@@ -131,17 +131,16 @@ def test_the_walls_test_sees_a_breach(tmp_path):
 
 def test_constants_shared_by_c_and_python_agree():
     """Layouts written in both languages: the rotor slots and the sat_flags bits
-    (common/multirotor.h) against controller.fmu_parameters, and the polytope caps the
-    generated headers declare."""
+    (common/multirotor.h) against controller.fmu_parameters, and the polytope caps
+    (controller/controller.h)."""
     from controller import fmu_parameters as fp
 
     rotor_h = (SRC / "common" / "multirotor.h").read_text()
     assert int(re.search(r"#define FP_MAX_ROTORS (\d+)", rotor_h).group(1)) == fp.MAX_ROTORS
     bits = dict(re.findall(r"FP_SAT_(\w+) = (\d+)", rotor_h))
     assert {k.lower(): int(v) for k, v in bits.items()} == fp.SAT_FLAG_SHIFT
-    caps = {"default_polytope.h": ("FP_POLYTOPE_MAX_FACETS", fp.POLY_FACETS),
-            "default_fail_polytopes.h": ("FP_FAIL_POLYTOPE_FACETS", fp.FAIL_FACETS)}
-    for header, (macro, value) in caps.items():
-        text = (SRC / "controller" / header).read_text()
+    text = (SRC / "controller" / "controller.h").read_text()
+    for macro, value in (("FP_POLYTOPE_MAX_FACETS", fp.POLY_FACETS),
+                         ("FP_FAIL_POLYTOPE_FACETS", fp.FAIL_FACETS)):
         assert int(re.search(rf"#define {macro} (\d+)", text).group(1)) == value
 

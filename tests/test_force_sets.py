@@ -10,10 +10,7 @@ Oracles used here, none of which goes through controller.force_sets:
 
 from __future__ import annotations
 
-import dataclasses
 import re
-import subprocess
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -22,7 +19,6 @@ from scipy.optimize import linprog, minimize
 from scipy.spatial import ConvexHull
 
 import plant
-from controller import polytope_defaults
 from controller.force_sets import (
     MAX_FACETS,
     EmptyForceSetError,
@@ -39,7 +35,6 @@ from plant.effectiveness import thrust_direction
 AIRFRAMES = ["paper_hexacopter", "fixed_tilt_hexarotor", "quadrotor"]
 ROOT = Path(__file__).resolve().parents[1]
 # the header in this checkout (the installed package has no fmu_src/)
-SHIPPED_HEADER = ROOT / "fmu_src" / "controller" / "default_polytope.h"
 
 _CACHE: dict[tuple[str, str], object] = {}
 
@@ -321,23 +316,6 @@ def test_deterministic_bit_identical():
 
 
 # ---------------------------------------------------------------------------
-# (5) the committed header is fresh
-
-
-def test_default_header_is_fresh():
-    p = s0_of("paper_hexacopter")
-    text = polytope_defaults.render(p)
-    ok, message = polytope_defaults.check(SHIPPED_HEADER, text)
-    assert ok, message
-    # compared as sets (other library versions move the numbers by round-off), not bytes
-    A, b = polytope_defaults.parse(SHIPPED_HEADER.read_text())
-    assert A.shape == (p.n_facets, 3)
-    assert same_polytope(A, b, p.A, p.b)[0]
-    assert f"#define FP_POLYTOPE_MAX_FACETS {MAX_FACETS}\n" in text
-    assert f"#define FP_DEFAULT_POLYTOPE_FACETS {p.n_facets}\n" in text
-
-
-# ---------------------------------------------------------------------------
 # (5b) canonical facet order, and polytopes compared as sets
 
 
@@ -405,80 +383,6 @@ def test_same_polytope_reports_a_moved_facet():
     b_empty[k] = -p.b[int(np.argmax(p.A[:, 2]))] - 1.0  # below the set's lowest f_z
     assert same_polytope(p.A, b_empty, p.A, p.b) == \
         (False, "the first set is empty, the other is not")
-
-
-def _slower_rotors_s0():
-    """S(0) of the paper hexacopter with every rotor's omega_max 1 % lower (a real change)."""
-    if ("slow", "S0") not in _CACHE:
-        af = plant.load_airframe("paper_hexacopter")
-        _CACHE[("slow", "S0")] = feasible_force_set(
-            dataclasses.replace(af, omega_max=0.99 * af.omega_max))
-    return _CACHE[("slow", "S0")]
-
-
-def test_check_accepts_a_reordered_rounded_header(tmp_path):
-    p = s0_of("paper_hexacopter")
-    A2, b2 = _shuffled(p.A, p.b, np.random.default_rng(2))
-    norms = np.linalg.norm(A2, axis=1)  # rows stay unit normals in a header
-    header = tmp_path / "default_polytope.h"
-    header.write_text(polytope_defaults.render(
-        dataclasses.replace(p, A=A2 / norms[:, None], b=b2 / norms)))
-    ok, message = polytope_defaults.check(header, polytope_defaults.render(p))
-    assert ok, message
-
-
-def test_check_rejects_an_edited_airframe(tmp_path):
-    """Rotors 1 % slower (thrust -2 %): the check fails and names a facet, its offset and
-    the offset computed for the slower rotors.  Oracle: with omega_min = 0, S(0) scales with
-    the thrust, so the slower offset is (0.99)^2 = 0.9801 times the file's, exactly."""
-    header = tmp_path / "default_polytope.h"
-    header.write_text(SHIPPED_HEADER.read_text())
-    af = plant.load_airframe("paper_hexacopter")
-    assert af.omega_min == 0.0
-    slow = dataclasses.replace(af, omega_max=0.99 * af.omega_max)
-    ok, message = polytope_defaults.check(header, polytope_defaults.render(s0_of(
-        "paper_hexacopter")), airframe=slow)
-    assert not ok and "stale" in message
-    m = re.search(r"facet (\d+) \(normal [^)]*\) has offset (\S+) N where the forces reach "
-                  r"(\S+) N here", message)
-    assert m is not None, message
-    k, file_b, slow_b = int(m.group(1)), float(m.group(2)), float(m.group(3))
-    _, b = polytope_defaults.parse(SHIPPED_HEADER.read_text())
-    assert file_b == pytest.approx(b[k], rel=1e-8)  # (9 digits in the message)
-    assert slow_b == pytest.approx(0.9801 * b[k], rel=1e-8)
-
-
-def test_check_rejects_another_poly_margin(tmp_path):
-    """A file holding the polytope shrunk about the hover force h like the controller's
-    poly_margin m does (b_i -> a_i . h + m (b_i - a_i . h)): the check names the facet moved
-    most, (1 - m)(b_i - a_i . h), with its offset and the one computed for its normal."""
-    p = s0_of("paper_hexacopter")
-    h, m = hover_force("paper_hexacopter"), 0.9
-    shrunk = p.A @ h + m * (p.b - p.A @ h)
-    header = tmp_path / "default_polytope.h"
-    header.write_text(polytope_defaults.render(dataclasses.replace(p, b=shrunk)))
-    ok, message = polytope_defaults.check(header, polytope_defaults.render(p))
-    assert not ok
-    got = re.search(r"facet (\d+) \(normal [^)]*\) has offset (\S+) N where the forces reach "
-                    r"(\S+) N here", message)
-    assert got is not None, message
-    k, file_b, here = int(got.group(1)), float(got.group(2)), float(got.group(3))
-    moved = (1 - m) * (p.b - p.A @ h)
-    assert moved[k] == pytest.approx(moved.max(), rel=1e-9)  # symmetric facets tie
-    assert (file_b, here) == (pytest.approx(shrunk[k], rel=1e-8), pytest.approx(p.b[k], rel=1e-8))
-
-
-def test_check_command_detects_a_stale_file(tmp_path):
-    stale = tmp_path / "default_polytope.h"
-    text = SHIPPED_HEADER.read_text()
-    stale.write_text(text.replace("#define FP_DEFAULT_POLYTOPE_FACETS",
-                                  "#define FP_DEFAULT_POLYTOPE_FACETS 1 +"))
-    cmd = [sys.executable, "-m", "controller.polytope_defaults", "--check", "--output"]
-    res = subprocess.run([*cmd, str(stale)], cwd=ROOT, capture_output=True, text=True,
-                         check=False)
-    assert res.returncode == 1, res.stdout + res.stderr
-    assert "stale" in res.stderr
-    # (the committed file itself is checked in-process by test_default_header_is_fresh)
 
 
 # ---------------------------------------------------------------------------

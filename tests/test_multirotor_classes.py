@@ -2,24 +2,19 @@
 
 from __future__ import annotations
 
-import dataclasses
 import math
-import re
 from pathlib import Path
 
 import numpy as np
 import pytest
 
 import plant
-from controller import failure_defaults
-from controller.failures import FAIL_FACETS, airframe_without, failure_polytopes, hover_possible
-from controller.force_sets import feasible_force_set
+from controller.failures import airframe_without, failure_polytopes, hover_possible
 from orchestrator.master import run
 from orchestrator.metrics import compute_metrics
 from orchestrator.runner import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
-FAIL_HEADER = ROOT / "fmu_src" / "controller" / "default_fail_polytopes.h"  # (checkout only)
 H = 0.002
 
 
@@ -68,61 +63,6 @@ def test_hover_with_a_demanded_attitude(name):
 @pytest.fixture(scope="module")
 def hexa_failures():
     return failure_polytopes(plant.load_airframe("paper_hexacopter"))
-
-
-def test_failure_header_is_fresh(hexa_failures):
-    ok, message = failure_defaults.check(FAIL_HEADER, failure_defaults.render(hexa_failures))
-    assert ok, message
-
-
-def test_failure_check_command(hexa_failures, tmp_path, monkeypatch, capsys):
-    """The command's --check (its computation replaced by the fixture's: same function)."""
-    monkeypatch.setattr(failure_defaults, "failure_polytopes", lambda af: hexa_failures)
-    assert failure_defaults.main(["--check", "--output", str(FAIL_HEADER)]) == 0
-    stale = tmp_path / "default_fail_polytopes.h"
-    stale.write_text(FAIL_HEADER.read_text().replace("hover possible", "hover maybe", 1))
-    assert failure_defaults.main(["--check", "--output", str(stale)]) == 1
-    assert "stale" in capsys.readouterr().err
-
-
-def test_failure_check_compares_sets(hexa_failures):
-    """Permuted, round-off-perturbed facets pass; a real change in one rotor's set fails and
-    the message names that rotor and what differs."""
-    fresh = failure_defaults.render(hexa_failures)
-    rng = np.random.default_rng(5)
-    shuffled = []
-    for p in hexa_failures:
-        perm = rng.permutation(len(p.b))
-        A = p.A[perm] * (1.0 + 1e-12 * rng.standard_normal(p.A.shape))
-        b = p.b[perm] * (1.0 + 1e-12 * rng.standard_normal(len(p.b)))
-        norms = np.linalg.norm(A, axis=1)
-        shuffled.append(dataclasses.replace(p, A=A / norms[:, None], b=b / norms))
-    ok, why = failure_defaults.compare(failure_defaults.render(shuffled), fresh)
-    assert ok, why
-    # rotor 3's set of a vehicle whose rotors are 1 % slower (thrust -2 %)
-    hexa = plant.load_airframe("paper_hexacopter")
-    slow = dataclasses.replace(hexa, omega_max=0.99 * hexa.omega_max)
-    edited = list(hexa_failures)
-    edited[2] = feasible_force_set(airframe_without(slow, [2]), n_directions=FAIL_FACETS)
-    ok, why = failure_defaults.compare(failure_defaults.render(edited), fresh)
-    assert not ok
-    # the file's rotor-3 set is the slower one: with omega_min = 0 it is the set computed
-    # here scaled by (0.99)^2, so its offsets are 0.9801 of the ones computed here
-    m = re.fullmatch(r"rotor 3: facet \d+ \(normal [^)]*\) has offset (\S+) N where the forces "
-                     r"reach (\S+) N here \(tolerance \S+ N\)", why)
-    assert m is not None, why
-    assert float(m.group(1)) == pytest.approx(0.9801 * float(m.group(2)), rel=1e-8)
-    assert "rotor 1" not in why and "rotor 2" not in why
-    # a slot emptied in the file
-    counts = [len(p.b) for p in hexa_failures] + [0, 0]
-
-    def n_array(n):
-        return f"fp_default_fail_n[8] = {{{', '.join(str(c) for c in n)}}};"
-
-    emptied = fresh.replace(n_array(counts), n_array([*counts[:5], 0, 0, 0]))
-    assert emptied != fresh
-    ok, why = failure_defaults.compare(emptied, fresh)
-    assert (ok, why) == (False, "rotor 6 is empty, but not here")
 
 
 def test_single_failure_sets(hexa_failures):

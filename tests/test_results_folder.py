@@ -68,53 +68,75 @@ def cache(tmp_path, monkeypatch):
     return tmp_path / "cache"
 
 
-def test_cache_computes_once_per_airframe_content(cache):
-    af = load_airframe("paper_hexacopter")
+def _tilted_quad():
+    """A quadrotor with rotors no shipped airframe has (no shipped sets)."""
+    af = load_airframe("quadrotor")
+    return dataclasses.replace(af, name="tilted", alpha_limits=np.tile([0.1, 0.1], (4, 1)))
+
+
+def test_cache_computes_once_per_rotor_content(cache, monkeypatch):
+    """The key is what the sets depend on: the rotors, not the name, mass or lags."""
+    af = _tilted_quad()
     calls = []
+    real = polytope_cache.compute_polytope
 
-    def compute(a):
-        calls.append(a.name)
-        return {"poly_n": 4, "x": 0.1 + 0.2}
+    def compute(kind, a):
+        calls.append((kind, a.name))
+        return real(kind, a)
 
-    first = polytope_cache.cached_parameters("t", af, compute)
-    renamed = dataclasses.replace(af, name="same numbers, another name")
-    again = polytope_cache.cached_parameters("t", renamed, compute)
-    assert first == again == {"poly_n": 4, "x": 0.1 + 0.2}  # floats round-trip exactly
-    assert calls == [af.name]
-    heavier = dataclasses.replace(af, mass=af.mass * 1.01)  # an edited airframe
-    polytope_cache.cached_parameters("t", heavier, compute)
+    monkeypatch.setattr(polytope_cache, "compute_polytope", compute)
+    monkeypatch.setattr(polytope_cache, "_MEMO", {})
+    first = polytope_cache.cached_polytope("s0", af)
+    assert calls == [("s0", "tilted")]
+    polytope_cache._MEMO.clear()
+    for same in (dataclasses.replace(af, name="another name"),
+                 dataclasses.replace(af, mass=af.mass * 1.3, tau_motor=0.05,
+                                     inertia=af.inertia * 1.5)):
+        again = polytope_cache.cached_polytope("s0", same)  # from the disk entry
+        polytope_cache._MEMO.clear()
+        assert np.array_equal(again.A, first.A) and np.array_equal(again.b, first.b)
+    assert len(calls) == 1
+    slower = dataclasses.replace(af, omega_max=af.omega_max * 0.99)  # other rotors
+    polytope_cache.cached_polytope("s0", slower)
     assert len(calls) == 2
 
 
-def test_a_corrupt_entry_is_recomputed(cache):
-    af = load_airframe("paper_hexacopter")
-    polytope_cache.cached_parameters("t", af, lambda a: {"v": 1.0})
+def test_a_corrupt_entry_is_recomputed(cache, monkeypatch):
+    monkeypatch.setattr(polytope_cache, "_MEMO", {})
+    af = _tilted_quad()
+    first = polytope_cache.cached_polytope("s0", af)
     (entry,) = cache.iterdir()
-    entry.write_text('{"parameters": {"v": NaN}}')
-    assert polytope_cache.cached_parameters("t", af, lambda a: {"v": 2.0}) == {"v": 2.0}
-    entry.write_text("garbage")
-    assert polytope_cache.cached_parameters("t", af, lambda a: {"v": 3.0}) == {"v": 3.0}
+    for garbage in ('{"A": [[NaN, 0, 0]]}', "garbage"):
+        entry.write_text(garbage)
+        polytope_cache._MEMO.clear()
+        again = polytope_cache.cached_polytope("s0", af)
+        assert np.array_equal(again.b, first.b)
 
 
 def test_an_unwritable_cache_only_costs_the_caching(tmp_path, monkeypatch):
     blocker = tmp_path / "a_file"
     blocker.write_text("")
     monkeypatch.setenv("FULLPOSE_CACHE_DIR", str(blocker / "cache"))
-    af = load_airframe("paper_hexacopter")
-    assert polytope_cache.cached_parameters("t", af, lambda a: {"v": 1.0}) == {"v": 1.0}
+    monkeypatch.setattr(polytope_cache, "_MEMO", {})
+    af = _tilted_quad()
+    assert polytope_cache.cached_polytope("s0", af).n_facets >= 4
 
 
-def test_cached_s0_is_the_airframes_s0(cache):
-    """Oracle: the set computed directly by controller.force_sets."""
+def test_design_sets_serve_shipped_rotors_only():
+    """A shipped airframe's design-time S(0) (oracle: controller.force_sets now) and failure
+    sets; the same rotors on a heavier vehicle get them too; other rotors get none (the
+    controller derives them)."""
     af = load_airframe("quadrotor")
-    params = polytope_cache.polytope_parameters(af)
-    params = polytope_cache.polytope_parameters(af)  # from the cache this time
-    n = int(params["poly_n"])
-    A = np.array([[params[f"poly_A[{i + 1},{j + 1}]"] for j in range(3)] for i in range(n)])
-    b = np.array([params[f"poly_b[{i + 1}]"] for i in range(n)])
-    poly = feasible_force_set(af)
-    same, why = same_polytope(A, b, poly.A, poly.b)
-    assert same, why
+    for vehicle in (af, dataclasses.replace(af, mass=1.2, name="heavier")):
+        params = polytope_cache.design_set_parameters(vehicle)
+        n = int(params["poly_n"])
+        A = np.array([[params[f"poly_A[{i + 1},{j + 1}]"] for j in range(3)] for i in range(n)])
+        b = np.array([params[f"poly_b[{i + 1}]"] for i in range(n)])
+        poly = feasible_force_set(af)
+        same, why = same_polytope(A, b, poly.A, poly.b)
+        assert same, why
+        assert all(f"fail_poly_n[{i + 1}]" in params for i in range(af.n_rotors))
+    assert polytope_cache.design_set_parameters(_tilted_quad()) == {}
 
 
 def test_shipped_sets_are_fresh_for_every_shipped_airframe():

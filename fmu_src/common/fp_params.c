@@ -3,6 +3,9 @@
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
+#include <string.h>
+
+#include "fp_math.h"
 
 #define PI 3.14159265358979323846
 
@@ -190,9 +193,83 @@ static void check_inertia(FpCheck *c, const double *inertia) {
 /* ------------------------------------------------------------------------ */
 /* Airframe                                                                 */
 
+/* The eigenvalues of the Gram matrix of the columns cols[k] (k < n), largest first. */
+static void gram_eigenvalues(const double (*cols)[3], int n, double e[3]) {
+    double g[3][3] = {{0.0}};
+    int i, j, k;
+    for (k = 0; k < n; k++)
+        for (i = 0; i < 3; i++)
+            for (j = 0; j < 3; j++) g[i][j] += cols[k][i] * cols[k][j];
+    sym3_eigenvalues(g, e);
+    for (i = 0; i < 2; i++) /* (the diagonal case comes unsorted) */
+        for (j = 0; j < 2 - i; j++)
+            if (e[j] < e[j + 1]) {
+                double t = e[j];
+                e[j] = e[j + 1], e[j + 1] = t;
+            }
+}
+
+/*
+ * Control authority of a valid rotor set: no two rotors at one place, and torques about
+ * every axis.  The torque directions a rotor offers are M_i t_i (thrust changes) and
+ * M_i dt_i/dalpha, M_i dt_i/dbeta (tilts, where the servo moves), at the centre of its servo
+ * box, with M_i = S(d_i) + c_i (k_d / k_t) I (eq. 3).  The moment arms alone (S(d_i)) must
+ * span two axes, and with the drag torques all three: otherwise roll, pitch or yaw is out of
+ * reach whatever the allocation does (all rotors at the centre, all on one line through it).
+ */
+static void check_authority(FpCheck *c, const FpRotorSet *rs) {
+    double arm[3 * FP_MAX_ROTORS][3], all[3 * FP_MAX_ROTORS][3], e_arm[3], e_all[3];
+    double size = 0.0, r = rs->k_d / rs->k_t;
+    int i, j, k = 0;
+    for (i = 0; i < rs->n; i++) size = fmax(size, sqrt(v3_dot(rs->pos[i], rs->pos[i])));
+    for (i = 0; i < rs->n; i++)
+        for (j = i + 1; j < rs->n; j++) {
+            double d[3];
+            d[0] = rs->pos[i][0] - rs->pos[j][0], d[1] = rs->pos[i][1] - rs->pos[j][1];
+            d[2] = rs->pos[i][2] - rs->pos[j][2];
+            if (sqrt(v3_dot(d, d)) <= 1e-9 * (1.0 + size)) {
+                fp_check_error(c,
+                               "parameter rotor_pos: rotors %d and %d are at the same position "
+                               "(%.6g, %.6g, %.6g) m: no two rotors can occupy one place",
+                               i + 1, j + 1, rs->pos[i][0], rs->pos[i][1], rs->pos[i][2]);
+                return;
+            }
+        }
+    for (i = 0; i < rs->n; i++) {
+        double a0 = 0.5 * (rs->alpha_min[i] + rs->alpha_max[i]);
+        double b0 = 0.5 * (rs->beta_min[i] + rs->beta_max[i]);
+        double dirs[3][3];
+        int n_dirs = 1, q;
+        fp_thrust_direction(a0, b0, rs->gamma[i], dirs[0]);
+        fp_thrust_direction_jacobian(a0, b0, rs->gamma[i], dirs[1], dirs[2]);
+        if (rs->alpha_max[i] > rs->alpha_min[i]) n_dirs = 2;
+        if (rs->beta_max[i] > rs->beta_min[i]) {
+            if (n_dirs == 1) memcpy(dirs[1], dirs[2], sizeof dirs[1]);
+            n_dirs++;
+        }
+        for (q = 0; q < n_dirs; q++, k++) {
+            v3_cross(rs->pos[i], dirs[q], arm[k]);
+            for (j = 0; j < 3; j++) all[k][j] = arm[k][j] + r * rs->dir[i] * dirs[q][j];
+        }
+    }
+    gram_eigenvalues((const double(*)[3])arm, k, e_arm);
+    gram_eigenvalues((const double(*)[3])all, k, e_all);
+    if (!(e_arm[1] > 1e-9 * e_arm[0]) || !(e_arm[0] > 0.0))
+        fp_check_error(c,
+                       "parameter rotor_pos: the rotors' moment arms about the centre of gravity "
+                       "give torque about %s axis (all rotors at the centre or on one line "
+                       "through it): the vehicle cannot be controlled",
+                       e_arm[0] > 0.0 ? "one" : "no");
+    else if (!(e_all[2] > 1e-9 * e_all[0]))
+        fp_check_error(c,
+                       "parameters rotor_pos, rotor_dir, k_d: the rotors give no torque about one "
+                       "axis (the moment arms span two, and the drag torques do not add the "
+                       "third): the vehicle cannot be controlled");
+}
+
 FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, double g,
                            const FpRotorSet *rs) {
-    int i, n = rs->n, errors = c->errors;
+    int i, n = rs->n, errors = c->errors, errors0 = c->errors;
     fp_need_int_param(c, "n_rotors", &rs->n, 1);
     if (c->errors > errors) return FP_ERROR; /* the per-rotor checks need a valid n */
     if (n < 1 || n > FP_MAX_ROTORS) { /* a table whose range exceeds the arrays: a bug */
@@ -224,5 +301,6 @@ FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, doubl
     fp_need_param(c, "omega_max", &rs->omega_max, 1, NULL);
     fp_need_ordered(c, "omega_min", &rs->omega_min, &rs->omega_max, 1, 0,
                     "exceeds omega_max (inverted limits)");
+    if (c->errors == errors0) check_authority(c, rs);
     return FP_OK;
 }

@@ -96,24 +96,9 @@ static void controller_set_defaults(void *model) {
     m->euler_min[0] = m->euler_min[1] = -60.0 * CTRL_PI / 180.0;
     m->euler_max[0] = m->euler_max[1] = 60.0 * CTRL_PI / 180.0;
     m->force_constraint = 0;
-    m->poly_n = FP_DEFAULT_POLYTOPE_FACETS;
-    for (i = 0; i < FP_DEFAULT_POLYTOPE_FACETS; i++) {
-        m->poly_A[i][0] = fp_default_polytope_A[3 * i];
-        m->poly_A[i][1] = fp_default_polytope_A[3 * i + 1];
-        m->poly_A[i][2] = fp_default_polytope_A[3 * i + 2];
-        m->poly_b[i] = fp_default_polytope_b[i];
-    }
-    for (i = 0; i < FP_MAX_ROTORS; i++) {
-        int k, base = i * FP_FAIL_POLYTOPE_FACETS;
-        m->fail_poly_n[i] = fp_default_fail_n[i];
-        m->rotor_health[i] = 1.0;
-        for (k = 0; k < fp_default_fail_n[i]; k++) {
-            m->fail_poly_A[base + k][0] = fp_default_fail_A[3 * (base + k)];
-            m->fail_poly_A[base + k][1] = fp_default_fail_A[3 * (base + k) + 1];
-            m->fail_poly_A[base + k][2] = fp_default_fail_A[3 * (base + k) + 2];
-            m->fail_poly_b[base + k] = fp_default_fail_b[base + k];
-        }
-    }
+    /* poly_n = fail_poly_n[i] = 0: every force set derived from the airframe at
+     * initialization (ctrl_force_sets_resolve) */
+    for (i = 0; i < FP_MAX_ROTORS; i++) m->rotor_health[i] = 1.0;
     m->poly_margin = 0.9;
     m->W_nu[0] = m->W_nu[1] = m->W_nu[2] = 1.0;
     /* Torque priority for roll and pitch; yaw, the weakest axis (drag torque and
@@ -176,17 +161,17 @@ static CtrlForceSet force_set_in_use(const ControllerModel *m) {
     CtrlForceSet fs;
     int i = m->active_polytope;
     if (i >= 1) {
-        fs.A = (const double(*)[3])&m->fail_poly_A[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
+        fs.A = (const double(*)[3])&m->set_fail_A[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
         fs.d = &m->fail_d[(i - 1) * FP_FAIL_POLYTOPE_FACETS];
-        fs.n = m->fail_poly_n[i - 1];
+        fs.n = m->set_fail_n[i - 1];
         fs.fz[0] = m->fail_fz[i - 1][0];
         fs.fz[1] = m->fail_fz[i - 1][1];
         fs.id = i;
         return fs;
     }
-    fs.A = (const double(*)[3])m->poly_A;
+    fs.A = (const double(*)[3])m->set_A;
     fs.d = m->poly_d;
-    fs.n = m->poly_n;
+    fs.n = m->set_n;
     fs.fz[0] = m->fz_min;
     fs.fz[1] = m->fz_max;
     fs.id = 0;
@@ -258,40 +243,68 @@ static CtrlAllocationParams allocation_params(const ControllerModel *m) {
 /* ------------------------------------------------------------------------ */
 /* Initialization: the force sets                                           */
 
-/* Validate the nominal and single-failure polytopes and derive their margin-scaled
- * offsets, f_bz ranges and hover flags (the guidance QP's solver is borrowed before it is
- * set up). */
+/* The force sets in use (given or derived from the airframe), validated, with their
+ * margin-scaled offsets, f_bz ranges and hover flags (the guidance QP's solver is borrowed
+ * before it is set up). */
 static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     FpCheck c;
+    FpRotorSet rs;
+    CtrlGivenSet s0, fail[FP_MAX_ROTORS];
     double hover_fz = -m->mass * m->g;
-    int i;
+    char lost[48] = "";
+    int i, n_lost = 0;
     fp_check_init(&c, logger, controller_vars, N_CTRL_VARS);
-    if (ctrl_force_set_prepare(&c, "poly_A, poly_b", (const double(*)[3])m->poly_A, m->poly_b,
-                               m->poly_n, hover_fz, m->poly_margin, &m->guid, m->poly_d,
+    FP_MODEL_TO_ROTOR_SET(m, &rs);
+    s0.n = m->poly_n, s0.A = (const double(*)[3])m->poly_A, s0.b = m->poly_b;
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        int base = i * FP_FAIL_POLYTOPE_FACETS;
+        fail[i].n = m->fail_poly_n[i];
+        fail[i].A = (const double(*)[3])&m->fail_poly_A[base];
+        fail[i].b = &m->fail_poly_b[base];
+    }
+    if (ctrl_force_sets_resolve(&c, &rs, &s0, fail, &m->guid, &m->set_n, m->set_A, m->set_b,
+                                m->set_fail_n, m->set_fail_A, m->set_fail_b,
+                                &m->sets_derived) != FP_OK)
+        return FP_ERROR;
+    if (ctrl_force_set_prepare(&c, "poly_A, poly_b", (const double(*)[3])m->set_A, m->set_b,
+                               m->set_n, hover_fz, m->poly_margin, &m->guid, m->poly_d,
                                &m->fz_min, &m->fz_max, &m->hover_ok[0]) != FP_OK)
         return FP_ERROR;
     if (!m->hover_ok[0]) {
-        fp_check_error(&c,
-                       "parameters poly_A, poly_b: the hover force [0, 0, %.6g] N is outside "
-                       "the polytope: it does not describe this vehicle",
-                       hover_fz);
+        if (m->sets_derived & 1)
+            fp_check_error(&c,
+                           "parameters mass, k_t, omega_max, rotor tilts: the hover force [0, "
+                           "0, %.6g] N is outside the feasible-force set S(0) derived from the "
+                           "airframe (its most upward force is %.6g N): the rotors cannot hold "
+                           "this vehicle",
+                           hover_fz, m->fz_min);
+        else
+            fp_check_error(&c,
+                           "parameters poly_A, poly_b: the hover force [0, 0, %.6g] N is "
+                           "outside the polytope: it does not describe this vehicle",
+                           hover_fz);
         return FP_ERROR;
     }
     for (i = 0; i < FP_MAX_ROTORS; i++) {
         int base = i * FP_FAIL_POLYTOPE_FACETS;
         char name[48];
         m->hover_ok[i + 1] = 0;
-        if (i >= m->n_rotors || m->fail_poly_n[i] == 0) continue;
+        if (i >= m->n_rotors || m->set_fail_n[i] == 0) continue;
         snprintf(name, sizeof name, "fail_poly_A, fail_poly_b (rotor %d)", i + 1);
-        if (ctrl_force_set_prepare(&c, name, (const double(*)[3])&m->fail_poly_A[base],
-                                   &m->fail_poly_b[base], m->fail_poly_n[i], hover_fz,
+        if (ctrl_force_set_prepare(&c, name, (const double(*)[3])&m->set_fail_A[base],
+                                   &m->set_fail_b[base], m->set_fail_n[i], hover_fz,
                                    m->poly_margin, &m->guid, &m->fail_d[base], &m->fail_fz[i][0],
                                    &m->fail_fz[i][1], &m->hover_ok[i + 1]) != FP_OK)
             return FP_ERROR;
-        if (!m->hover_ok[i + 1])
-            fp_check_warning(&c, "losing rotor %d leaves no hover force in its feasible-force set",
-                             i + 1);
+        if (!m->hover_ok[i + 1] && strlen(lost) + 4 < sizeof lost)
+            snprintf(lost + strlen(lost), sizeof lost - strlen(lost), "%s%d",
+                     n_lost++ ? ", " : "", i + 1);
     }
+    if (n_lost) /* one warning for all of them: each loss is a fact of the airframe */
+        fp_check_warning(&c,
+                         "losing rotor %s leaves no hover force in the feasible-force set "
+                         "(each of them alone)",
+                         lost);
     return FP_OK;
 }
 
@@ -321,7 +334,7 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     for (i = 0; i < FP_MAX_ROTORS; i++)
         m->health[i] = m->fault_detect ? fmin(m->rotor_health[i], m->detect.est[i])
                                        : m->rotor_health[i];
-    ctrl_rotor_losses(m->n_rotors, m->health, m->fail_poly_n, m->hover_ok, &l);
+    ctrl_rotor_losses(m->n_rotors, m->health, m->set_fail_n, m->hover_ok, &l);
     if (l.lost_mask == m->lost_mask) return;
     m->lost_mask = l.lost_mask;
     m->rotors_lost = l.rotors_lost;
@@ -690,8 +703,8 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
             return FP_ERROR;
         }
     m->guid_c_rows = 0; /* (the twin's: its memset above) */
-    if (fp_wls_setup(&m->guid, 5, 8, m->poly_n) != FP_OK ||
-        fp_wls_setup(&m->twin_qp, 5, 8, m->poly_n) != FP_OK ||
+    if (fp_wls_setup(&m->guid, 5, 8, m->set_n) != FP_OK ||
+        fp_wls_setup(&m->twin_qp, 5, 8, m->set_n) != FP_OK ||
         fp_wls_setup(&m->alloc, 3 * n, 6 + 3 * n, 0) != FP_OK) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "allocation problem sizes exceed the solver caps");
         return FP_ERROR;
@@ -785,11 +798,14 @@ static int structure_valid(const ControllerModel *m) {
     int i;
     if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
         m->rotors.n > FP_MAX_ROTORS || m->poly_n < 0 || m->poly_n > FP_POLYTOPE_MAX_FACETS ||
+        m->set_n < 0 || m->set_n > FP_POLYTOPE_MAX_FACETS ||
         m->active_polytope < -1 || m->active_polytope > FP_MAX_ROTORS ||
         !wls_valid(&m->guid) || !wls_valid(&m->alloc) || !wls_valid(&m->twin_qp))
         return 0;
     for (i = 0; i < FP_MAX_ROTORS; i++)
-        if (m->fail_poly_n[i] < 0 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS) return 0;
+        if (m->fail_poly_n[i] < 0 || m->fail_poly_n[i] > FP_FAIL_POLYTOPE_FACETS ||
+            m->set_fail_n[i] < 0 || m->set_fail_n[i] > FP_FAIL_POLYTOPE_FACETS)
+            return 0;
     return 1;
 }
 
@@ -814,11 +830,17 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         !fp_all_finite(m->twin.mu, 3) || !fp_all_finite(m->twin.f, 3) ||
         !fp_all_finite(m->detect.est, FP_MAX_ROTORS) ||
         !fp_all_finite(m->acc_limit, 2) ||
+        !fp_all_finite(&m->set_A[0][0], sizeof m->set_A / sizeof(double)) ||
+        !fp_all_finite(m->set_b, FP_POLYTOPE_MAX_FACETS) ||
+        !fp_all_finite(&m->set_fail_A[0][0], sizeof m->set_fail_A / sizeof(double)) ||
+        !fp_all_finite(m->set_fail_b, FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS) ||
+        !fp_all_finite(m->poly_d, FP_POLYTOPE_MAX_FACETS) ||
+        !fp_all_finite(m->fail_d, FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS) ||
         !fp_all_finite(&m->filt_phi[0][0], 4) || !fp_all_finite(m->filt_gamma, 2) ||
         !isfinite(m->grid_t0) || m->samples_run < 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-               "restored state: the filter or block states are not finite, or the sample "
-               "grid is invalid");
+               "restored state: the filter or block states or the force sets are not "
+               "finite, or the sample grid is invalid");
         return FP_ERROR;
     }
     return FP_OK;

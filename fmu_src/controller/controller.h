@@ -5,11 +5,13 @@
 
 #include <stdint.h>
 
-#include "default_fail_polytopes.h"
-#include "default_polytope.h"
 #include "fp_model.h"
 #include "multirotor.h"
 #include "wls.h"
+
+/* Capacities of the feasible-force sets (facets): S(0), and each single-failure set. */
+#define FP_POLYTOPE_MAX_FACETS 64
+#define FP_FAIL_POLYTOPE_FACETS 32
 
 #define CTRL_N_CHECKED_INPUTS 15 /* the inputs checked every sample (controller.c) */
 #define CTRL_N_FILTERS (24 + 3 * FP_MAX_ROTORS) /* measurements, pos/vel/euler refs, actuators */
@@ -102,6 +104,14 @@ typedef struct {
     double psi_ref_raw, psi_ref_unwrapped; /* the same for the heading reference */
     double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
     double inertia_inv[3][3];
+    /* The force sets in use (prepare_force_sets): the parameters poly_* / fail_poly_* where
+     * given (count > 0), else derived from the airframe at initialization (derive_sets.c). */
+    int32_t set_n;                                        /* S(0): facets */
+    double set_A[FP_POLYTOPE_MAX_FACETS][3], set_b[FP_POLYTOPE_MAX_FACETS];
+    int32_t set_fail_n[FP_MAX_ROTORS];                    /* 0: that loss leaves no set */
+    double set_fail_A[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS][3];
+    double set_fail_b[FP_MAX_ROTORS * FP_FAIL_POLYTOPE_FACETS];
+    int32_t sets_derived;                  /* bit 0: S(0) derived; bit i: rotor i's set */
     double fz_min, fz_max;                 /* f_bz range of the polytope */
     double fail_fz[FP_MAX_ROTORS][2];      /* the same for each single-failure set */
     double poly_d[FP_POLYTOPE_MAX_FACETS]; /* offsets of the margin-scaled nominal polytope */

@@ -71,10 +71,10 @@
     X(euler_min, 220, REAL, PARAM_TUNABLE, 2, 1, ANGLE, FP_IN_OPEN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower bounds of [phi_c, theta_c]") \
     X(euler_max, 222, REAL, PARAM_TUNABLE, 2, 1, ANGLE, FP_IN_OPEN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper bounds of [phi_c, theta_c]") \
     X(force_constraint, 224, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(0, 1), "0: joint 3-D polytope S(0); 1: paper's slice P_xy at f_bz_ref plus f_bz bounds") \
-    X(poly_n, 230, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(4, FP_POLYTOPE_MAX_FACETS), "Number of facets of the feasible-force polytope (<= 64)") \
-    X(poly_A, 300, REAL, PARAM_FIXED, 64, 3, DIMENSIONLESS, FP_ANY, "Feasible-force polytope S(0): A f_b <= b, unit normals") \
-    X(poly_b, 500, REAL, PARAM_FIXED, 64, 1, FORCE, FP_ANY, "Feasible-force polytope S(0): offsets b") \
-    X(fail_poly_n, 570, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(0, FP_FAIL_POLYTOPE_FACETS), "Facets of S(0) after losing rotor i (<= 32; 0: none given)") \
+    X(poly_n, 230, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(0, FP_POLYTOPE_MAX_FACETS), "Facets of the feasible-force polytope S(0) given in poly_A, poly_b (4..64); 0: S(0) derived from the airframe parameters at initialization") \
+    X(poly_A, 300, REAL, PARAM_FIXED, 64, 3, DIMENSIONLESS, FP_ANY, "Feasible-force polytope S(0) when poly_n > 0: A f_b <= b, unit normals (checked against the airframe)") \
+    X(poly_b, 500, REAL, PARAM_FIXED, 64, 1, FORCE, FP_ANY, "Feasible-force polytope S(0) when poly_n > 0: offsets b") \
+    X(fail_poly_n, 570, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(0, FP_FAIL_POLYTOPE_FACETS), "Facets of S(0) after losing rotor i given in fail_poly_A, fail_poly_b (4..32); 0: derived from the airframe parameters at initialization") \
     X(fail_poly_A, 3000, REAL, PARAM_FIXED, 256, 3, DIMENSIONLESS, FP_ANY, "S(0) after losing rotor i: rows 32 (i-1) + 1 .. 32 (i-1) + fail_poly_n[i], unit normals") \
     X(fail_poly_b, 4000, REAL, PARAM_FIXED, 256, 1, FORCE, FP_ANY, "S(0) after losing rotor i: offsets (rows as fail_poly_A)") \
     X(poly_margin, 564, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_LOPEN(0, 1), "Scale (0, 1] of S(0) about the hover force used by the guidance: reserve for attitude torques") \

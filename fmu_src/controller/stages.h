@@ -164,6 +164,28 @@ FpStatus ctrl_force_set_prepare(FpCheck *c, const char *name, const double (*A)[
                                 FpWls *scratch, double d[], double *fz_min, double *fz_max,
                                 int32_t *hover_ok);
 
+/*
+ * The force sets the controller flies with (ControllerModel.set_*): for S(0) and for the set
+ * after losing each rotor, the given polytope where its count is > 0, else the one derived
+ * from the airframe (derive_sets.h).  A given set is checked against the derived one: it
+ * may be smaller (a design margin), but reaching more than CTRL_SET_MISMATCH of the rotors'
+ * total thrust beyond what the airframe can produce means it belongs to another vehicle,
+ * and it is refused.  An empty derived S(0), or one without the hover force, is refused
+ * with its cause.  *derived: bit 0 S(0) derived, bit i rotor i's set.  Uses about 53 kB of
+ * stack (the derivation's working memory) and nothing after it returns.
+ */
+#define CTRL_SET_MISMATCH 0.1
+typedef struct {
+    int32_t n;                   /* given facets (0: derive) */
+    const double (*A)[3];
+    const double *b;
+} CtrlGivenSet;
+
+FpStatus ctrl_force_sets_resolve(FpCheck *c, const FpRotorSet *rs, const CtrlGivenSet *s0, const CtrlGivenSet fail[],
+                                 FpWls *scratch, int32_t *n_out, double A_out[][3],
+                                 double b_out[], int32_t fail_n_out[], double fail_A_out[][3],
+                                 double fail_b_out[], int32_t *derived);
+
 /* Which rotors are lost (efficiency below one half) and which force set goes with it. */
 typedef struct {
     int32_t lost_mask;       /* bit i-1: rotor i */

@@ -54,17 +54,22 @@ static void check_shaping(const ControllerModel *m, FpCheck *c) {
     fp_need_param(c, "fault_time", &m->fault_time, 1, NULL);
 }
 
-/* Facet counts and the margin of the feasible-force polytopes. */
+/* Facet counts and the margin of the feasible-force polytopes: 0 (derive from the airframe)
+ * or a bounded polytope's 4 facets and more. */
 static void check_polytope_sizes(const ControllerModel *m, FpCheck *c) {
     char why[64];
     int i, errors = c->errors;
     fp_need_int_param(c, "poly_n", &m->poly_n, 1);
     if (c->errors > errors) return;
+    if (m->poly_n != 0 && m->poly_n < 4) {
+        snprintf(why, sizeof why, "must be 0 (derived) or 4..%d", FP_POLYTOPE_MAX_FACETS);
+        fp_check_bad_int(c, "poly_n", 0, (long)m->poly_n, why);
+    }
     fp_need_param(c, "poly_margin", &m->poly_margin, 1, NULL);
     errors = c->errors;
     fp_need_int_param(c, "fail_poly_n", m->fail_poly_n, m->n_rotors);
     if (c->errors > errors) return;
-    snprintf(why, sizeof why, "must be 0 (none) or 4..%d", FP_FAIL_POLYTOPE_FACETS);
+    snprintf(why, sizeof why, "must be 0 (derived) or 4..%d", FP_FAIL_POLYTOPE_FACETS);
     for (i = 0; i < m->n_rotors; i++) /* a bounded polytope in 3-D needs 4 facets */
         if (m->fail_poly_n[i] != 0 && m->fail_poly_n[i] < 4)
             fp_check_bad_int(c, "fail_poly_n", i + 1, (long)m->fail_poly_n[i], why);

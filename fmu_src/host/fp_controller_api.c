@@ -7,10 +7,12 @@
 #endif
 #include "fp_controller_api.h"
 
+#include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "controller.h"
+#include "derive_sets.h"
 #include "wls.h"
 
 FP_API int fp_wls_size(void) { return (int)sizeof(FpWls); }
@@ -167,5 +169,24 @@ FP_API int fp_controller_state_qp(const unsigned char *state, long size, int whi
     memcpy(C, w->C, nc * nv * sizeof(double));
     memcpy(d, w->d, nc * sizeof(double));
     memcpy(x, w->x, nv * sizeof(double));
+    return FP_OK;
+}
+
+FP_API int fp_derive_force_set_api(const void *rotor_set, int lost_mask, int cap, double *A,
+                                   double *b, int32_t *info, double *ns, char *why,
+                                   int why_size) {
+    CtrlSetWork *w = (CtrlSetWork *)malloc(sizeof *w); /* host code: the FMU uses its stack */
+    double t0;
+    int32_t n = 0, dim = -1;
+    CtrlSetStatus s;
+    if (!w) return FP_ERROR;
+    memset(w, 0, sizeof *w);
+    t0 = fp_now_ns();
+    s = ctrl_derive_force_set((const FpRotorSet *)rotor_set, lost_mask, cap, w,
+                              (double(*)[3])A, b, &n, &dim, why, why_size);
+    *ns = fp_now_ns() - t0;
+    info[0] = (int32_t)s, info[1] = n, info[2] = dim;
+    info[3] = (int32_t)w->lp_solves, info[4] = (int32_t)w->lp_pivots;
+    free(w);
     return FP_OK;
 }
