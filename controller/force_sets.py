@@ -50,8 +50,8 @@ Method (deterministic; no randomness anywhere)
   never row by row.
 
 Rows of ``A`` are unit vectors (body FRD, dimensionless), ``b`` is in newtons.  The paper
-hexacopter's S(0) (64 facets) is about 1.5 s; :mod:`controller.polytope_defaults` writes it as
-the controller FMU's default parameters, :mod:`controller.plots_force_sets` draws Fig. 3.
+hexacopter's S(0) (64 facets) is about 1.5 s.  It is the oracle of the controller FMU's own
+derivation (:mod:`controller.derived_sets`); :mod:`controller.plots_force_sets` draws Fig. 3.
 """
 
 from __future__ import annotations
@@ -61,6 +61,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from functools import cached_property
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
@@ -356,12 +357,22 @@ def _intersection(A: Array, b: Array, interior: Array) -> tuple[Array, int]:
     return np.asarray(hs.intersections, dtype=float), len(active)
 
 
-def _sandwich(oracle: _Oracle, p0: Array, Q: Array, budget: int) -> list[Array]:
+def _sandwich(oracle: _Oracle, p0: Array, Q: Array, budget: int,
+              label: str = "force set") -> list[Array]:
     """Directions (in the reduced coordinates of span Q) chosen by the sandwich scheme.
 
     Directions are added until ``budget`` of them are non-redundant (facets made redundant
-    by later ones do not count), or the outer and inner polytopes meet.
+    by later ones do not count), or the outer and inner polytopes meet.  A progress bar
+    (facets found of ``budget``) shows on a terminal and stays quiet in pipes.
     """
+    from tqdm import tqdm
+
+    with tqdm(total=budget, desc=label, unit="facet", leave=False, disable=None) as bar:
+        return _sandwich_steps(oracle, p0, Q, budget, bar)
+
+
+def _sandwich_steps(oracle: _Oracle, p0: Array, Q: Array, budget: int,
+                    bar: Any) -> list[Array]:
     from scipy.spatial import ConvexHull, QhullError
 
     k = Q.shape[1]
@@ -387,6 +398,7 @@ def _sandwich(oracle: _Oracle, p0: Array, Q: Array, budget: int) -> list[Array]:
             break
         centre = inner[hull.vertices].mean(axis=0)
         outer, active = _intersection(np.array(dirs), np.array(vals), centre)
+        bar.update(max(0, min(active, budget) - bar.n))
         if active >= budget:
             break
         # the inner facet along which the outer polytope sticks out most, measured relative
@@ -592,7 +604,9 @@ def _build(af: Airframe, torque: Array | None, n_directions: int, grid: int) -> 
     p0, Q, W = _affine_hull(oracle)
     k = Q.shape[1]
     flat_dirs = [s * w for w in W.T for s in (1.0, -1.0)]
-    dirs_red = _sandwich(oracle, p0, Q, n_directions - len(flat_dirs))
+    what = "attainable force set" if torque is None else "S(tau)"
+    dirs_red = _sandwich(oracle, p0, Q, n_directions - len(flat_dirs),
+                         label=f"{af.name}: {what}")
     dirs = [np.ascontiguousarray(w) for w in flat_dirs] + \
         [np.ascontiguousarray(Q @ a) for a in dirs_red]
     A = np.array(dirs, dtype=float).reshape(-1, 3) + 0.0  # + 0.0: no negative zeros

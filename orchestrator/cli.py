@@ -59,7 +59,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from orchestrator.outcome import EXIT_LOST
     from orchestrator.runner import prepare, run_scenario
 
-    scenario = prepare(args.scenario, args.duration, args.set)
+    scenario = prepare(args.scenario, args.duration, args.set, airframe=args.airframe)
     _warn(scenario.warnings)
     if args.view or args.save is not None:  # no run whose view cannot be shown or written
         from orchestrator.view import check_viewer
@@ -107,16 +107,20 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
+    from orchestrator.plots import resolve_airframe
     from orchestrator.results import RunResult
     from orchestrator.view import replay
     from plant.airframe import load_airframe
 
     result = RunResult.read(args.results)
-    name = args.airframe or result.meta.get("airframe")
-    if not name:
-        raise ValueError(f"{args.results}: the results do not name their airframe; "
-                         "give it with --airframe NAME_OR_FILE")
-    airframe = load_airframe(name)
+    if args.airframe is not None:
+        airframe = load_airframe(args.airframe)  # (a wrong name: its own one-line error)
+    else:
+        found = resolve_airframe(result)
+        if found is None:
+            raise ValueError(f"{args.results}: the results do not carry or name a loadable "
+                             "airframe; give it with --airframe NAME_OR_FILE")
+        airframe = found
     rep = replay(result, airframe, save=args.save, spawn=args.save is None)
     print(f"{args.results}: {rep.pose_rows} poses, {rep.series_rows} series rows sent in "
           f"{rep.seconds:.2f} s" + (f"; wrote {args.save}" if args.save else " to the viewer"))
@@ -135,7 +139,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from orchestrator.master import CoSimulation
     from orchestrator.runner import prepare
 
-    sc = prepare(args.file, args.duration, args.set)
+    sc = prepare(args.file, args.duration, args.set, airframe=args.airframe)
     _warn(sc.warnings)
     # both FMUs instantiated and initialized with the scenario's values: whatever they
     # would refuse at the start of a run is reported here too
@@ -260,6 +264,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, default=None,
                      help="output directory (default: results/NAME)")
     run.add_argument("--duration", type=float, default=None, help="override the duration (s)")
+    run.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
+                     help="fly the scenario on this airframe (shipped name or TOML file) "
+                          "instead of the one it names")
     run.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
                      help="override a parameter, e.g. controller.K_pos_D[1]=3 (repeatable)")
     run.add_argument("--no-timing", action="store_true",
@@ -284,7 +291,7 @@ def build_parser() -> argparse.ArgumentParser:
     view.add_argument("--save", type=Path, default=None, metavar="FILE.rrd",
                       help="write a Rerun recording instead of opening the viewer")
     view.add_argument("--airframe", default=None,
-                      help="airframe name or file (default: the one the results name)")
+                      help="airframe name or file (default: the one the results carry)")
     view.set_defaults(func=_cmd_view)
 
     scen = sub.add_parser("scenarios", help="list the shipped scenarios")
@@ -294,6 +301,8 @@ def build_parser() -> argparse.ArgumentParser:
                                          "with its values (steps nothing)")
     check.add_argument("file", help="scenario TOML file or shipped name")
     check.add_argument("--duration", type=float, default=None, help="override the duration (s)")
+    check.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
+                       help="check it on this airframe instead of the one it names")
     check.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
                        help="override a parameter, as for run (repeatable)")
     check.set_defaults(func=_cmd_check)

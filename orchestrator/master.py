@@ -311,6 +311,10 @@ class CoSimulation:
             "scenario_source": str(sc.source),
             "airframe": sc.airframe.name,
             "airframe_source": str(sc.airframe.source),
+            # the airframe flown, whole: figures and the 3-D view read it from here, never
+            # from a file that may have changed since
+            "airframe_record": sc.airframe.record(),
+            "airframe_digest": sc.airframe.digest(),
             "n_rotors": sc.airframe.n_rotors,
             "alpha_limits": [float(x) for x in sc.airframe.alpha_limits[0]],
             "beta_limits": [float(x) for x in sc.airframe.beta_limits[0]],

@@ -680,14 +680,22 @@ def disturbance_timing_figure(result: RunResult) -> Figure:
 
 def resolve_airframe(result: RunResult,
                      airframe: Airframe | str | Path | None = None) -> Airframe | None:
-    """The run's airframe: the argument, else meta ``airframe_source``, else ``airframe``.
+    """The run's airframe: the argument, else the airframe the results recorded (meta
+    ``airframe_record``: what flew, whatever its file says now), else for results written
+    before records the file ``airframe_source``, else the name ``airframe``.
 
     Returns None (with a warning) when none of them loads.
     """
-    from plant.airframe import Airframe, load_airframe
+    from plant.airframe import Airframe, AirframeError, load_airframe
 
     if isinstance(airframe, Airframe):
         return airframe
+    record = result.meta.get("airframe_record")
+    if airframe is None and isinstance(record, dict):
+        try:
+            return Airframe.from_record(record)
+        except AirframeError as exc:
+            warnings.warn(f"the results' airframe record is unusable: {exc}", stacklevel=2)
     candidates = [airframe, result.meta.get("airframe_source"), result.meta.get("airframe")]
     errors = []
     for c in candidates:

@@ -61,12 +61,14 @@ class RunOutput:
 
 
 def prepare(name_or_path: str | Path, duration: float | None = None,
-            settings: Iterable[str] = ()) -> Scenario:
-    """Load and validate a scenario with the command line's overrides (nothing runs yet)."""
+            settings: Iterable[str] = (), airframe: str | Path | None = None) -> Scenario:
+    """Load and validate a scenario with the command line's overrides (nothing runs yet):
+    ``airframe`` flies it on another airframe (a shipped name or an airframe file)."""
     scenario = load_scenario(name_or_path)
     settings = list(settings)
-    if duration is not None or settings:
-        scenario = scenario.with_overrides(duration=duration, settings=settings)
+    if duration is not None or settings or airframe is not None:
+        scenario = scenario.with_overrides(duration=duration, settings=settings,
+                                           airframe=airframe)
     return scenario
 
 

@@ -256,10 +256,28 @@ class Scenario:
     # -- overrides -------------------------------------------------------------
 
     def with_overrides(self, duration: float | None = None,
-                       settings: Iterable[str] = ()) -> Scenario:
-        """A copy with another duration and/or parameter settings ``plant.NAME=VALUE`` /
-        ``controller.NAME=VALUE`` (VALUE in TOML syntax: ``3.0``, ``false``, ``[1, 2, 3]``),
-        validated like the file's ``[plant]`` / ``[controller]`` tables."""
+                       settings: Iterable[str] = (),
+                       airframe: str | Path | Airframe | None = None) -> Scenario:
+        """A copy with another duration, another airframe (a shipped name, an airframe file
+        or an :class:`Airframe`: the command line's ``--airframe``) and/or parameter settings
+        ``plant.NAME=VALUE`` / ``controller.NAME=VALUE`` (VALUE in TOML syntax: ``3.0``,
+        ``false``, ``[1, 2, 3]``), validated like the file's ``[plant]`` / ``[controller]``
+        tables."""
+        sc = self if airframe is None else self._on_airframe(airframe)
+        if sc is not self and duration is None and not settings:
+            return _checked(sc)
+        return sc._with_settings(duration, settings)
+
+    def _on_airframe(self, airframe: str | Path | Airframe) -> Scenario:
+        af = airframe if isinstance(airframe, Airframe) else load_airframe(airframe)
+        for fault in self.faults:
+            if fault.rotor > af.n_rotors:
+                raise ScenarioError(self.source, "fault.rotor",
+                                    f"rotor {fault.rotor} does not exist on airframe {af.name!r} "
+                                    f"({af.n_rotors} rotors)")
+        return replace(self, airframe=af)
+
+    def _with_settings(self, duration: float | None, settings: Iterable[str]) -> Scenario:
         plant_p = dict(self.plant_parameters)
         ctrl_p = dict(self.controller_parameters)
         for setting in settings:

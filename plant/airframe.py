@@ -7,6 +7,9 @@ field and what is expected.  See docs/airframes.md for the format.
 
 from __future__ import annotations
 
+import difflib
+import hashlib
+import json
 import math
 import sys
 from dataclasses import dataclass
@@ -99,6 +102,46 @@ class Airframe:
             p[f"beta_max[{r}]"] = float(self.beta_limits[k, 1]) if used else 0.0
         return p
 
+    def record(self) -> dict[str, Any]:
+        """Every number of the airframe as JSON-ready data (``repr``-exact floats), what a
+        results folder stores so that its figures and 3-D view never reload the file."""
+        return {"name": self.name, "description": self.description, "source": self.source,
+                "mass": self.mass, "inertia": self.inertia.tolist(), "gravity": self.gravity,
+                "k_t": self.k_t, "k_d": self.k_d, "omega_min": self.omega_min,
+                "omega_max": self.omega_max, "tau_motor": self.tau_motor,
+                "tau_servo": self.tau_servo, "tilting": self.tilting,
+                "positions": self.positions.tolist(), "spins": self.spins.tolist(),
+                "gamma": self.gamma.tolist(), "alpha_limits": self.alpha_limits.tolist(),
+                "beta_limits": self.beta_limits.tolist()}
+
+    def digest(self) -> str:
+        """SHA-256 of :meth:`record`'s numbers (name and source excluded)."""
+        numbers = {k: v for k, v in self.record().items()
+                   if k not in ("name", "description", "source")}
+        return hashlib.sha256(json.dumps(numbers, sort_keys=True).encode()).hexdigest()
+
+    @staticmethod
+    def from_record(doc: dict[str, Any]) -> Airframe:
+        """The inverse of :meth:`record`; AirframeError when the record is malformed."""
+        try:
+            n = len(doc["positions"])
+            arrays = {"inertia": (3, 3), "positions": (n, 3), "spins": (n,), "gamma": (n,),
+                      "alpha_limits": (n, 2), "beta_limits": (n, 2)}
+            values = {k: np.array(doc[k], dtype=int if k == "spins" else float)
+                      for k in arrays}
+            for k, shape in arrays.items():
+                if values[k].shape != shape or not np.all(np.isfinite(values[k])):
+                    raise ValueError(f"{k}: expected finite numbers of shape {shape}")
+            if not 1 <= n <= MAX_ROTORS:
+                raise ValueError(f"positions: expected 1..{MAX_ROTORS} rotors, got {n}")
+            scalars = {k: float(doc[k]) for k in ("mass", "gravity", "k_t", "k_d", "omega_min",
+                                                  "omega_max", "tau_motor", "tau_servo")}
+            return Airframe(name=str(doc["name"]), description=str(doc.get("description", "")),
+                            source=str(doc.get("source", "")), tilting=bool(doc["tilting"]),
+                            **scalars, **values)
+        except (KeyError, TypeError, ValueError) as e:
+            raise AirframeError("<airframe record>", "", f"not an airframe record: {e}") from None
+
     def hover_trim(self, euler: object = (0.0, 0.0, 0.0)) -> tuple[np.ndarray, ...]:
         """(alpha, beta, omega) holding hover at the given attitude (C core)."""
         e = np.asarray(euler, dtype=float)
@@ -180,9 +223,13 @@ class _Reader(TomlTable):
         return math.radians(lo), math.radians(hi)
 
     def reject_unknown(self) -> None:
+        """An error for the first field the parser never asked for, with the closest field
+        it did ask for (present or not) as a suggestion."""
         for key in self.data:
             if key not in self.used:
-                raise self.fail(key, "unknown field")
+                close = difflib.get_close_matches(key, sorted(self.used), n=1, cutoff=0.6)
+                hint = f" (did you mean '{close[0]}'?)" if close else ""
+                raise self.fail(key, "unknown field" + hint)
 
 
 def _inertia(body: _Reader) -> np.ndarray:

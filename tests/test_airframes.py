@@ -38,7 +38,8 @@ def write(tmp_path: Path, text: str) -> Path:
 
 
 def test_shipped_airframes():
-    assert plant.list_airframes() == ["fixed_tilt_hexarotor", "paper_hexacopter", "quadrotor"]
+    assert plant.list_airframes() == ["fixed_tilt_hexarotor", "paper_hexacopter", "quadrotor",
+                                      "x8_coaxial", "y6"]
 
 
 def test_paper_hexacopter_is_table_1():

@@ -21,6 +21,7 @@ from fmpy.ssp.ssd import read_ssd
 from lxml import etree
 
 from controller.force_sets import feasible_force_set, same_polytope
+from controller.polytope_cache import polytope_from_doc, shipped
 from orchestrator.fmu import installed_fmu
 from orchestrator.ssp import (
     CONTROLLER,
@@ -32,7 +33,7 @@ from orchestrator.ssp import (
     parameter_set,
     unconnected_inputs,
 )
-from plant import AirframeError
+from plant import AirframeError, load_airframe
 
 SCHEMAS = Path(fmpy.ssp.__file__).parent / "schema"
 NS = {
@@ -190,14 +191,16 @@ def test_parameter_values(hover_ssp, mds):
     assert [float(plant[f"pos0[{i}]"][1]) for i in (1, 2, 3)] == list(HOVER)
     assert [float(ctrl[f"pos_ref[{i}]"][1]) for i in (1, 2, 3)] == list(HOVER)
     assert "tau_motor" in plant and "tau_motor" not in ctrl
-    # S(0) written explicitly; for the paper hexacopter it is the controller FMU's default,
-    # the same set (another platform or library version may order or round facets otherwise)
+    # S(0) written explicitly: the paper hexacopter's shipped design-time set (the FMU's
+    # default, poly_n = 0, derives its own)
     defaults = {v.name: v.start for v in mds[CONTROLLER].modelVariables}
+    assert int(defaults["poly_n"]) == 0
     poly = [n for n in ctrl if n.startswith("poly_")]
     assert len(poly) == 1 + 4 * int(ctrl["poly_n"][1])
     exported = polytope_values({n: v for n, (_, v) in ctrl.items()})
-    default = polytope_values(defaults)
-    same, why = same_polytope(*exported, *default, names=("the SSV's S(0)", "the FMU default"))
+    design = polytope_from_doc(shipped(load_airframe("paper_hexacopter"))["s0"])
+    same, why = same_polytope(*exported, design.A, design.b,
+                              names=("the SSV's S(0)", "the shipped design set"))
     assert same, why
     # the measurement start values are the plant's initial (trim) outputs
     assert float(ctrl["pos[3]"][1]) == -3.0

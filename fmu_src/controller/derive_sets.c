@@ -606,6 +606,171 @@ static CtrlSetStatus refine(CtrlSetWork *w, int cap, double A[][3], double b[], 
     return CTRL_SET_OK;
 }
 
+/* ------------------------------------------------------------------------ */
+/* A planar set: the sandwich refinement within its plane                   */
+
+#define PLANE_MAX CTRL_SET_MAX_DIRS
+
+typedef struct {
+    int n_d, n_p;
+    double d[PLANE_MAX][2], h[PLANE_MAX]; /* in-plane directions and their support */
+    double p[PLANE_MAX][2];               /* inner points, in-plane coordinates */
+    double v[PLANE_MAX * 2][2];           /* vertices of the outer polygon */
+    int n_v;
+    int hull[PLANE_MAX], n_hull;          /* the inner points' hull, counter-clockwise */
+    int used[PLANE_MAX];                  /* direction j carries an outer edge */
+} CtrlPlane;
+
+static double cross2(const double o[2], const double a[2], const double b[2]) {
+    return (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+}
+
+/* Convex hull of the inner points (monotone chain on an index order sorted by x, y). */
+static void plane_inner_hull(CtrlPlane *pl, double eps) {
+    int order[PLANE_MAX], i, j, k = 0, lower;
+    for (i = 0; i < pl->n_p; i++) order[i] = i;
+    for (i = 1; i < pl->n_p; i++) /* insertion sort: at most PLANE_MAX points */
+        for (j = i; j > 0; j--) {
+            const double *a = pl->p[order[j - 1]], *b = pl->p[order[j]];
+            if (a[0] < b[0] || (a[0] == b[0] && a[1] <= b[1])) break;
+            k = order[j], order[j] = order[j - 1], order[j - 1] = k;
+        }
+    k = 0;
+    for (i = 0; i < pl->n_p; i++) {
+        while (k >= 2 && cross2(pl->p[pl->hull[k - 2]], pl->p[pl->hull[k - 1]],
+                                pl->p[order[i]]) <= eps)
+            k--;
+        pl->hull[k++] = order[i];
+    }
+    lower = k + 1;
+    for (i = pl->n_p - 2; i >= 0; i--) {
+        while (k >= lower && cross2(pl->p[pl->hull[k - 2]], pl->p[pl->hull[k - 1]],
+                                    pl->p[order[i]]) <= eps)
+            k--;
+        pl->hull[k++] = order[i];
+    }
+    pl->n_hull = k > 1 ? k - 1 : k;
+}
+
+/* Vertices of the outer polygon {x : d_j . x <= h_j}: the pairwise intersections that
+ * satisfy every constraint; marks the directions that carry an edge. */
+static int plane_outer(CtrlPlane *pl, double tol) {
+    int i, j, k, count = 0;
+    pl->n_v = 0;
+    memset(pl->used, 0, sizeof pl->used);
+    for (i = 0; i < pl->n_d; i++)
+        for (j = i + 1; j < pl->n_d; j++) {
+            double det = pl->d[i][0] * pl->d[j][1] - pl->d[i][1] * pl->d[j][0], x[2];
+            int ok = 1;
+            if (fabs(det) < 1e-12) continue;
+            x[0] = (pl->h[i] * pl->d[j][1] - pl->h[j] * pl->d[i][1]) / det;
+            x[1] = (pl->d[i][0] * pl->h[j] - pl->d[j][0] * pl->h[i]) / det;
+            for (k = 0; k < pl->n_d && ok; k++)
+                ok = pl->d[k][0] * x[0] + pl->d[k][1] * x[1] <= pl->h[k] + tol;
+            if (!ok || pl->n_v >= PLANE_MAX * 2) continue;
+            pl->v[pl->n_v][0] = x[0], pl->v[pl->n_v][1] = x[1];
+            pl->n_v++;
+            pl->used[i] = pl->used[j] = 1;
+        }
+    for (i = 0; i < pl->n_d; i++) count += pl->used[i];
+    return count;
+}
+
+/* Support along the in-plane direction dir2: its offset and inner point, kept. */
+static CtrlSetStatus plane_add(CtrlSetWork *w, CtrlPlane *pl, const double u[3][3],
+                               const double o[3], const double dir2[2], char *why,
+                               int why_size) {
+    double c[3], rel[3];
+    int j, newp;
+    CtrlSetStatus s;
+    if (pl->n_d >= PLANE_MAX) {
+        set_why(why, why_size, "too many support directions in the plane");
+        return CTRL_SET_FAILED;
+    }
+    for (j = 0; j < 3; j++) c[j] = dir2[0] * u[0][j] + dir2[1] * u[1][j];
+    s = add_direction(w, c, &newp, why, why_size);
+    if (s != CTRL_SET_OK) return s;
+    pl->d[pl->n_d][0] = dir2[0], pl->d[pl->n_d][1] = dir2[1];
+    pl->h[pl->n_d] = w->b[w->n_c - 1] - v3_dot(w->c[w->n_c - 1], o);
+    pl->n_d++;
+    if (newp >= 0 && pl->n_p < PLANE_MAX) {
+        for (j = 0; j < 3; j++) rel[j] = w->p[newp][j] - o[j];
+        pl->p[pl->n_p][0] = v3_dot(rel, u[0]);
+        pl->p[pl->n_p][1] = v3_dot(rel, u[1]);
+        pl->n_p++;
+    }
+    return CTRL_SET_OK;
+}
+
+/* The planar set's in-plane facets: seeded with 8 directions, then the inner polygon's
+ * edge beyond which the outer polygon sticks out most (relative to the force magnitude,
+ * as in 3-D) gives the next, until `cap` facets carry an edge or the two agree. */
+static CtrlSetStatus refine_plane(CtrlSetWork *w, const double u[3][3], int cap, double A[][3],
+                                  double b[], int *n, char *why, int why_size) {
+    CtrlPlane pl;
+    double o[3];
+    const double tol = SET_REL_TOL * w->scale;
+    int k, j, count;
+    CtrlSetStatus s;
+    memset(&pl, 0, sizeof pl);
+    for (j = 0; j < 3; j++) o[j] = w->p[0][j];
+    for (k = 0; k < w->n_p && pl.n_p < PLANE_MAX; k++) { /* the points found so far */
+        double rel[3] = {w->p[k][0] - o[0], w->p[k][1] - o[1], w->p[k][2] - o[2]};
+        pl.p[pl.n_p][0] = v3_dot(rel, u[0]);
+        pl.p[pl.n_p][1] = v3_dot(rel, u[1]);
+        pl.n_p++;
+    }
+    for (k = 0; k < 8; k++) {
+        double t = 2.0 * 3.14159265358979323846 * k / 8.0, d2[2];
+        d2[0] = cos(t), d2[1] = sin(t);
+        if ((s = plane_add(w, &pl, u, o, d2, why, why_size)) != CTRL_SET_OK) return s;
+    }
+    count = plane_outer(&pl, tol);
+    while (count < cap && pl.n_d < PLANE_MAX) {
+        double best = -1.0, best_abs = 0.0, best_n[2] = {0.0, 0.0};
+        int e;
+        plane_inner_hull(&pl, tol * tol);
+        for (e = 0; e < pl.n_hull; e++) {
+            const double *a = pl.p[pl.hull[e]], *c = pl.p[pl.hull[(e + 1) % pl.n_hull]];
+            double nn[2] = {c[1] - a[1], a[0] - c[0]}, len = hypot(nn[0], nn[1]), ex = -1.0;
+            double at = 0.0;
+            int dup = 0, q;
+            if (!(len > tol)) continue;
+            nn[0] /= len, nn[1] /= len;
+            for (q = 0; q < pl.n_d && !dup; q++)
+                dup = nn[0] * pl.d[q][0] + nn[1] * pl.d[q][1] > 1.0 - 1e-12;
+            if (dup) continue;
+            for (q = 0; q < pl.n_v; q++) {
+                double ev = nn[0] * (pl.v[q][0] - a[0]) + nn[1] * (pl.v[q][1] - a[1]);
+                if (ev > ex) {
+                    double v3[3];
+                    for (j = 0; j < 3; j++)
+                        v3[j] = o[j] + pl.v[q][0] * u[0][j] + pl.v[q][1] * u[1][j];
+                    ex = ev, at = sqrt(v3_dot(v3, v3));
+                }
+            }
+            if (ex / (at + SET_FLOOR * w->scale) > best)
+                best = ex / (at + SET_FLOOR * w->scale), best_abs = ex, best_n[0] = nn[0],
+                best_n[1] = nn[1];
+        }
+        if (best < 0.0 || best_abs <= 1e-7 * w->scale) break; /* inner and outer agree */
+        if ((s = plane_add(w, &pl, u, o, best_n, why, why_size)) != CTRL_SET_OK) return s;
+        count = plane_outer(&pl, tol);
+        if (count > cap) { /* the last direction pushed it over: without it */
+            pl.n_d--;
+            count = plane_outer(&pl, tol);
+            break;
+        }
+    }
+    for (k = 0; k < pl.n_d && count > 0; k++) {
+        double c[3];
+        if (!pl.used[k]) continue;
+        for (j = 0; j < 3; j++) c[j] = pl.d[k][0] * u[0][j] + pl.d[k][1] * u[1][j];
+        write_facet(A, b, n, c, pl.h[k] + v3_dot(c, o));
+    }
+    return CTRL_SET_OK;
+}
+
 CtrlSetStatus ctrl_derive_force_set(const FpRotorSet *rs, int32_t lost_mask, int cap,
                                     CtrlSetWork *w, double A[][3], double b[], int32_t *n_out,
                                     int32_t *dim, char *why, int why_size) {
@@ -656,14 +821,8 @@ CtrlSetStatus ctrl_derive_force_set(const FpRotorSet *rs, int32_t lost_mask, int
         }
     }
     if (d == 2) {
-        int fan = cap - n < 16 ? cap - n : 16;
-        for (k = 0; k < fan; k++) {
-            double t = 2.0 * 3.14159265358979323846 * k / fan, c[3];
-            int j;
-            for (j = 0; j < 3; j++) c[j] = cos(t) * u[0][j] + sin(t) * u[1][j];
-            if ((s = add_direction(w, c, &newp, why, why_size)) != CTRL_SET_OK) return s;
-            write_facet(A, b, &n, w->c[w->n_c - 1], w->b[w->n_c - 1]);
-        }
+        s = refine_plane(w, (const double(*)[3])u, cap - n, A, b, &n, why, why_size);
+        if (s != CTRL_SET_OK) return s;
     }
     *n_out = n;
     return CTRL_SET_OK;
