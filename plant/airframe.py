@@ -134,11 +134,16 @@ class Airframe:
                     raise ValueError(f"{k}: expected finite numbers of shape {shape}")
             if not 1 <= n <= MAX_ROTORS:
                 raise ValueError(f"positions: expected 1..{MAX_ROTORS} rotors, got {n}")
-            scalars = {k: float(doc[k]) for k in ("mass", "gravity", "k_t", "k_d", "omega_min",
-                                                  "omega_max", "tau_motor", "tau_servo")}
-            return Airframe(name=str(doc["name"]), description=str(doc.get("description", "")),
-                            source=str(doc.get("source", "")), tilting=bool(doc["tilting"]),
-                            **scalars, **values)
+            return Airframe(
+                name=str(doc["name"]), description=str(doc.get("description", "")),
+                source=str(doc.get("source", "")), mass=float(doc["mass"]),
+                inertia=values["inertia"], gravity=float(doc["gravity"]),
+                k_t=float(doc["k_t"]), k_d=float(doc["k_d"]),
+                omega_min=float(doc["omega_min"]), omega_max=float(doc["omega_max"]),
+                tau_motor=float(doc["tau_motor"]), tau_servo=float(doc["tau_servo"]),
+                tilting=bool(doc["tilting"]), positions=values["positions"],
+                spins=values["spins"], gamma=values["gamma"],
+                alpha_limits=values["alpha_limits"], beta_limits=values["beta_limits"])
         except (KeyError, TypeError, ValueError) as e:
             raise AirframeError("<airframe record>", "", f"not an airframe record: {e}") from None
 
