@@ -232,9 +232,11 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError(f"sweep --torque must be a finite amplitude >= 0 N m, got {args.torque}")
     rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
                      dask=args.dask, noise=args.noise, torque=args.torque, delay=args.delay,
-                     design_set=[d.strip() for d in args.designs.split(",") if d.strip()])
+                     design_set=[d.strip() for d in args.designs.split(",") if d.strip()],
+                     scenario=args.scenario, airframe=args.airframe)
     wall = time.perf_counter() - t0
-    meta = {"n": args.cases, "seed": args.seed, "duration": args.duration, "noise": args.noise,
+    meta = {"n": args.cases, "seed": args.seed, "duration": args.duration,
+            "scenario": args.scenario, "airframe": args.airframe, "noise": args.noise,
             "torque": args.torque, "delay": args.delay,
             "workers": args.dask or args.workers, "wall_time": wall,
             "throughput": len(rows) / wall}
@@ -338,6 +340,10 @@ def build_parser() -> argparse.ArgumentParser:
 
     sw = sub.add_parser("sweep", help="Monte-Carlo robustness campaign: H-infinity vs baseline")
     sw.add_argument("--cases", type=int, default=50, help="sampled cases (default: 50)")
+    sw.add_argument("--scenario", default="hover", metavar="NAME_OR_FILE",
+                    help="the scenario every case flies, perturbed (default: hover)")
+    sw.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
+                    help="fly it on this airframe instead of the scenario's")
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
     sw.add_argument("--duration", type=float, default=6.0, help="seconds per run (default: 6)")
     sw.add_argument("--designs", default="hinf,baseline",

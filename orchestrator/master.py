@@ -249,7 +249,8 @@ class CoSimulation:
         pose = Pose.of(refs0["pos_ref"][0], refs0["euler_ref"][0], refs0["vel_ref"][0])
         return start_values(sc.airframe, pose, timing=self.timing,
                             plant_overrides=sc.plant_parameters,
-                            controller_overrides=sc.controller_parameters)
+                            controller_overrides=sc.controller_parameters,
+                            plant_airframe=sc.plant_airframe)
 
     def _setup(self, plant_inst: FmuInstance, ctrl_inst: FmuInstance, rows: int,
                planned_rows: int | None = None) -> Engine:

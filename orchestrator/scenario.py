@@ -172,6 +172,14 @@ class Scenario:
     # WGS84 point of the local NED origin (lat deg, lon deg, alt m AMSL), for `fullpose fly`;
     # None: the flier's default
     origin: tuple[float, float, float] | None = None
+    # the airframe the plant flies when it is not the one the controller is told (a sweep's
+    # perturbed vehicle: the model mismatch); None: ``airframe``.  No scenario file field.
+    plant_airframe: Airframe | None = None
+
+    @property
+    def true_airframe(self) -> Airframe:
+        """The airframe the plant flies (``plant_airframe``, else ``airframe``)."""
+        return self.plant_airframe if self.plant_airframe is not None else self.airframe
 
     @property
     def n_steps(self) -> int:

@@ -75,20 +75,40 @@ def controller_start_values(airframe: Airframe, *,
     variables = fmu_variables(controller_fmu())
     params: dict[str, Value] = {k: v for k, v in airframe.fmu_parameters().items()
                                 if k in variables and variables[k].causality == "parameter"}
-    params.update(design_set_parameters(airframe))
+    params.update(_design_sets(airframe))
     params.update(design or {})
     params.update(overrides or {})
     return params
 
 
+_DESIGN_SETS: dict[str, dict[str, Value]] = {}
+
+
+def _design_sets(airframe: Airframe) -> dict[str, Value]:
+    """design_set_parameters, read once per rotor set within a process (a sweep builds
+    every case's start values)."""
+    from controller.polytope_cache import rotors_digest
+
+    digest = rotors_digest(airframe)
+    found = _DESIGN_SETS.get(digest)
+    if found is None:
+        if len(_DESIGN_SETS) >= 8:
+            _DESIGN_SETS.clear()
+        found = _DESIGN_SETS[digest] = dict(design_set_parameters(airframe))
+    return found
+
+
 def start_values(airframe: Airframe, pose: Pose = Pose(), *,
                  design: Mapping[str, float] | None = None, timing: bool = False,
                  plant_overrides: Mapping[str, Value] | None = None,
-                 controller_overrides: Mapping[str, Value] | None = None) -> StartValues:
+                 controller_overrides: Mapping[str, Value] | None = None,
+                 plant_airframe: Airframe | None = None) -> StartValues:
     """Both FMUs' start values for a closed loop starting at ``pose``; ``timing`` switches
-    on the FMUs' self-timing outputs."""
+    on the FMUs' self-timing outputs.  ``plant_airframe``: the vehicle the plant flies when
+    it is not ``airframe``, the one the controller is told (a model mismatch)."""
+    flown = plant_airframe if plant_airframe is not None else airframe
     return StartValues(
-        plant=plant_start_values(airframe, pose, overrides={"timing": timing,
+        plant=plant_start_values(flown, pose, overrides={"timing": timing,
                                                             **(plant_overrides or {})}),
         controller=controller_start_values(airframe, design=design,
                                            overrides={"timing": timing,

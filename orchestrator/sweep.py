@@ -1,6 +1,7 @@
 """Monte-Carlo robustness campaign (``fullpose sweep``).
 
-Each case: hover at [0, 0, -3] m with a perturbed plant - mass x U(0.7, 1.3), each principal
+Each case flies a scenario (default: the shipped hover at [0, 0, -3] m; any scenario file,
+on any airframe) with a perturbed plant - mass x U(0.7, 1.3), each principal
 inertia x U(0.5, 1.5), motor and servo time constants x U(0.7, 1.3) - a world-frame
 acceleration disturbance step of amplitude U(0.5, 3) m/s^2 in a uniformly random direction,
 applied at ``t_on`` = 1 s and removed at mid-run, and sensor noise (each channel's standard
@@ -18,8 +19,9 @@ larger; the larger of the two times), stable (finite and max error < ``diverged_
 Workers (:class:`Worker`): the calling process (``workers=1``), each process of the local pool
 and each Dask worker process instantiates the plant and controller FMUs once (one unzip, one
 library load) and between cases only resets them (fmi2Reset) and sets the next case's start
-values; the hover scenario and the start values every case shares (the airframe, the pose,
-S(0)) are built once per duration.  A worker sends back only the case's row of metrics.
+values; the campaign's scenario is validated once per worker, and the perturbed vehicle is
+an :class:`~plant.Airframe` the plant flies (the controller keeps the nominal one).  A worker
+sends back only the case's row of metrics.
 ``reuse=False`` flies every case on freshly loaded FMUs instead: the previous path, and the
 oracle the tests hold the reused one to, bit for bit.
 """
@@ -45,9 +47,7 @@ import numpy as np
 
 if TYPE_CHECKING:
     from orchestrator.fmu import FmuInstance
-    from orchestrator.master import CoSimulation
     from orchestrator.scenario import Scenario
-    from orchestrator.start_values import StartValues
 
 NOISE = {"noise_pos": 0.002, "noise_vel": 0.005, "noise_acc": 0.05, "noise_att": 0.002,
          "noise_rate": 0.005, "noise_ang_acc": 0.05}
@@ -140,20 +140,29 @@ def _designs() -> dict[str, dict[str, float]]:
     return {**base, **{name + MATCHED: p for name, p in base.items()}}
 
 
-def perturbed(hover: Scenario, case: dict[str, float], design: str,
+def perturbed(base: Scenario, case: dict[str, float], design: str,
               params: dict[str, float], duration: float) -> Scenario:
-    """The hover scenario of one (case, design): the sampled plant, the disturbance step and
-    sensor noise, the design's gains (``NAME_matched``: also the true mass and inertia).  It
-    differs from ``hover`` only in parameters and disturbances, never in the airframe, the
-    pose or the references."""
+    """The scenario of one (case, design): the base scenario with the plant flying a
+    perturbed copy of its :class:`~plant.Airframe` (mass, principal inertias and actuator
+    time constants scaled by the case's factors, from the values the base scenario flies),
+    the disturbance step and sensor noise, the design's gains; the controller keeps the
+    nominal airframe (``NAME_matched``: it is told the perturbed mass and inertia).  It
+    differs from ``base`` only in the plant's airframe, parameters and disturbances, never
+    in the pose or the references."""
     from orchestrator.signals import Steps
 
-    af = hover.airframe
-    plant: dict[str, Any] = {"mass": af.mass * case["mass_scale"]}
+    af = base.airframe
+    given = base.plant_parameters
+    inertia = np.array(af.inertia, dtype=float)
     for i, key in enumerate(("ixx_scale", "iyy_scale", "izz_scale")):
-        plant[f"inertia[{i + 1},{i + 1}]"] = float(af.inertia[i, i]) * case[key]
-    plant["tau_motor"] = af.tau_motor * case["tau_motor_scale"]
-    plant["tau_servo"] = af.tau_servo * case["tau_servo_scale"]
+        name = f"inertia[{i + 1},{i + 1}]"
+        inertia[i, i] = float(given.get(name, inertia[i, i])) * case[key]
+    vehicle = dataclasses.replace(
+        af, mass=float(given.get("mass", af.mass)) * case["mass_scale"], inertia=inertia,
+        tau_motor=float(given.get("tau_motor", af.tau_motor)) * case["tau_motor_scale"],
+        tau_servo=float(given.get("tau_servo", af.tau_servo)) * case["tau_servo_scale"])
+    scaled = {"mass", "tau_motor", "tau_servo"} | {f"inertia[{i},{i}]" for i in (1, 2, 3)}
+    plant: dict[str, Any] = {k: v for k, v in given.items() if k not in scaled}
     for name, level in NOISE.items():
         plant[name] = level * case["noise_scale"]
     plant["noise_seed"] = int(case["seed"])
@@ -162,18 +171,35 @@ def perturbed(hover: Scenario, case: dict[str, float], design: str,
     acc_x, acc_y, acc_z = (Steps((T_ON, t_off), (amp * case[k], 0.0))
                            for k in ("dist_x", "dist_y", "dist_z"))
     t_amp = case.get("torque_amp", 0.0)
-    torque = hover.torque
+    torque = base.torque
     if t_amp > 0:
         torque = (Steps((T_ON, t_off), (t_amp * case["torque_x"], 0.0)),
                   Steps((T_ON, t_off), (t_amp * case["torque_y"], 0.0)),
                   Steps((T_ON, t_off), (t_amp * case["torque_z"], 0.0)))
-    ctrl = {**hover.controller_parameters, **params}
+    told = af
     if design.endswith(MATCHED):
-        ctrl.update({k: v for k, v in plant.items() if k == "mass" or k.startswith("inertia")})
-    return dataclasses.replace(hover, acceleration=(acc_x, acc_y, acc_z), torque=torque,
-                               coupling="jacobi" if case.get("delay") else hover.coupling,
-                               plant_parameters={**hover.plant_parameters, **plant},
-                               controller_parameters=ctrl)
+        told = dataclasses.replace(af, mass=vehicle.mass, inertia=vehicle.inertia)
+    return dataclasses.replace(base, airframe=told, plant_airframe=vehicle,
+                               acceleration=(acc_x, acc_y, acc_z), torque=torque,
+                               coupling="jacobi" if case.get("delay") else base.coupling,
+                               plant_parameters=plant,
+                               controller_parameters={**base.controller_parameters, **params})
+
+
+@dataclasses.dataclass(frozen=True)
+class Campaign:
+    """What every case of a sweep flies: a scenario (shipped name or file, default the
+    hover), optionally on another airframe (shipped name or file), for ``duration`` s."""
+
+    scenario: str = "hover"
+    airframe: str | None = None
+    duration: float = 6.0
+
+    def base(self) -> Scenario:
+        """The campaign's scenario, validated (nothing runs)."""
+        from orchestrator.runner import prepare
+
+        return prepare(self.scenario, self.duration, airframe=self.airframe)
 
 
 def _t_off(duration: float) -> float:
@@ -181,24 +207,19 @@ def _t_off(duration: float) -> float:
 
 
 def run_case(case: dict[str, float], design: str, params: dict[str, float],
-             duration: float, worker: Worker | None = None) -> dict[str, Any]:
+             campaign: Campaign, worker: Worker | None = None) -> dict[str, Any]:
     """One closed-loop run; returns a table row.  With a ``worker`` the run uses its FMU
     instances, reset (fmi2Reset) from the previous case; without, it loads fresh FMUs as a
     single run does (the reference the reused path is tested against, bit for bit)."""
     from orchestrator.engine import RunError
     from orchestrator.fmu import FmuError
+    from orchestrator.master import CoSimulation
 
     t0 = time.perf_counter()
-    if worker is None:
-        from orchestrator.master import CoSimulation
-        from orchestrator.runner import prepare
-
-        sc = perturbed(prepare("hover", duration), case, design, params, duration)
-        sim = CoSimulation(sc)
-    else:
-        sim = worker.simulation(lambda hover: perturbed(hover, case, design, params, duration),
-                                duration)
-        sc = sim.scenario
+    duration = campaign.duration
+    base = worker.base(campaign) if worker is not None else campaign.base()
+    sc = perturbed(base, case, design, params, duration)
+    sim = CoSimulation(sc, fmus=worker.fmus() if worker is not None else None)
     row: dict[str, Any] = {k: case[k] for k in COLUMNS if k in case}
     row["design"] = design
     try:
@@ -243,13 +264,20 @@ def case_metrics(t: np.ndarray, err: np.ndarray, complete: bool,
 class Worker:
     """What one worker keeps from case to case: the plant and controller FMU instantiated
     once (one unzip, one library load), reset with fmi2Reset before every case and then
-    given the case's parameters; the hover scenario and its start values (the airframe's
-    S(0) among them) once per duration.  ``with Worker() as w`` closes the instances."""
+    given the case's start values; the campaign's validated scenario once per campaign.
+    ``with Worker() as w`` closes the instances."""
 
-    def __init__(self) -> None:
+    def __init__(self, inherited: Worker | None = None) -> None:
+        """``inherited``: the parent's worker a forked child starts from: its instances
+        (copied into this process by the fork, so nothing is unzipped or loaded again) and
+        its scenarios, used here but never closed here (the files are the parent's)."""
         self.pid = os.getpid()
         self._fmus: tuple[FmuInstance, FmuInstance] | None = None
-        self._hover: dict[float, tuple[Scenario, StartValues]] = {}
+        self._bases: dict[Campaign, Scenario] = {}
+        self._owns_fmus = True
+        if inherited is not None:
+            self._fmus, self._owns_fmus = inherited._fmus, False
+            self._bases = dict(inherited._bases)
 
     def fmus(self) -> tuple[FmuInstance, FmuInstance]:
         """(plant, controller) in the Instantiated state, ready for a run: instantiated at
@@ -258,36 +286,27 @@ class Worker:
         from orchestrator.fmu import FmuError
 
         if self._fmus is None:
-            self._fmus = _instantiate()
+            self._fmus, self._owns_fmus = _instantiate(), True
         try:
             for inst in self._fmus:
                 inst.reset()
         except FmuError:
             self.close()
-            self._fmus = _instantiate()
+            self._fmus, self._owns_fmus = _instantiate(), True
         return self._fmus
 
-    def hover(self, duration: float) -> tuple[Scenario, StartValues]:
-        """The sweep's hover scenario of ``duration`` and both FMUs' start values for it."""
-        found = self._hover.get(duration)
+    def base(self, campaign: Campaign) -> Scenario:
+        """The campaign's scenario, validated once per worker."""
+        found = self._bases.get(campaign)
         if found is None:
-            from orchestrator.master import CoSimulation
-            from orchestrator.runner import prepare
-
-            sc = prepare("hover", duration)
-            found = self._hover[duration] = (sc, CoSimulation(sc).start_values())
+            found = self._bases[campaign] = campaign.base()
         return found
-
-    def simulation(self, make: Callable[[Scenario], Scenario], duration: float) -> CoSimulation:
-        """The run of ``make(hover)`` on this worker's reset instances."""
-        hover, start = self.hover(duration)
-        return _reused_run(make(hover), self.fmus(), start)
 
     def close(self) -> None:
         """Frees the instances (in the process that made them only: a forked child's copy
         must not remove its parent's unzipped files)."""
         fmus, self._fmus = self._fmus, None
-        if fmus is not None and os.getpid() == self.pid:
+        if fmus is not None and os.getpid() == self.pid and self._owns_fmus:
             for inst in fmus:
                 inst.close()
 
@@ -311,24 +330,6 @@ def _instantiate() -> tuple[FmuInstance, FmuInstance]:
         raise
 
 
-def _reused_run(sc: Scenario, fmus: tuple[FmuInstance, FmuInstance],
-                base: StartValues) -> CoSimulation:
-    """A CoSimulation on reused instances whose start values are ``base`` (the hover
-    scenario's, computed once) with the case's overrides on top: what
-    ``start_values(...)`` gives for the case, as the scenario differs from the hover one
-    only in its overrides."""
-    from orchestrator.master import CoSimulation
-    from orchestrator.start_values import StartValues
-
-    class ReusedRun(CoSimulation):
-        def start_values(self, refs0: dict[str, np.ndarray] | None = None) -> StartValues:
-            return StartValues(plant={**base.plant, **self.scenario.plant_parameters},
-                               controller={**base.controller,
-                                           **self.scenario.controller_parameters})
-
-    return ReusedRun(sc, fmus=fmus)
-
-
 _LOCAL = threading.local()
 
 
@@ -337,19 +338,19 @@ def process_worker() -> Worker:
     process exits; a forked child makes its own."""
     w: Worker | None = getattr(_LOCAL, "worker", None)
     if w is None or w.pid != os.getpid():
-        w = _LOCAL.worker = Worker()
+        w = _LOCAL.worker = Worker(inherited=w)
         atexit.register(w.close)
         multiprocessing.util.Finalize(None, w.close, exitpriority=0)  # pool workers' exit
     return w
 
 
-Task = tuple[dict[str, float], str, dict[str, float], float, bool]
-"""(case, design, the design's controller parameters, duration, reuse FMUs)."""
+Task = tuple[dict[str, float], str, dict[str, float], Campaign, bool]
+"""(case, design, the design's controller parameters, the campaign, reuse FMUs)."""
 
 
 def _task(args: Task) -> dict[str, Any]:
-    case, design, params, duration, reuse = args
-    return run_case(case, design, params, duration, process_worker() if reuse else None)
+    case, design, params, campaign, reuse = args
+    return run_case(case, design, params, campaign, process_worker() if reuse else None)
 
 
 def _batch(tasks: Sequence[Task]) -> list[dict[str, Any]]:
@@ -360,20 +361,27 @@ def run_sweep(n: int, seed: int = 0, duration: float = 6.0, workers: int = 1,
               dask: str | Any | None = None, progress: bool | None = None,
               design_set: Sequence[str] = ("hinf", "baseline"),
               noise: float = 1.0, reuse: bool = True, torque: float = 0.0,
-              delay: bool = False) -> list[dict[str, Any]]:
-    """All (case, design) runs, sorted by (case, design); identical for any worker count
-    and with or without ``reuse`` (each worker's FMUs instantiated once and reset between
-    cases; ``reuse=False``: fresh FMUs loaded for every case)."""
+              delay: bool = False, scenario: str | Path = "hover",
+              airframe: str | Path | None = None) -> list[dict[str, Any]]:
+    """All (case, design) runs of ``scenario`` (default the hover; on ``airframe`` when
+    given), sorted by (case, design); identical for any worker count and with or without
+    ``reuse`` (each worker's FMUs instantiated once and reset between cases;
+    ``reuse=False``: fresh FMUs loaded for every case).  The scenario and airframe are
+    validated here first, so a mistake is one error, not one per worker."""
     params = designs()
     unknown = [d for d in design_set if d not in params]
     if unknown or not design_set:
         raise ValueError(f"unknown design(s) {unknown or '(none)'}; known: {', '.join(params)}")
-    tasks: list[Task] = [(c, d, params[d], duration, reuse)
+    campaign = Campaign(str(scenario), None if airframe is None else str(airframe),
+                        float(duration))
+    campaign.base()
+    tasks: list[Task] = [(c, d, params[d], campaign, reuse)
                          for c in sample_cases(n, seed, noise, torque, delay)
                          for d in design_set]
     if progress is None:
         progress = sys.stderr.isatty()
     bar = _bar(len(tasks), progress)
+    workers = min(workers, max(1, len(tasks) // 2))  # no worker without two runs to fly
     if dask is not None:
         rows = _on_dask(dask, tasks, bar)
     elif workers <= 1:
@@ -388,8 +396,8 @@ def run_sweep(n: int, seed: int = 0, duration: float = 6.0, workers: int = 1,
 def _in_process(tasks: Sequence[Task], bar: Callable[..., None]) -> list[dict[str, Any]]:
     rows = []
     with Worker() as w:
-        for case, design, params, duration, reuse in tasks:
-            rows.append(run_case(case, design, params, duration, w if reuse else None))
+        for case, design, params, campaign, reuse in tasks:
+            rows.append(run_case(case, design, params, campaign, w if reuse else None))
             bar(1)
     return rows
 
@@ -410,6 +418,13 @@ def _on_pool(workers: int, tasks: Sequence[Task],
              bar: Callable[..., None]) -> list[dict[str, Any]]:
     from orchestrator import master, runner  # noqa: F401  (forked workers inherit them)
 
+    # this process's FMU instances and the campaign's scenario, made before the workers fork
+    # so that they start flying at once: a forked worker adopts copies of both (a spawned
+    # one, where fork is not the start method, makes its own)
+    parent = process_worker()
+    parent.fmus()
+    for campaign in {t[3] for t in tasks}:
+        parent.base(campaign)
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=workers) as ex:
         for done in ex.map(_batch, _chunks(tasks, workers)):

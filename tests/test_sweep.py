@@ -6,9 +6,12 @@ from __future__ import annotations
 
 import multiprocessing
 import os
+import threading
 
+import numpy as np
 import pytest
 
+import plant
 from orchestrator import sweep
 from orchestrator.cli import main
 
@@ -92,8 +95,10 @@ def test_a_worker_instantiates_once_and_survives_lost_and_refused_cases(monkeypa
              ({**c1, "tau_motor_scale": -1.0}, "hinf"), (c2, "prototype_matched"),
              (c0, "hinf")]
     with sweep.Worker() as w:
-        reused = [sweep.run_case(c, d, params[d], DURATION, w) for c, d in cases]
-    fresh = [sweep.run_case(c, d, params[d], DURATION) for c, d in cases]
+        reused = [sweep.run_case(c, d, params[d], sweep.Campaign(duration=DURATION), w)
+                  for c, d in cases]
+    fresh = [sweep.run_case(c, d, params[d], sweep.Campaign(duration=DURATION))
+             for c, d in cases]
     assert exact(reused) == exact(fresh)
     assert [r["stable"] for r in fresh] == [1, 0, 0, 1, 1]
     assert made == [1]
@@ -101,8 +106,11 @@ def test_a_worker_instantiates_once_and_survives_lost_and_refused_cases(monkeypa
 
 @pytest.mark.skipif(multiprocessing.get_start_method() != "fork",
                     reason="counts instantiations through a patch the pool's children inherit")
-def test_each_pool_worker_instantiates_its_fmus_once(monkeypatch, tmp_path):
+def test_pool_workers_adopt_the_parents_fmus(monkeypatch, tmp_path, serial):
+    """The parent instantiates the FMUs once, before the pool forks; the workers fly on
+    their copies (no unzip, no library load of their own) and give the serial table."""
     log = tmp_path / "pids"
+    log.write_text("")
     instantiate = sweep._instantiate
 
     def counted():
@@ -111,11 +119,18 @@ def test_each_pool_worker_instantiates_its_fmus_once(monkeypatch, tmp_path):
         return instantiate()
 
     monkeypatch.setattr(sweep, "_instantiate", counted)
-    rows = sweep.run_sweep(4, seed=1, duration=2.0, workers=2, progress=False)
-    assert len(rows) == 8
-    pids = log.read_text().split()
-    assert 1 <= len(pids) <= 2 and len(set(pids)) == len(pids)
-    assert str(os.getpid()) not in pids
+    monkeypatch.setattr(sweep, "_LOCAL", threading.local())
+    rows = sweep.run_sweep(N, seed=7, duration=DURATION, workers=2, progress=False)
+    assert exact(rows) == exact(serial)
+    assert log.read_text().split() == [str(os.getpid())]
+    sweep.process_worker().close()
+
+
+def test_a_tiny_sweep_runs_in_process(monkeypatch):
+    """One case (two runs) on two workers: no pool is started for it."""
+    monkeypatch.setattr(sweep, "_on_pool", lambda *a: pytest.fail("a pool for two runs"))
+    rows = sweep.run_sweep(1, seed=1, duration=2.0, workers=2, progress=False)
+    assert len(rows) == 2
 
 
 @pytest.mark.parametrize("config", ["default", "sweep.DASK_CONFIG"])
@@ -174,11 +189,40 @@ def test_matched_design_tells_the_controller_the_true_plant(tmp_path, capsys):
     heavy = max(cases, key=lambda c: c["mass_scale"])
     assert heavy["mass_scale"] > 1.2
     params = sweep.designs()
-    nominal = sweep.run_case(heavy, "hinf", params["hinf"], 3.0)
-    matched = sweep.run_case(heavy, "hinf_matched", params["hinf_matched"], 3.0)
+    nominal = sweep.run_case(heavy, "hinf", params["hinf"], sweep.Campaign(duration=3.0))
+    matched = sweep.run_case(heavy, "hinf_matched", params["hinf_matched"],
+                             sweep.Campaign(duration=3.0))
     assert nominal["stable"] and matched["stable"]
     assert matched["max_err"] < 0.9 * nominal["max_err"]
     with pytest.raises(ValueError, match="unknown design"):
         sweep.run_sweep(1, design_set=("hinf_typo",))
     assert main(["sweep", "--cases", "1", "--designs", "nope", "--out", str(tmp_path)]) == 2
     assert "unknown design" in capsys.readouterr().err
+
+
+def test_a_sweep_perturbs_the_airframe_of_any_scenario_and_vehicle(tmp_path):
+    """The X8 on a user's scenario file: every case's plant flies a perturbed copy of the X8
+    (mass, principal inertias, time constants scaled by the case's factors), the controller
+    keeps the nominal X8 (or is told the true mass and inertia: _matched), and the cases
+    hold the hover under the disturbance steps (stable, error well under a metre)."""
+    scenario = tmp_path / "hold.toml"
+    scenario.write_text('duration = 3.0\nairframe = "paper_hexacopter"\n'
+                        "[reference.position]\nz = -2.0\n")
+    campaign = sweep.Campaign(str(scenario), "x8_coaxial", DURATION)
+    base = campaign.base()
+    x8 = plant.load_airframe("x8_coaxial")
+    (case,) = sweep.sample_cases(1, 4)
+    for design in ("hinf", "hinf_matched"):
+        sc = sweep.perturbed(base, case, design, sweep.designs()[design], DURATION)
+        truth = sc.true_airframe
+        assert truth.mass == pytest.approx(x8.mass * case["mass_scale"], rel=1e-15)
+        assert np.allclose(np.diag(truth.inertia), np.diag(x8.inertia) * [
+            case["ixx_scale"], case["iyy_scale"], case["izz_scale"]], rtol=1e-15)
+        assert truth.tau_motor == pytest.approx(x8.tau_motor * case["tau_motor_scale"])
+        assert np.array_equal(truth.positions, x8.positions)
+        told = sc.airframe.mass
+        assert told == (truth.mass if design.endswith("_matched") else x8.mass)
+    rows = sweep.run_sweep(3, seed=4, duration=DURATION, scenario=scenario,
+                           airframe="x8_coaxial", design_set=("hinf",), progress=False)
+    assert [r["stable"] for r in rows] == [1, 1, 1]
+    assert max(r["max_err"] for r in rows) < 0.5
