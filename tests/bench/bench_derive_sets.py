@@ -27,13 +27,13 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from airframe_kinds import KINDS, load_kind  # noqa: E402
+from airframe_kinds import KINDS, load_kind
 
-import plant  # noqa: E402
-from controller import controller_fmu  # noqa: E402
-from controller.derived_sets import controller_sets  # noqa: E402
-from controller.force_sets import feasible_force_set  # noqa: E402
-from orchestrator.fmu import FmuInstance  # noqa: E402
+import plant
+from controller import controller_fmu
+from controller.derived_sets import controller_sets
+from controller.force_sets import feasible_force_set
+from orchestrator.fmu import FmuInstance
 
 
 def init_seconds(af: plant.Airframe, repeats: int) -> float:
