@@ -17,7 +17,8 @@ def register(sub: Any) -> None:
     fly.add_argument("scenario", nargs="?", default=None,
                      help="start from this scenario's airframe, pose and parameters")
     fly.add_argument("--airframe", default=None,
-                     help="shipped airframe name or TOML file (default: paper_hexacopter)")
+                     help="shipped airframe name or TOML file (default: the scenario's, else "
+                          "paper_hexacopter)")
     fly.add_argument("--gcs", action="append", default=[], metavar="URL",
                      help="MAVLink endpoint, udpout:HOST:PORT or udpin:HOST:PORT (repeatable; "
                           "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540)")
@@ -46,8 +47,6 @@ def _fly(args: argparse.Namespace) -> int:
     from mavlink_bridge.bridge import DEFAULT_URLS, Bridge, BridgeConfig  # pymavlink: lazily
     from mavlink_bridge.links import load_key
 
-    if args.scenario is not None and args.airframe is not None:
-        raise ValueError("give a scenario or --airframe, not both")
     speed = math.inf if args.speed.lower() == "max" else float(args.speed)
     if not speed > 0:
         raise ValueError("--speed must be positive or 'max'")
@@ -58,9 +57,9 @@ def _fly(args: argparse.Namespace) -> int:
     config = BridgeConfig(urls=urls, speed=speed, duration=args.duration,
                           signing_setup_from=tuple(args.signing_setup_from))
     if args.scenario is not None:
-        from orchestrator.scenario import load_scenario
+        from orchestrator.runner import prepare
 
-        sc = load_scenario(args.scenario)
+        sc = prepare(args.scenario, airframe=args.airframe)  # (--airframe: on another one)
         pos0, euler0 = sc.initial_pose()
         config.airframe, config.pos0, config.euler0 = sc.airframe, tuple(pos0), tuple(euler0)
         config.plant_parameters = sc.plant_parameters
