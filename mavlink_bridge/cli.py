@@ -19,6 +19,9 @@ def register(sub: Any) -> None:
     fly.add_argument("--airframe", default=None,
                      help="shipped airframe name or TOML file (default: the scenario's, else "
                           "paper_hexacopter)")
+    fly.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
+                     help="fly with the gains of this file (fullpose design) instead of the "
+                          "shipped ones")
     fly.add_argument("--gcs", action="append", default=[], metavar="URL",
                      help="MAVLink endpoint, udpout:HOST:PORT or udpin:HOST:PORT (repeatable; "
                           "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540)")
@@ -59,9 +62,11 @@ def _fly(args: argparse.Namespace) -> int:
     if args.scenario is not None:
         from orchestrator.runner import prepare
 
-        sc = prepare(args.scenario, airframe=args.airframe)  # (--airframe: on another one)
+        sc = prepare(args.scenario, airframe=args.airframe, gains=args.gains)
         pos0, euler0 = sc.initial_pose()
         config.airframe, config.pos0, config.euler0 = sc.airframe, tuple(pos0), tuple(euler0)
+        for warning in sc.warnings:
+            print(f"fullpose: warning: {warning}", file=sys.stderr)
         config.plant_parameters = sc.plant_parameters
         config.controller_parameters = sc.controller_parameters
         config.coupling = sc.coupling
@@ -69,8 +74,18 @@ def _fly(args: argparse.Namespace) -> int:
             from mavlink_bridge.geodesy import Origin
 
             config.origin = Origin(*sc.origin)
-    elif args.airframe is not None:
-        config.airframe = args.airframe
+    else:
+        from controller.design_check import lag_warning, read_gains
+        from plant import load_airframe
+
+        af = load_airframe(args.airframe or "paper_hexacopter")
+        config.airframe = af
+        gains = read_gains(args.gains) if args.gains is not None else None
+        if gains is not None:
+            config.controller_parameters = gains.controller_parameters()
+        lag_note = lag_warning(af, gains)
+        if lag_note is not None:
+            print(f"fullpose: warning: {lag_note}", file=sys.stderr)
     if args.origin is not None:
         from mavlink_bridge.geodesy import parse_origin
 

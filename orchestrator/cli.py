@@ -59,7 +59,8 @@ def _cmd_run(args: argparse.Namespace) -> int:
     from orchestrator.outcome import EXIT_LOST
     from orchestrator.runner import prepare, run_scenario
 
-    scenario = prepare(args.scenario, args.duration, args.set, airframe=args.airframe)
+    scenario = prepare(args.scenario, args.duration, args.set, airframe=args.airframe,
+                       gains=args.gains)
     _warn(scenario.warnings)
     if args.view or args.save is not None:  # no run whose view cannot be shown or written
         from orchestrator.view import check_viewer
@@ -139,7 +140,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
     from orchestrator.master import CoSimulation
     from orchestrator.runner import prepare
 
-    sc = prepare(args.file, args.duration, args.set, airframe=args.airframe)
+    sc = prepare(args.file, args.duration, args.set, airframe=args.airframe, gains=args.gains)
     _warn(sc.warnings)
     # both FMUs instantiated and initialized with the scenario's values: whatever they
     # would refuse at the start of a run is reported here too
@@ -156,6 +157,30 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
     path = export_ssp(args.output, airframe=args.airframe, pos0=tuple(args.pos0),
                       stop_time=args.stop_time, euler0=euler0)
     print(f"wrote {path}")
+    return 0
+
+
+def _cmd_design(args: argparse.Namespace) -> int:
+    from controller import design_check
+
+    af = load_airframe(args.airframe)
+    given = design_check.read_gains(args.gains) if args.gains is not None else None
+    result = design_check.check(af, given)
+    print("gains             " + (given.path if given else "shipped"))
+    for line in result.report():
+        print(line)
+    if result.certified or args.no_synthesis or given is not None:
+        return 0
+    out = args.out if args.out is not None else Path(f"{af.name}.gains.json")
+    print(f"synthesis         for {af.name}'s model set (its lag x[0.7, 1.3]; the shipped "
+          "weights, performance scaled to its actuators' bandwidth)")
+    sys.stdout.flush()
+    gains, fresh = design_check.synthesize(af)
+    design_check.write_gains(out, gains)
+    print("gains             " + str(out))
+    for line in fresh.report()[2:]:
+        print(line)
+    print(f"use them with     fullpose run SCENARIO --airframe {args.airframe} --gains {out}")
     return 0
 
 
@@ -227,6 +252,9 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
         raise ValueError("sweep needs --cases >= 1 and --duration > 1 s")
     if not (math.isfinite(args.noise) and args.noise >= 0.0):
         raise ValueError(f"sweep --noise must be a finite factor >= 0, got {args.noise}")
+    from orchestrator.sweep import Campaign
+
+    _warn(Campaign(args.scenario, args.airframe, args.duration).base().warnings)
     t0 = time.perf_counter()
     if not (math.isfinite(args.torque) and args.torque >= 0.0):
         raise ValueError(f"sweep --torque must be a finite amplitude >= 0 N m, got {args.torque}")
@@ -269,6 +297,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
                      help="fly the scenario on this airframe (shipped name or TOML file) "
                           "instead of the one it names")
+    run.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
+                     help="fly with the gains of this file (fullpose design) instead of the "
+                          "shipped ones")
     run.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
                      help="override a parameter, e.g. controller.K_pos_D[1]=3 (repeatable)")
     run.add_argument("--no-timing", action="store_true",
@@ -305,6 +336,8 @@ def build_parser() -> argparse.ArgumentParser:
     check.add_argument("--duration", type=float, default=None, help="override the duration (s)")
     check.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
                        help="check it on this airframe instead of the one it names")
+    check.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
+                       help="with the gains of this file, as for run")
     check.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
                        help="override a parameter, as for run (repeatable)")
     check.set_defaults(func=_cmd_check)
@@ -328,6 +361,17 @@ def build_parser() -> argparse.ArgumentParser:
     hover.add_argument("--out", type=Path, default=None,
                        help="directory for hover.csv and hover_summary.json")
     hover.set_defaults(func=_cmd_hover)
+
+    design = sub.add_parser("design", help="are the gains certified for an airframe; if not, "
+                                           "synthesize gains for it")
+    design.add_argument("airframe", help="shipped airframe name or TOML file")
+    design.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
+                        help="check these gains instead of the shipped ones")
+    design.add_argument("--out", type=Path, default=None, metavar="FILE.json",
+                        help="where a synthesis writes its gains (default: NAME.gains.json)")
+    design.add_argument("--no-synthesis", action="store_true",
+                        help="only check, even when the gains are not certified")
+    design.set_defaults(func=_cmd_design)
 
     airframes = sub.add_parser("airframes", help="list the shipped airframe files")
     airframes.set_defaults(func=_cmd_airframes)

@@ -19,6 +19,7 @@ results (no ``metrics.json``, not empty) is never replaced.
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import glob
 import json
 import os
@@ -61,14 +62,28 @@ class RunOutput:
 
 
 def prepare(name_or_path: str | Path, duration: float | None = None,
-            settings: Iterable[str] = (), airframe: str | Path | None = None) -> Scenario:
+            settings: Iterable[str] = (), airframe: str | Path | None = None,
+            gains: str | Path | None = None) -> Scenario:
     """Load and validate a scenario with the command line's overrides (nothing runs yet):
-    ``airframe`` flies it on another airframe (a shipped name or an airframe file)."""
+    ``airframe`` flies it on another airframe (a shipped name or an airframe file),
+    ``gains`` with the gains of a gains file (``fullpose design``), ``settings`` last.
+    The scenario's warnings gain one when the airframe's actuator lag lies outside the range
+    the gains in use are certified for."""
+    from controller.design_check import lag_warning, read_gains
+
     scenario = load_scenario(name_or_path)
     settings = list(settings)
-    if duration is not None or settings or airframe is not None:
-        scenario = scenario.with_overrides(duration=duration, settings=settings,
-                                           airframe=airframe)
+    if airframe is not None:
+        scenario = scenario.with_overrides(airframe=airframe)
+    gains_file = read_gains(gains) if gains is not None else None
+    if gains_file is not None:
+        scenario = dataclasses.replace(scenario, controller_parameters={
+            **scenario.controller_parameters, **gains_file.controller_parameters()})
+    if duration is not None or settings:
+        scenario = scenario.with_overrides(duration=duration, settings=settings)
+    lag = lag_warning(scenario.airframe, gains_file)
+    if lag is not None:
+        scenario = dataclasses.replace(scenario, warnings=(*scenario.warnings, lag))
     return scenario
 
 
