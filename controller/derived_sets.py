@@ -97,3 +97,30 @@ def _required(s: DerivedSet | None, airframe: Airframe) -> DerivedSet:
         raise DerivationError(f"{airframe.name}: no force at zero torque at all (S(0) is "
                               "empty): the rotors cannot balance their torques")
     return s
+
+
+def flown_sets(airframe: Airframe) -> dict[str, object]:
+    """The force sets a run's controller flies with, as JSON-ready data: the design-time
+    sets passed for a shipped airframe's rotors (``source`` "design"), else the ones the
+    controller derives itself (``source`` "derived", through the same C code):
+    ``{"source", "s0": {"A", "b"}, "failures": [{"A", "b"} or None per rotor]}``."""
+    from controller.polytope_cache import design_set_parameters
+
+    params = design_set_parameters(airframe)
+    if params:
+        def rows(prefix: str, first: int, n: int) -> dict[str, list[list[float]] | list[float]]:
+            return {"A": [[float(params[f"{prefix}_A[{r},{j}]"]) for j in (1, 2, 3)]
+                          for r in range(first + 1, first + n + 1)],
+                    "b": [float(params[f"{prefix}_b[{r}]"])
+                          for r in range(first + 1, first + n + 1)]}
+
+        fails: list[object] = []
+        for i in range(airframe.n_rotors):
+            n = int(params[f"fail_poly_n[{i + 1}]"])
+            fails.append(rows("fail_poly", i * FAIL_FACETS, n) if n else None)
+        return {"source": "design", "s0": rows("poly", 0, int(params["poly_n"])),
+                "failures": fails}
+    sets = controller_sets(airframe)
+    return {"source": "derived", "s0": {"A": sets.s0.A.tolist(), "b": sets.s0.b.tolist()},
+            "failures": [None if f is None else {"A": f.A.tolist(), "b": f.b.tolist()}
+                         for f in sets.failures]}

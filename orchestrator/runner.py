@@ -198,6 +198,11 @@ def _existing(folder: Path) -> Path:
     return folder
 
 
+FORCE_SETS_FILE = "force_sets.json"
+"""A results folder's record of the force sets the controller flew with
+(:func:`controller.derived_sets.flown_sets`)."""
+
+
 def _remove_stale_spills(folder: Path, name: str) -> None:
     """Removes what a killed run of the same results folder left (a long run's recording
     file).  Safe even while another run maps one: POSIX keeps a removed file for the process
@@ -288,6 +293,11 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
             write_mcap(result, folder / MCAP_FILE)
             names.append(MCAP_FILE)
             phase("mcap")
+        from controller.derived_sets import flown_sets
+
+        # the force sets the controller flew with, beside the airframe record in the meta
+        (folder / FORCE_SETS_FILE).write_text(json.dumps(flown_sets(scenario.airframe)) + "\n")
+        names.append(FORCE_SETS_FILE)
         doc = {"scenario": scenario.name, "metrics": metrics, "paper": paper,
                "meta": result.meta}
         (folder / RESULT_MARKER).write_text(json.dumps(doc, indent=2, default=str) + "\n")

@@ -13,6 +13,7 @@ import json
 import math
 import sys
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -73,33 +74,47 @@ class Airframe:
             omega_limits=(self.omega_min, self.omega_max),
         )
 
-    def fmu_parameters(self) -> dict[str, float | int | bool]:
-        """Start values for the MultirotorPlant FMU, keyed by variable name."""
-        p: dict[str, float | int | bool] = {
-            "n_rotors": self.n_rotors,
-            "mass": self.mass,
-            "g": self.gravity,
-            "k_t": self.k_t,
-            "k_d": self.k_d,
-            "omega_min": self.omega_min,
-            "omega_max": self.omega_max,
-            "tau_motor": self.tau_motor,
-            "tau_servo": self.tau_servo,
+    def table_values(self) -> dict[str, np.ndarray]:
+        """The airframe's numbers by row of the airframe variable table both FMUs share
+        (``fmu_src/common/airframe_vars.h``), each as an array of the row's shape (rotor rows
+        padded to the table's 8 slots: spin +1, zeros elsewhere)."""
+        n, slots = self.n_rotors, MAX_ROTORS
+
+        def rotors(values: np.ndarray, fill: float = 0.0) -> np.ndarray:
+            out = np.full((slots, *values.shape[1:]), fill, dtype=float)
+            out[:n] = values
+            return out
+
+        return {
+            "n_rotors": np.array([n]), "mass": np.array([self.mass]),
+            "inertia": self.inertia, "g": np.array([self.gravity]),
+            "k_t": np.array([self.k_t]), "k_d": np.array([self.k_d]),
+            "rotor_pos": rotors(self.positions), "rotor_dir": rotors(self.spins, 1.0),
+            "rotor_gamma": rotors(self.gamma),
+            "alpha_min": rotors(self.alpha_limits[:, 0]),
+            "alpha_max": rotors(self.alpha_limits[:, 1]),
+            "beta_min": rotors(self.beta_limits[:, 0]),
+            "beta_max": rotors(self.beta_limits[:, 1]),
+            "omega_min": np.array([self.omega_min]), "omega_max": np.array([self.omega_max]),
+            "tau_motor": np.array([self.tau_motor]), "tau_servo": np.array([self.tau_servo]),
         }
-        for i in range(3):
-            for j in range(3):
-                p[f"inertia[{i + 1},{j + 1}]"] = float(self.inertia[i, j])
-        for k in range(MAX_ROTORS):
-            used = k < self.n_rotors
-            r = k + 1
-            for j in range(3):
-                p[f"rotor_pos[{r},{j + 1}]"] = float(self.positions[k, j]) if used else 0.0
-            p[f"rotor_dir[{r}]"] = int(self.spins[k]) if used else 1
-            p[f"rotor_gamma[{r}]"] = float(self.gamma[k]) if used else 0.0
-            p[f"alpha_min[{r}]"] = float(self.alpha_limits[k, 0]) if used else 0.0
-            p[f"alpha_max[{r}]"] = float(self.alpha_limits[k, 1]) if used else 0.0
-            p[f"beta_min[{r}]"] = float(self.beta_limits[k, 0]) if used else 0.0
-            p[f"beta_max[{r}]"] = float(self.beta_limits[k, 1]) if used else 0.0
+
+    def fmu_parameters(self) -> dict[str, float | int | bool]:
+        """Start values of both FMUs' airframe variables, keyed by variable name: every row
+        of the table the C core declares (:func:`airframe_table`), elementwise
+        (``rotor_pos[2,3]``), nothing else."""
+        values = self.table_values()
+        p: dict[str, float | int | bool] = {}
+        for row in airframe_table():
+            if row.name not in values:
+                raise AirframeError(self.source, row.name, "an airframe variable of the FMUs "
+                                    "that Airframe.table_values does not provide")
+            flat = np.asarray(values[row.name], dtype=float).reshape(-1)
+            if flat.size != row.rows * row.cols:
+                raise AirframeError(self.source, row.name, f"{flat.size} values for a "
+                                    f"{row.rows} x {row.cols} variable")
+            for k, v in enumerate(flat):
+                p[row.element(k)] = int(v) if row.integer else float(v)
         return p
 
     def record(self) -> dict[str, Any]:
@@ -157,6 +172,45 @@ class Airframe:
         row3 = np.array([-s_th, s_phi * c_th, c_phi * c_th])
         wrench = np.concatenate([-self.mass * self.gravity * row3, np.zeros(3)])
         return rs.preferred_config(wrench)
+
+
+@dataclass(frozen=True)
+class TableRow:
+    """One row of the airframe variable table (``fmu_src/common/airframe_vars.h``)."""
+
+    name: str
+    rows: int
+    cols: int
+    integer: bool
+
+    def element(self, k: int) -> str:
+        """The FMI name of element k (row-major): ``mass``, ``rotor_dir[3]``,
+        ``rotor_pos[2,1]``."""
+        if self.rows * self.cols == 1:
+            return self.name
+        if self.cols == 1:
+            return f"{self.name}[{k + 1}]"
+        return f"{self.name}[{k // self.cols + 1},{k % self.cols + 1}]"
+
+
+@cache
+def airframe_table() -> tuple[TableRow, ...]:
+    """The airframe variable table both FMUs share, as the C core declares it
+    (``libfp_multirotor``): what an airframe is, in the FMUs' words."""
+    import ctypes
+
+    from plant.native import multirotor
+
+    lib = multirotor()
+    out = []
+    for i in range(lib.fp_airframe_variable_count()):
+        name = ctypes.create_string_buffer(64)
+        rows, cols, integer = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int32()
+        if lib.fp_airframe_variable(i, name, 64, ctypes.byref(rows), ctypes.byref(cols),
+                                    ctypes.byref(integer)) != 0:
+            raise RuntimeError(f"libfp_multirotor: airframe table row {i} unreadable")
+        out.append(TableRow(name.value.decode(), rows.value, cols.value, bool(integer.value)))
+    return tuple(out)
 
 
 # ---------------------------------------------------------------------------

@@ -17,6 +17,8 @@ _I = ctypes.c_int
 SIGNATURES: dict[str, list[object]] = {
     "fp_api_version": [],
     "fp_max_rotors": [],
+    "fp_airframe_variable_count": [],
+    "fp_airframe_variable": [_I, ctypes.c_char_p, _I, _I32P, _I32P, _I32P],
     "fp_rotor_set_size": [],
     "fp_rotor_set_init": [_VP, _I, _D, _D, _DP, _I32P, _DP, _DP, _DP, _DP, _DP, _D, _D],
     "fp_rotor_rotation_api": [_D, _D, _D, _DP],

@@ -5,6 +5,7 @@ airframe file being edited or deleted; mistakes are one line, exit status 2."""
 
 from __future__ import annotations
 
+import json
 import shutil
 import subprocess
 import sys
@@ -57,6 +58,13 @@ def test_run_records_the_airframe_it_flew(flown, my_frame):
     assert abs(pos[-1, 0] - 1.0) < 0.02  # the 1 m step, flown on the heavier X8
     for png in ("tracking.png", "force_set.png", "actuators.png"):
         assert (flown / png).stat().st_size > 10_000, png
+    # the force sets it flew: the X8's design-time ones (a heavier X8 has the same rotors),
+    # S(0) the vertical thrust segment that holds the heavier weight (statics)
+    sets = json.loads((flown / "force_sets.json").read_text())
+    assert sets["source"] == "design" and len(sets["failures"]) == 8
+    A, b = np.array(sets["s0"]["A"]), np.array(sets["s0"]["b"])
+    assert np.all(A @ [0.0, 0.0, -1.9 * 9.81] <= b + 1e-9)
+    assert not np.all(A @ [0.0, 0.0, -8.1 * flew.k_t * flew.omega_max ** 2] <= b + 1e-9)
 
 
 def test_view_reads_the_recorded_airframe_after_the_file_is_gone(flown, my_frame, tmp_path):

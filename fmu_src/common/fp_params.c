@@ -267,18 +267,20 @@ static void check_authority(FpCheck *c, const FpRotorSet *rs) {
                        "third): the vehicle cannot be controlled");
 }
 
-FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, double g,
-                           const FpRotorSet *rs) {
-    int i, n = rs->n, errors = c->errors, errors0 = c->errors;
-    fp_need_int_param(c, "n_rotors", &rs->n, 1);
+FpStatus fp_check_airframe(FpCheck *c, const FpAirframe *af) {
+    FpRotorSet set;
+    const FpRotorSet *rs = &set;
+    int i, n = af->n_rotors, errors = c->errors, errors0 = c->errors;
+    fp_rotor_set_of(af, &set);
+    fp_need_int_param(c, "n_rotors", &af->n_rotors, 1);
     if (c->errors > errors) return FP_ERROR; /* the per-rotor checks need a valid n */
     if (n < 1 || n > FP_MAX_ROTORS) { /* a table whose range exceeds the arrays: a bug */
         fp_check_bad_int(c, "n_rotors", 0, (long)n, "exceeds the rotor slots");
         return FP_ERROR;
     }
-    fp_need_param(c, "mass", &mass, 1, NULL);
-    check_inertia(c, inertia);
-    fp_need_param(c, "g", &g, 1, NULL);
+    fp_need_param(c, "mass", &af->mass, 1, NULL);
+    check_inertia(c, &af->inertia[0][0]);
+    fp_need_param(c, "g", &af->g, 1, NULL);
     fp_need_param(c, "k_t", &rs->k_t, 1, NULL);
     fp_need_param(c, "k_d", &rs->k_d, 1, NULL);
     fp_need_param(c, "rotor_pos", &rs->pos[0][0], 3 * n, NULL);
@@ -301,6 +303,8 @@ FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, doubl
     fp_need_param(c, "omega_max", &rs->omega_max, 1, NULL);
     fp_need_ordered(c, "omega_min", &rs->omega_min, &rs->omega_max, 1, 0,
                     "exceeds omega_max (inverted limits)");
+    fp_need_param(c, "tau_motor", &af->tau_motor, 1, NULL);
+    fp_need_param(c, "tau_servo", &af->tau_servo, 1, NULL);
     if (c->errors == errors0) check_authority(c, rs);
     return FP_OK;
 }

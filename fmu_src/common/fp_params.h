@@ -73,9 +73,8 @@ void fp_need_ordered(FpCheck *c, const char *name, const double *lo, const doubl
 const char *fp_range_why(const FpRange *r, int integer, char *buf, size_t size);
 
 /*
- * The airframe rules of both FMUs, on their parameters of the same names (rs as
- * FP_MODEL_TO_ROTOR_SET fills it from the model, rs->n = n_rotors); the ranges are those of
- * the rows in c's table (both tables give these rows the same ranges: FP_SERVO_LIMIT etc.):
+ * The airframe rules of both FMUs, on the rows of the airframe table they share
+ * (common/airframe_vars.h, members of af); the ranges are those rows':
  *   n_rotors     within its range (1..FP_MAX_ROTORS; else nothing more is checked: FP_ERROR)
  *   mass, g, k_t, k_d, omega_min, omega_max     finite, within their ranges
  *   inertia      (9, row-major) finite, symmetric (|I_ij - I_ji| <= 1e-12 max|I|),
@@ -84,10 +83,11 @@ const char *fp_range_why(const FpRange *r, int integer, char *buf, size_t size);
  *   rotor_pos, rotor_gamma       finite (rotors 1..n_rotors)
  *   rotor_dir                    within its range, and +1 or -1
  *   alpha_min/max, beta_min/max  finite, within their ranges, min <= max
- *   omega_min <= omega_max
+ *   omega_min <= omega_max; tau_motor, tau_servo positive
+ *   control authority: no two rotors at one place; the moment arms give torque about two
+ *                axes and, with the drag torques, about all three
  * Errors are logged and counted in c.  Returns FP_ERROR only for a bad n_rotors.
  */
-FpStatus fp_check_airframe(FpCheck *c, double mass, const double *inertia, double g,
-                           const FpRotorSet *rs);
+FpStatus fp_check_airframe(FpCheck *c, const FpAirframe *af);
 
 #endif

@@ -78,7 +78,6 @@ void fp_tilt_from_direction(const double f[3], double gamma, double *alpha, doub
 
 void fp_paper_hexacopter(FpAirframe *af) {
     const double pi = 3.14159265358979323846;
-    FpRotorSet *rs = &af->rotors;
     int i;
     memset(af, 0, sizeof *af);
     af->mass = 0.6656;
@@ -88,21 +87,37 @@ void fp_paper_hexacopter(FpAirframe *af) {
     af->g = 9.81;
     af->tau_motor = 1.0 / 53.94;
     af->tau_servo = 1.0 / 53.94;
-    rs->n = 6;
-    rs->k_t = 1.14e-4;
-    rs->k_d = 1.14e-6;
-    for (i = 0; i < FP_MAX_ROTORS; i++) rs->dir[i] = 1;
+    af->n_rotors = 6;
+    af->k_t = 1.14e-4;
+    af->k_d = 1.14e-6;
+    for (i = 0; i < FP_MAX_ROTORS; i++) af->rotor_dir[i] = 1;
     for (i = 0; i < 6; i++) {
         double azimuth = (30.0 + 60.0 * i) * pi / 180.0; /* hexa "X", gamma = arm azimuth */
-        rs->pos[i][0] = 0.15 * cos(azimuth);
-        rs->pos[i][1] = 0.15 * sin(azimuth);
-        rs->dir[i] = (i % 2 == 0) ? 1 : -1;
-        rs->gamma[i] = azimuth;
-        rs->alpha_min[i] = rs->beta_min[i] = -40.0 * pi / 180.0;
-        rs->alpha_max[i] = rs->beta_max[i] = 40.0 * pi / 180.0;
+        af->rotor_pos[i][0] = 0.15 * cos(azimuth);
+        af->rotor_pos[i][1] = 0.15 * sin(azimuth);
+        af->rotor_dir[i] = (i % 2 == 0) ? 1 : -1;
+        af->rotor_gamma[i] = azimuth;
+        af->alpha_min[i] = af->beta_min[i] = -40.0 * pi / 180.0;
+        af->alpha_max[i] = af->beta_max[i] = 40.0 * pi / 180.0;
     }
-    rs->omega_min = 0.0;
-    rs->omega_max = 2000.0 * 2.0 * pi / 60.0;
+    af->omega_min = 0.0;
+    af->omega_max = 2000.0 * 2.0 * pi / 60.0;
+}
+
+void fp_rotor_set_of(const FpAirframe *af, FpRotorSet *rs) {
+    memset(rs, 0, sizeof *rs);
+    rs->n = af->n_rotors;
+    rs->k_t = af->k_t;
+    rs->k_d = af->k_d;
+    memcpy(rs->pos, af->rotor_pos, sizeof rs->pos);
+    memcpy(rs->dir, af->rotor_dir, sizeof rs->dir);
+    memcpy(rs->gamma, af->rotor_gamma, sizeof rs->gamma);
+    memcpy(rs->alpha_min, af->alpha_min, sizeof rs->alpha_min);
+    memcpy(rs->alpha_max, af->alpha_max, sizeof rs->alpha_max);
+    memcpy(rs->beta_min, af->beta_min, sizeof rs->beta_min);
+    memcpy(rs->beta_max, af->beta_max, sizeof rs->beta_max);
+    rs->omega_min = af->omega_min;
+    rs->omega_max = af->omega_max;
 }
 
 static void thrust_direction_jacobian_sc(double sa, double ca, double sb, double cb,

@@ -45,49 +45,25 @@ typedef struct {
     double omega_min, omega_max;
 } FpRotorSet;
 
-/* The paper's hexacopter (Table I), the default airframe of both FMUs. */
+/* An airframe as both FMUs hold it: one struct, the members of the airframe variable table
+ * (common/airframe_vars.h), embedded as `af` in both models. */
 typedef struct {
-    FpRotorSet rotors;
-    double mass, inertia[3][3], g, tau_motor, tau_servo;
+    int32_t n_rotors;
+    double mass, inertia[3][3], g, k_t, k_d;
+    double rotor_pos[FP_MAX_ROTORS][3];
+    int32_t rotor_dir[FP_MAX_ROTORS];
+    double rotor_gamma[FP_MAX_ROTORS];
+    double alpha_min[FP_MAX_ROTORS], alpha_max[FP_MAX_ROTORS];
+    double beta_min[FP_MAX_ROTORS], beta_max[FP_MAX_ROTORS];
+    double omega_min, omega_max;
+    double tau_motor, tau_servo;
 } FpAirframe;
 
+/* The paper's hexacopter (Table I), the default airframe of both FMUs. */
 void fp_paper_hexacopter(FpAirframe *af);
 
-/* Both FMUs' model structs name their airframe parameters alike (n_rotors, k_t, k_d,
- * rotor_pos, rotor_dir, rotor_gamma, alpha/beta_min/max, omega_min/max): these copy
- * between such a struct and an FpRotorSet. */
-#define FP_ROTOR_SET_TO_MODEL(rs, m)                                          \
-    do {                                                                      \
-        (m)->n_rotors = (rs)->n;                                              \
-        (m)->k_t = (rs)->k_t;                                                 \
-        (m)->k_d = (rs)->k_d;                                                 \
-        memcpy((m)->rotor_pos, (rs)->pos, sizeof (m)->rotor_pos);             \
-        memcpy((m)->rotor_dir, (rs)->dir, sizeof (m)->rotor_dir);             \
-        memcpy((m)->rotor_gamma, (rs)->gamma, sizeof (m)->rotor_gamma);       \
-        memcpy((m)->alpha_min, (rs)->alpha_min, sizeof (m)->alpha_min);       \
-        memcpy((m)->alpha_max, (rs)->alpha_max, sizeof (m)->alpha_max);       \
-        memcpy((m)->beta_min, (rs)->beta_min, sizeof (m)->beta_min);          \
-        memcpy((m)->beta_max, (rs)->beta_max, sizeof (m)->beta_max);          \
-        (m)->omega_min = (rs)->omega_min;                                     \
-        (m)->omega_max = (rs)->omega_max;                                     \
-    } while (0)
-
-#define FP_MODEL_TO_ROTOR_SET(m, rs)                                          \
-    do {                                                                      \
-        memset((rs), 0, sizeof *(rs));                                        \
-        (rs)->n = (m)->n_rotors;                                              \
-        (rs)->k_t = (m)->k_t;                                                 \
-        (rs)->k_d = (m)->k_d;                                                 \
-        memcpy((rs)->pos, (m)->rotor_pos, sizeof (rs)->pos);                  \
-        memcpy((rs)->dir, (m)->rotor_dir, sizeof (rs)->dir);                  \
-        memcpy((rs)->gamma, (m)->rotor_gamma, sizeof (rs)->gamma);            \
-        memcpy((rs)->alpha_min, (m)->alpha_min, sizeof (rs)->alpha_min);      \
-        memcpy((rs)->alpha_max, (m)->alpha_max, sizeof (rs)->alpha_max);      \
-        memcpy((rs)->beta_min, (m)->beta_min, sizeof (rs)->beta_min);         \
-        memcpy((rs)->beta_max, (m)->beta_max, sizeof (rs)->beta_max);         \
-        (rs)->omega_min = (m)->omega_min;                                     \
-        (rs)->omega_max = (m)->omega_max;                                     \
-    } while (0)
+/* The rotor set of an airframe (what the rotor math needs of it). */
+void fp_rotor_set_of(const FpAirframe *af, FpRotorSet *rs);
 
 /* sin and cos of every rotor's tilt angles (alpha, beta) and mounting azimuth (gamma), so
  * that a sample that needs the thrust directions, their derivatives and the wrench at one

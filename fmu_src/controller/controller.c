@@ -38,7 +38,11 @@
     FP_STATIC_ASSERT(sizeof(((ControllerModel *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type, \
                      name##_size);                                                               \
     FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
-CONTROLLER_VARIABLES(CTRL_CHECK)
+#define CTRL_AF_CHECK(name, vr, type, kind, rows, cols, dtype, range, desc)                      \
+    FP_STATIC_ASSERT(sizeof(((FpAirframe *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type,     \
+                     name##_size);                                                              \
+    FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
+CONTROLLER_VARIABLES(CTRL_CHECK, CTRL_AF_CHECK)
 FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS == 64, polytope_cap_matches_table);
 FP_STATIC_ASSERT(FP_FAIL_POLYTOPE_FACETS * FP_MAX_ROTORS == 256, fail_polytope_cap_matches_table);
 FP_STATIC_ASSERT(FP_POLYTOPE_MAX_FACETS <= FP_WLS_MAX_CONS, polytope_fits_qp);
@@ -48,12 +52,15 @@ FP_STATIC_ASSERT(6 + 3 * FP_MAX_ROTORS <= FP_WLS_MAX_ROWS, allocation_rows_fit_q
 #define CTRL_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                           \
     {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(ControllerModel, name), FP_T_##dtype,  \
      range, desc},
-static const FpVar controller_vars[] = {CONTROLLER_VARIABLES(CTRL_ROW)};
+#define CTRL_AF_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                        \
+    {#name, vr, FP_##type, FP_##kind, rows, cols,                                                 \
+     offsetof(ControllerModel, af) + offsetof(FpAirframe, name), FP_T_##dtype, range, desc},
+static const FpVar controller_vars[] = {CONTROLLER_VARIABLES(CTRL_ROW, CTRL_AF_ROW)};
 #define N_CTRL_VARS (sizeof controller_vars / sizeof controller_vars[0])
 
 /* Row indices (CV_pos, ...): the input checks read their plausible ranges from the rows. */
 #define CTRL_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc) CV_##name,
-enum { CONTROLLER_VARIABLES(CTRL_INDEX) CV_COUNT };
+enum { CONTROLLER_VARIABLES(CTRL_INDEX, CTRL_INDEX) CV_COUNT };
 
 /* ------------------------------------------------------------------------ */
 /* Defaults                                                                 */
@@ -68,16 +75,13 @@ enum { CONTROLLER_VARIABLES(CTRL_INDEX) CV_COUNT };
 
 static void controller_set_defaults(void *model) {
     ControllerModel *m = (ControllerModel *)model;
-    FpAirframe af;
+    FpRotorSet rs;
     double w[6] = {0.0, 0.0, 0.0, 0.0, 0.0, 0.0};
     int i;
     memset(m, 0, sizeof *m);
-    fp_paper_hexacopter(&af);
+    fp_paper_hexacopter(&m->af);
+    fp_rotor_set_of(&m->af, &rs);
     m->Ts = 0.002;
-    FP_ROTOR_SET_TO_MODEL(&af.rotors, m);
-    m->mass = af.mass;
-    memcpy(m->inertia, af.inertia, sizeof m->inertia);
-    m->g = af.g;
     /* H(s) at 80 rad/s, a design variable of the robust synthesis: INDI rejects a torque
      * disturbance (a lost rotor) at the filter's bandwidth, and at 50 rad/s no certified
      * first-order attitude design reached the hand-tuned bandwidth (docs/robust_design.md) */
@@ -131,8 +135,8 @@ static void controller_set_defaults(void *model) {
     m->fault_fit_max = 0.35;
     m->fault_time = 0.03;
     /* Measurements start at the hover trim of the default airframe. */
-    w[2] = -af.mass * af.g;
-    fp_preferred_config(&af.rotors, w, m->alpha, m->beta, m->omega, NULL, 0);
+    w[2] = -m->af.mass * m->af.g;
+    fp_preferred_config(&rs, w, m->alpha, m->beta, m->omega, NULL, 0);
     memcpy(m->omega_cmd, m->omega, sizeof m->omega_cmd);
     memcpy(m->alpha_cmd, m->alpha, sizeof m->alpha_cmd);
     memcpy(m->beta_cmd, m->beta, sizeof m->beta_cmd);
@@ -152,7 +156,7 @@ static CtrlFilterInputs filter_inputs(const ControllerModel *m) {
     in.pos_ref = m->pos_ref, in.vel_ref = m->vel_ref, in.mu_ref = m->euler_ref;
     in.psi = m->pose_now[8], in.psi_ref = m->euler_ref[2];
     in.omega = m->omega, in.alpha = m->alpha, in.beta = m->beta;
-    in.n_rotors = m->n_rotors;
+    in.n_rotors = m->af.n_rotors;
     return in;
 }
 
@@ -180,7 +184,7 @@ static CtrlForceSet force_set_in_use(const ControllerModel *m) {
 
 static CtrlGuidanceParams guidance_params(const ControllerModel *m) {
     CtrlGuidanceParams p;
-    p.mass = m->mass;
+    p.mass = m->af.mass;
     p.K_pos = CTRL_BLOCK(m, pos);
     p.K_vel = CTRL_BLOCK(m, vel);
     p.gamma_opt = m->gamma_opt;
@@ -195,14 +199,14 @@ static CtrlDetectParams detect_params(const ControllerModel *m) {
     CtrlDetectParams p;
     double arm = 0.0;
     int i;
-    p.mass = m->mass, p.g = m->g;
-    memcpy(p.inertia, m->inertia, sizeof p.inertia);
-    for (i = 0; i < m->n_rotors; i++)
-        arm += sqrt(v3_dot(m->rotor_pos[i], m->rotor_pos[i])) / m->n_rotors;
+    p.mass = m->af.mass, p.g = m->af.g;
+    memcpy(p.inertia, m->af.inertia, sizeof p.inertia);
+    for (i = 0; i < m->af.n_rotors; i++)
+        arm += sqrt(v3_dot(m->af.rotor_pos[i], m->af.rotor_pos[i])) / m->af.n_rotors;
     p.arm = arm > 0.0 ? arm : 1.0;
     p.loss_min = m->fault_loss_min, p.fit_max = m->fault_fit_max;
     /* a rotor below a twentieth of its share of the weight has no signature to speak of */
-    p.wrench_min = 0.05 * m->mass * fabs(m->g) / m->n_rotors;
+    p.wrench_min = 0.05 * m->af.mass * fabs(m->af.g) / m->af.n_rotors;
     p.persist = (int32_t)ceil(m->fault_time / m->Ts - 1e-9);
     if (p.persist < 1) p.persist = 1;
     return p;
@@ -226,7 +230,7 @@ static CtrlStabilizationParams stabilization_params(const ControllerModel *m) {
     p.K_att = CTRL_BLOCK(m, att);
     p.K_rate = CTRL_BLOCK(m, rate);
     p.yaw_rate_max = m->yaw_rate_max;
-    p.inertia = (const double(*)[3])m->inertia;
+    p.inertia = (const double(*)[3])m->af.inertia;
     return p;
 }
 
@@ -250,11 +254,11 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     FpCheck c;
     FpRotorSet rs;
     CtrlGivenSet s0, fail[FP_MAX_ROTORS];
-    double hover_fz = -m->mass * m->g;
+    double hover_fz = -m->af.mass * m->af.g;
     char lost[48] = "";
     int i, n_lost = 0;
     fp_check_init(&c, logger, controller_vars, N_CTRL_VARS);
-    FP_MODEL_TO_ROTOR_SET(m, &rs);
+    fp_rotor_set_of(&m->af, &rs);
     s0.n = m->poly_n, s0.A = (const double(*)[3])m->poly_A, s0.b = m->poly_b;
     for (i = 0; i < FP_MAX_ROTORS; i++) {
         int base = i * FP_FAIL_POLYTOPE_FACETS;
@@ -289,7 +293,7 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
         int base = i * FP_FAIL_POLYTOPE_FACETS;
         char name[48];
         m->hover_ok[i + 1] = 0;
-        if (i >= m->n_rotors || m->set_fail_n[i] == 0) continue;
+        if (i >= m->af.n_rotors || m->set_fail_n[i] == 0) continue;
         snprintf(name, sizeof name, "fail_poly_A, fail_poly_b (rotor %d)", i + 1);
         if (ctrl_force_set_prepare(&c, name, (const double(*)[3])&m->set_fail_A[base],
                                    &m->set_fail_b[base], m->set_fail_n[i], hover_fz,
@@ -314,7 +318,7 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
  * (|f_bz| at most -fz_min): over-actuated vehicles reach it with less tilt.  Vertically half of what is left of the
  * thrust range at that tilt, up and down, so a climb or descent never saturates it. */
 static void derive_acc_limits(ControllerModel *m) {
-    double g = m->g, up = -m->fz_min / m->mass, least = -m->fz_max / m->mass;
+    double g = m->af.g, up = -m->fz_min / m->af.mass, least = -m->fz_max / m->af.mass;
     double a_h = 0.9 * g * tan(m->ref_tilt_max), a_z;
     if (up > g) a_h = fmin(a_h, sqrt(up * up - g * g));
     a_z = 0.5 * fmin(up * cos(m->ref_tilt_max) - g, g - least);
@@ -334,7 +338,7 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     for (i = 0; i < FP_MAX_ROTORS; i++)
         m->health[i] = m->fault_detect ? fmin(m->rotor_health[i], m->detect.est[i])
                                        : m->rotor_health[i];
-    ctrl_rotor_losses(m->n_rotors, m->health, m->set_fail_n, m->hover_ok, &l);
+    ctrl_rotor_losses(m->af.n_rotors, m->health, m->set_fail_n, m->hover_ok, &l);
     if (l.lost_mask == m->lost_mask) return;
     m->lost_mask = l.lost_mask;
     m->rotors_lost = l.rotors_lost;
@@ -370,7 +374,7 @@ static const char *element_name(const FpVar *row, int i, char *buf, size_t size)
 static int checked_inputs(const ControllerModel *m, const double *inputs[CTRL_N_CHECKED_INPUTS],
                           int counts[CTRL_N_CHECKED_INPUTS]) {
     static const int c[CTRL_N_CHECKED_INPUTS] = {3, 3, 3, 3, 3, 3, 3, 3, 3, 3, 0, 0, 0, 0, 1};
-    int n = m->n_rotors;
+    int n = m->af.n_rotors;
     memcpy(counts, c, sizeof c);
     inputs[0] = m->pos_ref, inputs[1] = m->euler_ref, inputs[2] = m->vel_ref;
     inputs[3] = m->acc_ref, inputs[4] = m->euler_rate_ref, inputs[5] = m->pos;
@@ -389,11 +393,11 @@ static const int checked_rows[CTRL_N_CHECKED_INPUTS] = {
 static void extra_bounds(const ControllerModel *m, int k, int i, double *a, double *b) {
     *a = -HUGE_VAL, *b = HUGE_VAL;
     if (checked_rows[k] == CV_omega) {
-        *a = -m->omega_max, *b = 2.0 * m->omega_max;
+        *a = -m->af.omega_max, *b = 2.0 * m->af.omega_max;
     } else if (checked_rows[k] == CV_alpha || checked_rows[k] == CV_beta) {
         int al = checked_rows[k] == CV_alpha;
-        *a = (al ? m->alpha_min[i] : m->beta_min[i]) - CTRL_SERVO_MARGIN;
-        *b = (al ? m->alpha_max[i] : m->beta_max[i]) + CTRL_SERVO_MARGIN;
+        *a = (al ? m->af.alpha_min[i] : m->af.beta_min[i]) - CTRL_SERVO_MARGIN;
+        *b = (al ? m->af.alpha_max[i] : m->af.beta_max[i]) + CTRL_SERVO_MARGIN;
     }
 }
 
@@ -506,7 +510,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     CtrlDetect detect_before = m->detect;
     CtrlDetectOut dout;
     CtrlTwin twin_before = m->twin;
-    int i, n = m->n_rotors;
+    int i, n = m->af.n_rotors;
     if (!inputs_valid(m, logger)) return FP_WARNING;
     /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
     fp_wls_prefetch(&m->guid);
@@ -538,7 +542,7 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     fs = force_set_in_use(m);
     gp = guidance_params(m);
     rot_zyx_jacobian(r.mu, r_ref, NULL, NULL); /* the twin's and the guidance's R(mu_ref) */
-    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, r_ref, m->g, &m->twin, &m->twin_qp, mu_ff);
+    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, r_ref, m->af.g, &m->twin, &m->twin_qp, mu_ff);
     for (i = 0; i < 3; i++) /* the twin's rate wherever it departs from the reference */
         mu_rate_ff[i] = m->twin.active || twin_before.active
                             ? ctrl_wrap_pi(mu_ff[i] - m->mu_ff[i]) / m->Ts
@@ -664,8 +668,8 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->inputs_age = 0.0;
     m->samples_run = 0;
     m->warned_coarse = 0;
-    n = m->n_rotors;
-    FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
+    n = m->af.n_rotors;
+    fp_rotor_set_of(&m->af, &m->rotors);
     /* what the samples need of the geometry alone, once */
     memset(&m->rotor_trig, 0, sizeof m->rotor_trig);
     fp_rotor_trig_mounts(&m->rotors, &m->rotor_trig);
@@ -689,7 +693,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     memset(&m->twin, 0, sizeof m->twin);
     memcpy(m->twin.mu, m->euler_ref, sizeof m->twin.mu);
     m->twin.mu[2] = m->psi_ref_unwrapped;
-    m->twin.f[2] = -m->mass * m->g;
+    m->twin.f[2] = -m->af.mass * m->af.g;
     memcpy(m->mu_ff, m->twin.mu, sizeof m->mu_ff);
     memcpy(m->euler_ref_s, m->twin.mu, sizeof m->euler_ref_s);
     memcpy(m->mu_rate_ff, m->euler_rate_ref, sizeof m->mu_rate_ff);
@@ -796,7 +800,7 @@ static int wls_valid(const FpWls *w) {
 
 static int structure_valid(const ControllerModel *m) {
     int i;
-    if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
+    if (m->af.n_rotors < 1 || m->af.n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
         m->rotors.n > FP_MAX_ROTORS || m->poly_n < 0 || m->poly_n > FP_POLYTOPE_MAX_FACETS ||
         m->set_n < 0 || m->set_n > FP_POLYTOPE_MAX_FACETS ||
         m->active_polytope < -1 || m->active_polytope > FP_MAX_ROTORS ||
@@ -815,7 +819,7 @@ static FpStatus controller_check_restored(const void *model, int initialized,
     if (!structure_valid(m)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                "restored state: a size or index is beyond its cap (rotors %ld, facets %ld)",
-               (long)m->n_rotors, (long)m->poly_n);
+               (long)m->af.n_rotors, (long)m->poly_n);
         return FP_ERROR;
     }
     if (!initialized) return FP_OK; /* parameters are checked when initialization ends */

@@ -52,14 +52,7 @@ typedef struct {
 typedef struct {
     /* parameters */
     double Ts;
-    int32_t n_rotors;
-    double mass, inertia[3][3], g, k_t, k_d;
-    double rotor_pos[FP_MAX_ROTORS][3];
-    int32_t rotor_dir[FP_MAX_ROTORS];
-    double rotor_gamma[FP_MAX_ROTORS];
-    double alpha_min[FP_MAX_ROTORS], alpha_max[FP_MAX_ROTORS];
-    double beta_min[FP_MAX_ROTORS], beta_max[FP_MAX_ROTORS];
-    double omega_min, omega_max;
+    FpAirframe af; /* the airframe model (common/airframe_vars.h) */
     double filt_wn, filt_zeta;
     double K_pos_A[3], K_pos_B[3], K_pos_C[3], K_pos_D[3];
     double K_vel_A[3], K_vel_B[3], K_vel_C[3], K_vel_D[3];

@@ -16,6 +16,8 @@
 #ifndef CONTROLLER_VARS_H
 #define CONTROLLER_VARS_H
 
+#include "airframe_vars.h"
+
 /* The plausible ranges of the inputs (docs/robustness.md), shared by the references and the
  * measurements of the same quantity. */
 #define CTRL_MAX_DISTANCE 1e7 /* m */
@@ -26,24 +28,11 @@
 #define CTRL_SERVO_MARGIN 0.78539816339744830962 /* pi/4: rad beyond the servo limits */
 #define CTRL_MAX_SERVO (FP_SERVO_LIMIT + CTRL_SERVO_MARGIN) /* 3 pi/4 */
 
-#define CONTROLLER_VARIABLES(X)                                                                    \
-    /* parameters: sampling and airframe model (nominal) */                                        \
+#define CONTROLLER_VARIABLES(X, XAF)                                                                    \
+    /* parameters: sampling */                                        \
     X(Ts, 1, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Sample time; samples run at t0 + k Ts for any communication step, outputs held between them") \
-    X(n_rotors, 2, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(1, FP_MAX_ROTORS), "Number of rotors in use (1..8)") \
-    X(mass, 3, REAL, PARAM_FIXED, 1, 1, MASS, FP_POSITIVE, "Nominal mass used by the outer INDI")  \
-    X(inertia, 4, REAL, PARAM_FIXED, 3, 3, INERTIA, FP_ANY, "Nominal inertia used by the inner INDI") \
-    X(g, 13, REAL, PARAM_FIXED, 1, 1, ACCELERATION, FP_ANY, "Gravitational acceleration")          \
-    X(k_t, 14, REAL, PARAM_FIXED, 1, 1, THRUST_COEFFICIENT, FP_POSITIVE, "Thrust coefficient")     \
-    X(k_d, 15, REAL, PARAM_FIXED, 1, 1, DRAG_COEFFICIENT, FP_NONNEGATIVE, "Drag-torque coefficient") \
-    X(rotor_pos, 20, REAL, PARAM_FIXED, 8, 3, LENGTH, FP_ANY, "Rotor positions d_i, body FRD")     \
-    X(rotor_dir, 50, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(-1, 1), "Spin directions c_i (+-1)")  \
-    X(rotor_gamma, 60, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_ANY, "Fixed mounting angles gamma_i")    \
-    X(alpha_min, 70, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower servo limits alpha (equal limits: fixed)") \
-    X(alpha_max, 80, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper servo limits alpha") \
-    X(beta_min, 90, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower servo limits beta (equal limits: fixed)") \
-    X(beta_max, 100, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper servo limits beta") \
-    X(omega_min, 110, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_NONNEGATIVE, "Lower rotor speed limit") \
-    X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Upper rotor speed limit") \
+    /* parameters: the airframe model (common/airframe_vars.h), shared with the plant */          \
+    FP_AIRFRAME_VARIABLES(XAF, 1)                                                                  \
     /* parameters: measurement filter H(s) = wn^2 / (s^2 + 2 zeta wn s + wn^2) */                  \
     X(filt_wn, 120, REAL, PARAM_FIXED, 1, 1, ANGULAR_FREQUENCY, FP_POSITIVE, "Natural frequency of H(s)") \
     X(filt_zeta, 121, REAL, PARAM_FIXED, 1, 1, RATIO, FP_POSITIVE, "Damping ratio of H(s)")        \

@@ -67,10 +67,10 @@ static void check_polytope_sizes(const ControllerModel *m, FpCheck *c) {
     }
     fp_need_param(c, "poly_margin", &m->poly_margin, 1, NULL);
     errors = c->errors;
-    fp_need_int_param(c, "fail_poly_n", m->fail_poly_n, m->n_rotors);
+    fp_need_int_param(c, "fail_poly_n", m->fail_poly_n, m->af.n_rotors);
     if (c->errors > errors) return;
     snprintf(why, sizeof why, "must be 0 (derived) or 4..%d", FP_FAIL_POLYTOPE_FACETS);
-    for (i = 0; i < m->n_rotors; i++) /* a bounded polytope in 3-D needs 4 facets */
+    for (i = 0; i < m->af.n_rotors; i++) /* a bounded polytope in 3-D needs 4 facets */
         if (m->fail_poly_n[i] != 0 && m->fail_poly_n[i] < 4)
             fp_check_bad_int(c, "fail_poly_n", i + 1, (long)m->fail_poly_n[i], why);
 }
@@ -82,11 +82,9 @@ static void check_init(FpCheck *c, const FpLogger *logger) {
 
 int ctrl_check_parameters(const ControllerModel *m, const FpLogger *logger) {
     FpCheck c;
-    FpRotorSet rs;
     check_init(&c, logger);
     fp_need_param(&c, "Ts", &m->Ts, 1, NULL);
-    FP_MODEL_TO_ROTOR_SET(m, &rs);
-    if (fp_check_airframe(&c, m->mass, &m->inertia[0][0], m->g, &rs) != FP_OK) return c.errors;
+    if (fp_check_airframe(&c, &m->af) != FP_OK) return c.errors;
     fp_need_param(&c, "filt_wn", &m->filt_wn, 1, NULL);
     fp_need_param(&c, "filt_zeta", &m->filt_zeta, 1, NULL);
     fp_need_int_param(&c, "force_constraint", &m->force_constraint, 1);

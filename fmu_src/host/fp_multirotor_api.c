@@ -7,7 +7,32 @@
 
 #include <string.h>
 
+#include "airframe_vars.h"
 #include "multirotor.h"
+
+typedef struct {
+    const char *name;
+    int32_t rows, cols, integer;
+} AirframeRow;
+
+#define AF_ROW(name, vr, type, kind, rows, cols, dtype, range, desc) \
+    {#name, rows, cols, FP_##type == FP_INTEGER},
+static const AirframeRow airframe_rows[] = {FP_AIRFRAME_VARIABLES(AF_ROW, 0)};
+#define N_AIRFRAME_ROWS ((int)(sizeof airframe_rows / sizeof airframe_rows[0]))
+
+FP_API int fp_airframe_variable_count(void) { return N_AIRFRAME_ROWS; }
+
+FP_API int fp_airframe_variable(int i, char *name, int name_size, int32_t *rows, int32_t *cols,
+                                int32_t *integer) {
+    size_t len;
+    if (i < 0 || i >= N_AIRFRAME_ROWS || name == NULL || name_size <= 0) return FP_ERROR;
+    len = strlen(airframe_rows[i].name);
+    if (len + 1 > (size_t)name_size) return FP_ERROR;
+    memcpy(name, airframe_rows[i].name, len + 1);
+    *rows = airframe_rows[i].rows, *cols = airframe_rows[i].cols;
+    *integer = airframe_rows[i].integer;
+    return FP_OK;
+}
 
 FP_API int fp_api_version(void) { return 1; }
 

@@ -17,6 +17,13 @@ FP_API int fp_api_version(void);
 /* FP_MAX_ROTORS, the largest rotor count. */
 FP_API int fp_max_rotors(void);
 
+/* The airframe variable table both FMUs share (common/airframe_vars.h): its row count, and
+ * row i's name (into name[name_size]), shape (rows x cols) and type (integer: 1 for an
+ * Integer row, 0 for a Real one).  FP_ERROR for i out of range or a name that does not fit. */
+FP_API int fp_airframe_variable_count(void);
+FP_API int fp_airframe_variable(int i, char *name, int name_size, int32_t *rows, int32_t *cols,
+                                int32_t *integer);
+
 /* Size in bytes of the opaque rotor-set buffer the functions below take. */
 FP_API int fp_rotor_set_size(void);
 

@@ -20,17 +20,24 @@
     FP_STATIC_ASSERT(sizeof(((PlantModel *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type,     \
                      name##_size);                                                              \
     FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
-PLANT_VARIABLES(PLANT_CHECK)
+#define PLANT_AF_CHECK(name, vr, type, kind, rows, cols, dtype, range, desc)                     \
+    FP_STATIC_ASSERT(sizeof(((FpAirframe *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type,     \
+                     name##_size);                                                              \
+    FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
+PLANT_VARIABLES(PLANT_CHECK, PLANT_AF_CHECK)
 
 #define PLANT_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                          \
     {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(PlantModel, name), FP_T_##dtype, range, \
      desc},
-static const FpVar plant_vars[] = {PLANT_VARIABLES(PLANT_ROW)};
+#define PLANT_AF_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                       \
+    {#name, vr, FP_##type, FP_##kind, rows, cols,                                                 \
+     offsetof(PlantModel, af) + offsetof(FpAirframe, name), FP_T_##dtype, range, desc},
+static const FpVar plant_vars[] = {PLANT_VARIABLES(PLANT_ROW, PLANT_AF_ROW)};
 #define N_PLANT_VARS (sizeof plant_vars / sizeof plant_vars[0])
 
 /* Row indices (PV_mass, ...): the input checks read their ranges from the rows. */
 #define PLANT_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc) PV_##name,
-enum { PLANT_VARIABLES(PLANT_INDEX) PV_COUNT };
+enum { PLANT_VARIABLES(PLANT_INDEX, PLANT_INDEX) PV_COUNT };
 
 /* State vector layout. */
 enum { X_POS = 0, X_VEL = 3, X_QUAT = 6, X_RATE = 10, X_OMEGA = 13 };
@@ -48,31 +55,26 @@ static void hover_wrench(const PlantModel *m, const double euler[3], double w[6]
     rot_from_quat(q, r);
     /* f_b = -R^T (m g e_z): cancel gravity, no torque */
     for (j = 0; j < 3; j++) {
-        w[j] = -m->mass * m->g * r[2][j];
+        w[j] = -m->af.mass * m->af.g * r[2][j];
         w[3 + j] = 0.0;
     }
 }
 
 void plant_set_defaults(void *model) {
     PlantModel *m = (PlantModel *)model;
-    FpAirframe af;
     double w[6], zero[3] = {0.0, 0.0, 0.0};
     int i;
+    FpRotorSet rs;
     memset(m, 0, sizeof *m);
-    fp_paper_hexacopter(&af);
-    FP_ROTOR_SET_TO_MODEL(&af.rotors, m);
-    m->mass = af.mass;
-    memcpy(m->inertia, af.inertia, sizeof m->inertia);
-    m->g = af.g;
-    m->tau_motor = af.tau_motor;
-    m->tau_servo = af.tau_servo;
+    fp_paper_hexacopter(&m->af);
+    fp_rotor_set_of(&m->af, &rs);
     for (i = 0; i < FP_MAX_ROTORS; i++) m->efficiency[i] = 1.0;
     m->h_internal = 5e-4;
     m->init_trim = 1;
     m->noise_seed = 1;
     /* Inputs start at hover trim so the FMU hovers when simulated alone. */
     hover_wrench(m, zero, w);
-    if (fp_preferred_config(&af.rotors, w, m->alpha_cmd, m->beta_cmd, m->omega_cmd, NULL, 0) != FP_OK) {
+    if (fp_preferred_config(&rs, w, m->alpha_cmd, m->beta_cmd, m->omega_cmd, NULL, 0) != FP_OK) {
         memset(m->omega_cmd, 0, sizeof m->omega_cmd);
     }
 }
@@ -127,28 +129,28 @@ static void derivative(const PlantModel *m, const Commands *u, const double *x, 
                        double f_b[3], double tau_b[3]) {
     const double *q = x + X_QUAT, *w = x + X_RATE;
     double r[3][3], fw[3], iw[3], gyro[3], tau[3], fb[3], tb[3];
-    int i, n = m->n_rotors;
+    int i, n = m->af.n_rotors;
     fp_rotor_wrench(&m->rotors, x + X_ALPHA, x + X_BETA, x + X_OMEGA, m->efficiency, fb, tb);
     rot_from_quat(q, r);
     m3_mul_v(&r[0][0], fb, fw);
     for (i = 0; i < 3; i++) {
         dx[X_POS + i] = x[X_VEL + i];
-        dx[X_VEL + i] = (fw[i] + m->f_d[i]) / m->mass + m->a_d[i];
+        dx[X_VEL + i] = (fw[i] + m->f_d[i]) / m->af.mass + m->a_d[i];
     }
-    dx[X_VEL + 2] += m->g;
+    dx[X_VEL + 2] += m->af.g;
     dx[X_QUAT + 0] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2]);
     dx[X_QUAT + 1] = 0.5 * (q[0] * w[0] + q[2] * w[2] - q[3] * w[1]);
     dx[X_QUAT + 2] = 0.5 * (q[0] * w[1] - q[1] * w[2] + q[3] * w[0]);
     dx[X_QUAT + 3] = 0.5 * (q[0] * w[2] + q[1] * w[1] - q[2] * w[0]);
-    m3_mul_v(&m->inertia[0][0], w, iw);
+    m3_mul_v(&m->af.inertia[0][0], w, iw);
     v3_cross(w, iw, gyro);
     for (i = 0; i < 3; i++) tau[i] = tb[i] + m->tau_d[i] - gyro[i];
     m3_mul_v(&m->inertia_inv[0][0], tau, dx + X_RATE);
     for (i = 0; i < FP_MAX_ROTORS; i++) {
         if (i < n) {
-            dx[X_OMEGA + i] = (u->omega[i] - x[X_OMEGA + i]) / m->tau_motor;
-            dx[X_ALPHA + i] = (u->alpha[i] - x[X_ALPHA + i]) / m->tau_servo;
-            dx[X_BETA + i] = (u->beta[i] - x[X_BETA + i]) / m->tau_servo;
+            dx[X_OMEGA + i] = (u->omega[i] - x[X_OMEGA + i]) / m->af.tau_motor;
+            dx[X_ALPHA + i] = (u->alpha[i] - x[X_ALPHA + i]) / m->af.tau_servo;
+            dx[X_BETA + i] = (u->beta[i] - x[X_BETA + i]) / m->af.tau_servo;
         } else {
             dx[X_OMEGA + i] = dx[X_ALPHA + i] = dx[X_BETA + i] = 0.0;
         }
@@ -190,12 +192,12 @@ static void saturate(const PlantModel *m, Commands *u, int32_t *flags) {
     int i;
     *flags = 0;
     memset(u, 0, sizeof *u);
-    for (i = 0; i < m->n_rotors; i++) {
-        u->omega[i] = clamp(m->omega_cmd[i], m->omega_min, m->omega_max, flags,
+    for (i = 0; i < m->af.n_rotors; i++) {
+        u->omega[i] = clamp(m->omega_cmd[i], m->af.omega_min, m->af.omega_max, flags,
                             FP_SAT_MOTOR + i);
-        u->alpha[i] = clamp(m->alpha_cmd[i], m->alpha_min[i], m->alpha_max[i], flags,
+        u->alpha[i] = clamp(m->alpha_cmd[i], m->af.alpha_min[i], m->af.alpha_max[i], flags,
                             FP_SAT_ALPHA + i);
-        u->beta[i] = clamp(m->beta_cmd[i], m->beta_min[i], m->beta_max[i], flags,
+        u->beta[i] = clamp(m->beta_cmd[i], m->af.beta_min[i], m->af.beta_max[i], flags,
                            FP_SAT_BETA + i);
     }
 }
@@ -280,7 +282,7 @@ static FpStatus compute_outputs(PlantModel *m, const Commands *u, double t,
     if (m->quat_true[0] < 0.0)
         for (i = 0; i < 4; i++) m->quat_true[i] = -m->quat_true[i];
     for (i = 0; i < FP_MAX_ROTORS; i++) {
-        int used = i < m->n_rotors;
+        int used = i < m->af.n_rotors;
         m->omega[i] = used ? m->x[X_OMEGA + i] : 0.0;
         m->alpha[i] = used ? m->x[X_ALPHA + i] : 0.0;
         m->beta[i] = used ? m->x[X_BETA + i] : 0.0;
@@ -367,24 +369,20 @@ static void check_initial_actuator(FpCheck *c, const char *name, const double *v
 
 static int validate(const PlantModel *m, const FpLogger *logger) {
     FpCheck c;
-    FpRotorSet rs;
-    int n = m->n_rotors;
+    int n = m->af.n_rotors;
     fp_check_init(&c, logger, plant_vars, N_PLANT_VARS);
-    FP_MODEL_TO_ROTOR_SET(m, &rs);
-    if (fp_check_airframe(&c, m->mass, &m->inertia[0][0], m->g, &rs) != FP_OK) return c.errors;
-    fp_need_param(&c, "tau_motor", &m->tau_motor, 1, NULL);
-    fp_need_param(&c, "tau_servo", &m->tau_servo, 1, NULL);
+    if (fp_check_airframe(&c, &m->af) != FP_OK) return c.errors;
     fp_need_param(&c, "h_internal", &m->h_internal, 1, NULL);
     fp_need_param(&c, "pos0", m->pos0, 3, NULL);
     fp_need_param(&c, "vel0", m->vel0, 3, NULL);
     fp_need_param(&c, "euler0", m->euler0, 3, NULL);
     fp_need_param(&c, "rate0", m->rate0, 3, NULL);
     if (!m->init_trim) { /* ignored with init_trim, so not checked then */
-        check_initial_actuator(&c, "omega0", m->omega0, n, &m->omega_min, &m->omega_max, 0,
+        check_initial_actuator(&c, "omega0", m->omega0, n, &m->af.omega_min, &m->af.omega_max, 0,
                                "outside [omega_min, omega_max]");
-        check_initial_actuator(&c, "alpha0", m->alpha0, n, m->alpha_min, m->alpha_max, 1,
+        check_initial_actuator(&c, "alpha0", m->alpha0, n, m->af.alpha_min, m->af.alpha_max, 1,
                                "outside [alpha_min, alpha_max]");
-        check_initial_actuator(&c, "beta0", m->beta0, n, m->beta_min, m->beta_max, 1,
+        check_initial_actuator(&c, "beta0", m->beta0, n, m->af.beta_min, m->af.beta_max, 1,
                                "outside [beta_min, beta_max]");
     }
     fp_need_param(&c, "noise_pos", &m->noise_pos, 1, NULL);
@@ -396,11 +394,11 @@ static int validate(const PlantModel *m, const FpLogger *logger) {
     fp_need_param(&c, "mocap_period", &m->mocap_period, 1, NULL);
     fp_need_param(&c, "mocap_delay", &m->mocap_delay, 1, NULL);
     fp_need_param(&c, "imu_period", &m->imu_period, 1, NULL);
-    if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->tau_motor, m->tau_servo))
+    if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->af.tau_motor, m->af.tau_servo))
         fp_check_warning(&c,
                          "parameter h_internal = %g s is coarse against the actuator time "
                          "constants (%g s, %g s); RK4 will be inaccurate",
-                         m->h_internal, m->tau_motor, m->tau_servo);
+                         m->h_internal, m->af.tau_motor, m->af.tau_servo);
     return c.errors;
 }
 
@@ -416,7 +414,7 @@ static int check_inputs(const PlantModel *m, const FpLogger *logger) {
     int i, k;
     values[0] = m->omega_cmd, values[1] = m->alpha_cmd, values[2] = m->beta_cmd;
     values[3] = m->efficiency, values[4] = m->f_d, values[5] = m->tau_d, values[6] = m->a_d;
-    counts[0] = counts[1] = counts[2] = counts[3] = m->n_rotors; /* the others are ignored */
+    counts[0] = counts[1] = counts[2] = counts[3] = m->af.n_rotors; /* the others are ignored */
     for (k = 0; k < 7; k++) {
         const FpVar *v = &plant_vars[rows[k]];
         for (i = 0; i < counts[k]; i++) {
@@ -443,8 +441,8 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     uint64_t seed;
     int i;
     if (validate(m, logger) != 0) return FP_ERROR;
-    FP_MODEL_TO_ROTOR_SET(m, &m->rotors);
-    if (invert3(m->inertia, m->inertia_inv) != 0) {
+    fp_rotor_set_of(&m->af, &m->rotors);
+    if (invert3(m->af.inertia, m->inertia_inv) != 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "parameter inertia is singular");
         return FP_ERROR;
     }
@@ -468,7 +466,7 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
             return FP_ERROR;
         }
     } else {
-        for (i = 0; i < m->n_rotors; i++) {
+        for (i = 0; i < m->af.n_rotors; i++) {
             m->x[X_OMEGA + i] = m->omega0[i];
             m->x[X_ALPHA + i] = m->alpha0[i];
             m->x[X_BETA + i] = m->beta0[i];
@@ -485,7 +483,7 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     m->mocap_last = m->imu_last = t0 - 1.0; /* every sensor samples at t0 */
     if (compute_outputs(m, &u, t0, logger) != FP_OK) return FP_ERROR;
     fp_log(logger, FP_OK, FP_LOG_MODEL, "initial state: %d rotors, omega_1 = %g rad/s",
-           (int)m->n_rotors, m->x[X_OMEGA]);
+           (int)m->af.n_rotors, m->x[X_OMEGA]);
     return FP_OK;
 }
 
@@ -560,11 +558,11 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
 static FpStatus plant_check_restored(const void *model, int initialized,
                                      const FpLogger *logger) {
     const PlantModel *m = (const PlantModel *)model;
-    if (m->n_rotors < 1 || m->n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
-        m->rotors.n > FP_MAX_ROTORS || (initialized && m->rotors.n != m->n_rotors)) {
+    if (m->af.n_rotors < 1 || m->af.n_rotors > FP_MAX_ROTORS || m->rotors.n < 0 ||
+        m->rotors.n > FP_MAX_ROTORS || (initialized && m->rotors.n != m->af.n_rotors)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                "restored state: rotor count %ld (rotor set %ld) outside 1..%d",
-               (long)m->n_rotors, (long)m->rotors.n, FP_MAX_ROTORS);
+               (long)m->af.n_rotors, (long)m->rotors.n, FP_MAX_ROTORS);
         return FP_ERROR;
     }
     if (!initialized) return FP_OK; /* parameters are checked when initialization ends */

@@ -13,17 +13,8 @@
 
 typedef struct {
     /* parameters */
-    int32_t n_rotors;
-    double mass;
-    double inertia[3][3];
-    double g;
-    double k_t, k_d;
-    double rotor_pos[FP_MAX_ROTORS][3];
-    int32_t rotor_dir[FP_MAX_ROTORS];
-    double rotor_gamma[FP_MAX_ROTORS];
-    double alpha_min[FP_MAX_ROTORS], alpha_max[FP_MAX_ROTORS];
-    double beta_min[FP_MAX_ROTORS], beta_max[FP_MAX_ROTORS];
-    double omega_min, omega_max, tau_motor, tau_servo, h_internal;
+    FpAirframe af; /* the airframe (common/airframe_vars.h) */
+    double h_internal;
     double pos0[3], vel0[3], euler0[3], rate0[3];
     int32_t init_trim;
     double omega0[FP_MAX_ROTORS], alpha0[FP_MAX_ROTORS], beta0[FP_MAX_ROTORS];

@@ -5,6 +5,8 @@
  * that holds the value.
  *
  * X(name, value reference, type, kind, rows, cols, declared type, range, description)
+ * XAF: the same for the rows of the airframe table both FMUs share (common/airframe_vars.h),
+ * whose members live in the model's `af` (an FpAirframe).
  *
  * - declared type: the physical kind of a Real (FP_DECLARED_TYPES in
  *   common/fp_model.h: its quantity, unit and nominal), NONE otherwise.
@@ -22,25 +24,11 @@
 #ifndef PLANT_VARS_H
 #define PLANT_VARS_H
 
-#define PLANT_VARIABLES(X)                                                                         \
-    /* parameters: vehicle */                                                                      \
-    X(n_rotors, 1, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(1, FP_MAX_ROTORS), "Number of rotors in use (1..8); entries beyond it are ignored") \
-    X(mass, 2, REAL, PARAM_FIXED, 1, 1, MASS, FP_POSITIVE, "Vehicle mass m")                       \
-    X(inertia, 3, REAL, PARAM_FIXED, 3, 3, INERTIA, FP_ANY, "Inertia matrix I_B about the centre of gravity, body FRD axes") \
-    X(g, 12, REAL, PARAM_FIXED, 1, 1, ACCELERATION, FP_ANY, "Gravitational acceleration along world +z (down)") \
-    X(k_t, 13, REAL, PARAM_FIXED, 1, 1, THRUST_COEFFICIENT, FP_POSITIVE, "Thrust coefficient: f_m = k_t omega^2") \
-    X(k_d, 14, REAL, PARAM_FIXED, 1, 1, DRAG_COEFFICIENT, FP_NONNEGATIVE, "Drag-torque coefficient: tau_m = k_d omega^2") \
-    X(rotor_pos, 20, REAL, PARAM_FIXED, 8, 3, LENGTH, FP_ANY, "Rotor positions d_i in the body frame (row i = rotor i)") \
-    X(rotor_dir, 50, INTEGER, PARAM_FIXED, 8, 1, NONE, FP_IN(-1, 1), "Spin direction c_i (+1: reaction torque along the thrust, -1: against)") \
-    X(rotor_gamma, 60, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_ANY, "Fixed mounting angle gamma_i about body z (R_Mi^B = Rz(gamma) Rx(alpha) Ry(beta))") \
-    X(alpha_min, 70, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower limit of servo angle alpha_i (equal limits: fixed tilt)") \
-    X(alpha_max, 80, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper limit of servo angle alpha_i") \
-    X(beta_min, 90, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Lower limit of servo angle beta_i (equal limits: fixed tilt)") \
-    X(beta_max, 100, REAL, PARAM_FIXED, 8, 1, ANGLE, FP_IN(-FP_SERVO_LIMIT, FP_SERVO_LIMIT), "Upper limit of servo angle beta_i") \
-    X(omega_min, 110, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_NONNEGATIVE, "Lower limit of rotor speed") \
-    X(omega_max, 111, REAL, PARAM_FIXED, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Upper limit of rotor speed") \
-    X(tau_motor, 112, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time constant of the first-order motor model") \
-    X(tau_servo, 113, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time constant of the first-order servo model") \
+#include "airframe_vars.h"
+
+#define PLANT_VARIABLES(X, XAF)                                                                         \
+    /* parameters: the airframe (common/airframe_vars.h) */                                      \
+    FP_AIRFRAME_VARIABLES(XAF, 0)                                                                  \
     X(h_internal, 114, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Internal RK4 step; a communication step h takes ceil(h / h_internal) equal RK4 steps") \
     /* parameters: initial state */                                                                \
     X(pos0, 120, REAL, PARAM_FIXED, 3, 1, LENGTH, FP_ANY, "Initial position, world NED")           \
