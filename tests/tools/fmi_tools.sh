@@ -6,12 +6,17 @@
 #
 # Prints the folder holding bin/fmuCheck.linux64 and bin/fmusim and exits 0, or says on
 # stderr why there is none and exits 1 (the tests then skip and say so).
-#   FULLPOSE_FMI_TOOLS      the folder (default /opt/fmi-tools)
+#   FULLPOSE_FMI_TOOLS      the folder (default: the workplace's prebuilt tools,
+#                           /work/shared/fmi-tools, when present; else /opt/fmi-tools)
 #   FMI_TOOLS_BUILD_SCRIPT  the build script (default /work/shared/tools/build_fmi_tools.sh)
 #   MIRROR_ROOT             the repository snapshots it builds from (default /work/.mirror)
 set -euo pipefail
-dest=${FULLPOSE_FMI_TOOLS:-/opt/fmi-tools}
 have() { [ -x "$dest/bin/fmuCheck.linux64" ] && [ -x "$dest/bin/fmusim" ]; }
+if [ -z "${FULLPOSE_FMI_TOOLS:-}" ]; then  # prebuilt for this machine kind: no 10-minute build
+    dest=/work/shared/fmi-tools
+    if have; then echo "$dest"; exit 0; fi
+fi
+dest=${FULLPOSE_FMI_TOOLS:-/opt/fmi-tools}
 if have; then echo "$dest"; exit 0; fi
 script=${FMI_TOOLS_BUILD_SCRIPT:-/work/shared/tools/build_fmi_tools.sh}
 export MIRROR_ROOT=${MIRROR_ROOT:-/work/.mirror}
