@@ -7,6 +7,7 @@ field and what is expected.  See docs/airframes.md for the format.
 
 from __future__ import annotations
 
+import ctypes
 import difflib
 import hashlib
 import json
@@ -20,6 +21,7 @@ from typing import Any
 import numpy as np
 
 from plant.effectiveness import RotorSet
+from plant.native import multirotor
 from plant.toml_reader import FieldError, TomlTable, resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
@@ -62,8 +64,30 @@ class Airframe:
     def n_rotors(self) -> int:
         return int(self.positions.shape[0])
 
+    def native_buffer(self) -> ctypes.Array[ctypes.c_char]:
+        """The airframe as the C core's ``FpAirframe`` (the struct both models embed),
+        written row by row of the airframe table at the offsets the C core gives."""
+        lib = multirotor()
+        buf = ctypes.create_string_buffer(lib.fp_airframe_size())
+        values = self.table_values()
+        for row in airframe_table():
+            data = np.ascontiguousarray(values[row.name], dtype=np.int32 if row.integer
+                                        else np.float64).reshape(-1)
+            if data.size != row.rows * row.cols:
+                raise AirframeError(self.source, row.name, f"{data.size} values for a "
+                                    f"{row.rows} x {row.cols} variable")
+            ctypes.memmove(ctypes.addressof(buf) + row.offset, data.ctypes.data, data.nbytes)
+        return buf
+
     def rotor_set(self) -> RotorSet:
+        """The rotors, for the rotor math of the C core (:mod:`plant.effectiveness`)."""
+        lib = multirotor()
+        native = ctypes.create_string_buffer(lib.fp_rotor_set_size())
+        if lib.fp_rotor_set_from_airframe(self.native_buffer(), native) != 0:
+            raise AirframeError(self.source, "", f"invalid rotor set (n = {self.n_rotors}, "
+                                f"k_t = {self.k_t})")
         return RotorSet(
+            native=native.raw,
             k_t=self.k_t,
             k_d=self.k_d,
             positions=self.positions,
@@ -182,6 +206,8 @@ class TableRow:
     rows: int
     cols: int
     integer: bool
+    offset: int
+    """Byte offset of the row's member in the C core's ``FpAirframe``."""
 
     def element(self, k: int) -> str:
         """The FMI name of element k (row-major): ``mass``, ``rotor_dir[3]``,
@@ -197,19 +223,17 @@ class TableRow:
 def airframe_table() -> tuple[TableRow, ...]:
     """The airframe variable table both FMUs share, as the C core declares it
     (``libfp_multirotor``): what an airframe is, in the FMUs' words."""
-    import ctypes
-
-    from plant.native import multirotor
-
     lib = multirotor()
     out = []
     for i in range(lib.fp_airframe_variable_count()):
         name = ctypes.create_string_buffer(64)
-        rows, cols, integer = ctypes.c_int32(), ctypes.c_int32(), ctypes.c_int32()
+        rows, cols = ctypes.c_int32(), ctypes.c_int32()
+        integer, offset = ctypes.c_int32(), ctypes.c_int32()
         if lib.fp_airframe_variable(i, name, 64, ctypes.byref(rows), ctypes.byref(cols),
-                                    ctypes.byref(integer)) != 0:
+                                    ctypes.byref(integer), ctypes.byref(offset)) != 0:
             raise RuntimeError(f"libfp_multirotor: airframe table row {i} unreadable")
-        out.append(TableRow(name.value.decode(), rows.value, cols.value, bool(integer.value)))
+        out.append(TableRow(name.value.decode(), rows.value, cols.value, bool(integer.value),
+                            offset.value))
     return tuple(out)
 
 

@@ -9,7 +9,7 @@ along the rotor's -z axis, reaction torque c_i k_d omega^2 along the thrust.
 from __future__ import annotations
 
 import ctypes
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 from numpy.typing import NDArray
@@ -42,32 +42,20 @@ class RotorSet:
     alpha_limits: Array  # (n, 2)
     beta_limits: Array  # (n, 2)
     omega_limits: tuple[float, float]
+    native: bytes = field(repr=False, compare=False)
+    """The C core's ``FpRotorSet`` of these rotors (``plant.Airframe.rotor_set``)."""
 
     @property
     def n(self) -> int:
         return int(self.positions.shape[0])
 
     def native_buffer(self) -> ctypes.Array[ctypes.c_char]:
-        """The rotor set as the C core's ``FpRotorSet`` (``fp_rotor_set_init``), for the
-        host libraries that take one."""
-        return self._buffer()
+        """The rotor set as the C core's ``FpRotorSet`` (made from the airframe's
+        ``FpAirframe`` by ``fp_rotor_set_from_airframe``), for the host libraries."""
+        return ctypes.create_string_buffer(self.native, len(self.native))
 
     def _buffer(self) -> ctypes.Array[ctypes.c_char]:
-        lib = multirotor()
-        buf = ctypes.create_string_buffer(lib.fp_rotor_set_size())
-        pos = np.ascontiguousarray(self.positions, dtype=np.float64)
-        spins = np.ascontiguousarray(self.spins, dtype=np.int32)
-        gamma = np.ascontiguousarray(self.gamma, dtype=np.float64)
-        lims = [np.ascontiguousarray(x, dtype=np.float64) for x in (
-            self.alpha_limits[:, 0], self.alpha_limits[:, 1],
-            self.beta_limits[:, 0], self.beta_limits[:, 1])]
-        status = lib.fp_rotor_set_init(
-            buf, self.n, self.k_t, self.k_d, _dp(pos),
-            spins.ctypes.data_as(ctypes.POINTER(ctypes.c_int32)), _dp(gamma),
-            *(_dp(x) for x in lims), self.omega_limits[0], self.omega_limits[1])
-        if status != 0:
-            raise ValueError(f"invalid rotor set (n = {self.n}, k_t = {self.k_t})")
-        return buf
+        return self.native_buffer()
 
     def B(self) -> Array:
         """Paper eq. (3): 6 x 3n map from per-rotor body forces to [f_b; tau_b]."""

@@ -142,3 +142,26 @@ def test_missing_and_unparsable_files(tmp_path):
     bad.write_text("name = \n")
     with pytest.raises(AirframeError, match="not valid TOML"):
         load_airframe(bad)
+
+
+def test_both_fmus_declare_the_one_airframe_table_with_equal_defaults():
+    """The airframe table (common/airframe_vars.h), as the C core hands it to Python, is a
+    set of parameters of both FMUs' modelDescriptions, with the same declared type, unit and
+    range in both, and both FMUs' defaults are the paper hexacopter of its airframe file."""
+    import math
+
+    from controller import controller_fmu
+    from plant.airframe import airframe_table
+    from plant.model_description import fmu_variables
+
+    rows = airframe_table()
+    assert {r.name for r in rows} >= {"n_rotors", "mass", "inertia", "rotor_pos", "tau_servo"}
+    fmus = [fmu_variables(plant.plant_fmu()), fmu_variables(controller_fmu())]
+    paper = load_airframe("paper_hexacopter").fmu_parameters()
+    assert set(paper) == {r.element(k) for r in rows for k in range(r.rows * r.cols)}
+    for name, value in paper.items():
+        p, c = (v[name] for v in fmus)
+        assert p.causality == c.causality == "parameter", name
+        assert (p.type, p.unit, p.min, p.max) == (c.type, c.unit, c.min, c.max), name
+        assert math.isclose(float(p.start), float(c.start), rel_tol=1e-15, abs_tol=1e-15), name
+        assert math.isclose(float(p.start), float(value), rel_tol=1e-12, abs_tol=1e-15), name

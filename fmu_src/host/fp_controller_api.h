@@ -66,8 +66,8 @@ FP_API int fp_controller_state_qp(const unsigned char *state, long size, int whi
 
 /*
  * The controller's own derivation of a feasible-force set (controller/derive_sets.h): S(0)
- * of the rotors of rotor_set (a buffer filled by libfp_multirotor's fp_rotor_set_init: the
- * same FpRotorSet) without those in lost_mask (bit i: rotor i + 1), as at most cap facets
+ * of the rotors of rotor_set (a buffer made by libfp_multirotor's
+ * fp_rotor_set_from_airframe: the same FpRotorSet) without those in lost_mask (bit i: rotor i + 1), as at most cap facets
  * A[cap][3] f <= b[cap].  info[5] = status (0 ok, 1 empty, 2 failed), facets, dimension,
  * LP solves, LP pivots; *ns the wall time in ns; why[why_size] the reason of a failure.
  */

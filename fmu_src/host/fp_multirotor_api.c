@@ -5,6 +5,7 @@
  */
 #include "fp_multirotor_api.h"
 
+#include <stddef.h>
 #include <string.h>
 
 #include "airframe_vars.h"
@@ -12,18 +13,18 @@
 
 typedef struct {
     const char *name;
-    int32_t rows, cols, integer;
+    int32_t rows, cols, integer, offset;
 } AirframeRow;
 
 #define AF_ROW(name, vr, type, kind, rows, cols, dtype, range, desc) \
-    {#name, rows, cols, FP_##type == FP_INTEGER},
+    {#name, rows, cols, FP_##type == FP_INTEGER, (int32_t)offsetof(FpAirframe, name)},
 static const AirframeRow airframe_rows[] = {FP_AIRFRAME_VARIABLES(AF_ROW, 0)};
 #define N_AIRFRAME_ROWS ((int)(sizeof airframe_rows / sizeof airframe_rows[0]))
 
 FP_API int fp_airframe_variable_count(void) { return N_AIRFRAME_ROWS; }
 
 FP_API int fp_airframe_variable(int i, char *name, int name_size, int32_t *rows, int32_t *cols,
-                                int32_t *integer) {
+                                int32_t *integer, int32_t *offset) {
     size_t len;
     if (i < 0 || i >= N_AIRFRAME_ROWS || name == NULL || name_size <= 0) return FP_ERROR;
     len = strlen(airframe_rows[i].name);
@@ -31,6 +32,18 @@ FP_API int fp_airframe_variable(int i, char *name, int name_size, int32_t *rows,
     memcpy(name, airframe_rows[i].name, len + 1);
     *rows = airframe_rows[i].rows, *cols = airframe_rows[i].cols;
     *integer = airframe_rows[i].integer;
+    *offset = airframe_rows[i].offset;
+    return FP_OK;
+}
+
+FP_API int fp_airframe_size(void) { return (int)sizeof(FpAirframe); }
+
+FP_API int fp_rotor_set_from_airframe(const void *airframe, void *rotor_set) {
+    const FpAirframe *af = (const FpAirframe *)airframe;
+    if (af == NULL || rotor_set == NULL || af->n_rotors < 1 || af->n_rotors > FP_MAX_ROTORS ||
+        !(af->k_t > 0.0))
+        return FP_ERROR;
+    fp_rotor_set_of(af, (FpRotorSet *)rotor_set);
     return FP_OK;
 }
 
@@ -40,31 +53,6 @@ FP_API int fp_max_rotors(void) { return FP_MAX_ROTORS; }
 
 /* Size in bytes of the opaque rotor-set buffer the functions below take. */
 FP_API int fp_rotor_set_size(void) { return (int)sizeof(FpRotorSet); }
-
-FP_API int fp_rotor_set_init(void *buffer, int n, double k_t, double k_d, const double *pos,
-                             const int32_t *dir, const double *gamma, const double *alpha_min,
-                             const double *alpha_max, const double *beta_min,
-                             const double *beta_max, double omega_min, double omega_max) {
-    FpRotorSet *rs = (FpRotorSet *)buffer;
-    int i;
-    if (rs == NULL || n < 1 || n > FP_MAX_ROTORS || !(k_t > 0.0)) return FP_ERROR;
-    memset(rs, 0, sizeof *rs);
-    rs->n = n;
-    rs->k_t = k_t;
-    rs->k_d = k_d;
-    for (i = 0; i < n; i++) {
-        memcpy(rs->pos[i], pos + 3 * i, 3 * sizeof(double));
-        rs->dir[i] = dir[i];
-        rs->gamma[i] = gamma[i];
-        rs->alpha_min[i] = alpha_min[i];
-        rs->alpha_max[i] = alpha_max[i];
-        rs->beta_min[i] = beta_min[i];
-        rs->beta_max[i] = beta_max[i];
-    }
-    rs->omega_min = omega_min;
-    rs->omega_max = omega_max;
-    return FP_OK;
-}
 
 FP_API int fp_rotor_rotation_api(double alpha, double beta, double gamma, double *r9) {
     fp_rotor_rotation(alpha, beta, gamma, (double(*)[3])r9);

@@ -1,7 +1,8 @@
 /*
  * libfp_multirotor (installed in plant/lib/, used by plant/effectiveness.py): the rotor
  * geometry of common/multirotor.c, the very code both FMUs run.  A rotor set crosses the
- * API as an opaque buffer of fp_rotor_set_size() bytes filled by fp_rotor_set_init.
+ * API as an opaque buffer of fp_rotor_set_size() bytes made from an airframe buffer
+ * (fp_rotor_set_from_airframe), itself filled row by row from the airframe table.
  * Matrices are row-major.  Every function returns 0 on success, else a non-zero FpStatus.
  */
 #ifndef FP_MULTIROTOR_API_H
@@ -18,21 +19,23 @@ FP_API int fp_api_version(void);
 FP_API int fp_max_rotors(void);
 
 /* The airframe variable table both FMUs share (common/airframe_vars.h): its row count, and
- * row i's name (into name[name_size]), shape (rows x cols) and type (integer: 1 for an
- * Integer row, 0 for a Real one).  FP_ERROR for i out of range or a name that does not fit. */
+ * row i's name (into name[name_size]), shape (rows x cols), type (integer: 1 for an Integer
+ * row, stored as int32, 0 for a Real one, stored as double) and byte offset in the airframe
+ * buffer.  FP_ERROR for i out of range or a name that does not fit. */
 FP_API int fp_airframe_variable_count(void);
 FP_API int fp_airframe_variable(int i, char *name, int name_size, int32_t *rows, int32_t *cols,
-                                int32_t *integer);
+                                int32_t *integer, int32_t *offset);
+
+/* Size in bytes of an airframe buffer (the FpAirframe both models embed), filled row by row
+ * at the offsets above. */
+FP_API int fp_airframe_size(void);
+
+/* The rotor-set buffer (fp_rotor_set_size() bytes) of an airframe buffer: what the rotor
+ * functions below take.  FP_ERROR when n_rotors or k_t is invalid. */
+FP_API int fp_rotor_set_from_airframe(const void *airframe, void *rotor_set);
 
 /* Size in bytes of the opaque rotor-set buffer the functions below take. */
 FP_API int fp_rotor_set_size(void);
-
-/* Fill a rotor-set buffer: n rotors (1..fp_max_rotors()), pos[3 n], dir[n] (+-1),
- * gamma[n], servo limits [n] each, rotor speed limits. */
-FP_API int fp_rotor_set_init(void *buffer, int n, double k_t, double k_d, const double *pos,
-                             const int32_t *dir, const double *gamma, const double *alpha_min,
-                             const double *alpha_max, const double *beta_min,
-                             const double *beta_max, double omega_min, double omega_max);
 
 /* R_Mi^B(alpha, beta, gamma) = Rz(gamma) Rx(alpha) Ry(beta) into r9[9]. */
 FP_API int fp_rotor_rotation_api(double alpha, double beta, double gamma, double *r9);
