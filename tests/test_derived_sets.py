@@ -371,3 +371,33 @@ def test_kinds_module_is_complete():
     assert set(KINDS) == {"tilting_quadrotor", "tilting_octocopter", "canted_hexarotor",
                           "heavy_tilting_hexacopter"}
     assert math.isfinite(derive_force_set(plant.load_airframe("y6")).b.sum())
+
+
+@pytest.mark.parametrize("airframe", ["x8_coaxial", "y6"])
+def test_run_detects_an_undeclared_loss_and_flies_the_vehicles_own_failure_set(airframe,
+                                                                               tmp_path):
+    """Hover, a 1 m step at 1 s, rotor 1's propeller gone at 5 s without telling the
+    controller: it finds the rotor, stops its motor, switches to that vehicle's set after
+    losing rotor 1 (the set holds the hover force: statics of the remaining rotors), and
+    the step is held within the paper's 2 cm before and 5 cm after the loss."""
+    path = tmp_path / "loss.toml"
+    path.write_text(f'duration = 8.0\nairframe = "{airframe}"\nfault_detection = "none"\n'
+                    '[reference.position]\nx = { type = "steps", times = [1.0], '
+                    'values = [1.0] }\nz = -3.0\n'
+                    "[[fault]]\ntime = 5.0\nrotor = 1\nefficiency = 0.0\n")
+    result = run(prepare(path), progress=False)
+    t = result.time
+    pos = result.get("plant.pos")
+    err = np.linalg.norm(pos - result.get("ctrl.pos_ref_s"), axis=1)
+    k5 = int(np.searchsorted(t, 5.0))
+    assert err[:k5].max() < 0.02
+    assert err[k5:].max() < 0.05 and abs(pos[-1, 0] - 1.0) < 0.01
+    detected = np.flatnonzero(result.get("ctrl.rotors_detected") > 0)
+    assert detected.size and t[detected[0]] - 5.0 < 0.1
+    assert result.get("ctrl.active_polytope")[-1] == 1
+    assert result.get("ctrl.hover_possible")[-1] == 1
+    assert result.get("ctrl.omega_cmd")[-1, 0] == 0.0
+    # that set is this vehicle's (oracle: the controller's own derivation for this airframe)
+    own = derive_force_set(plant.load_airframe(airframe), (1,))
+    hover = np.array([0.0, 0.0, -plant.load_airframe(airframe).mass * 9.81])
+    assert own is not None and np.all(own.A @ hover <= own.b + 1e-9)

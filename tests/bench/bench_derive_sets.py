@@ -8,7 +8,9 @@ Per airframe (the shipped ones and the other kinds of tests/airframe_kinds.py):
   only the airframe's parameters set (the derivation, the checks and the rest of the
   initialization), median over fresh instances;
 - design: the scipy design tool's S(0) alone (controller.force_sets, a finer servo grid),
-  timed once, as the peer.
+  timed once, as the peer; and how far the two sets reach beyond each other (N, support
+  functions by scipy's LP) against the design tool's own approximation gap (the distance
+  between its inner and outer hulls).
 
     python tests/bench/bench_derive_sets.py [--repeats 20]
     PYTHONPATH=. FULLPOSE_BUILD_DIR=<cmake build dir> python tests/bench/bench_derive_sets.py
@@ -32,7 +34,7 @@ from airframe_kinds import KINDS, load_kind
 import plant
 from controller import controller_fmu
 from controller.derived_sets import controller_sets
-from controller.force_sets import feasible_force_set
+from controller.force_sets import _set_support, feasible_force_set
 from orchestrator.fmu import FmuInstance
 
 
@@ -67,18 +69,24 @@ def main() -> None:
         airframes = [plant.load_airframe(n) for n in plant.list_airframes()]
         airframes += [load_kind(k, Path(folder)) for k in KINDS]
         print(f"{'airframe':26s} {'rotors':>6s} {'servos':>6s} {'S(0) facets':>11s} "
-              f"{'derive ms':>9s} {'init ms':>8s} {'design S(0) ms':>14s} {'ratio':>6s}")
+              f"{'derive ms':>9s} {'init ms':>8s} {'design S(0) ms':>14s} {'ratio':>6s} "
+              f"{'C beyond N':>10s} {'design beyond N':>15s} {'design gap N':>12s}")
         for af in airframes:
             derive = statistics.median(controller_sets(af).seconds
                                        for _ in range(args.repeats))
             sets = controller_sets(af)
             init = init_seconds(af, max(3, args.repeats // 4))
             t0 = time.perf_counter()
-            feasible_force_set(af)
+            p = feasible_force_set(af)
             design = time.perf_counter() - t0
+            beyond_c = max(_set_support(sets.s0.A, sets.s0.b, a) - b for a, b in zip(
+                p.A, p.b, strict=True))
+            beyond_d = max(_set_support(p.A, p.b, a) - b for a, b in zip(
+                sets.s0.A, sets.s0.b, strict=True))
             print(f"{af.name:26s} {af.n_rotors:6d} {'yes' if af.tilting else 'no':>6s} "
                   f"{len(sets.s0.b):11d} {derive * 1e3:9.2f} {init * 1e3:8.2f} "
-                  f"{design * 1e3:14.0f} {design / derive:5.0f}x")
+                  f"{design * 1e3:14.0f} {design / derive:5.0f}x "
+                  f"{max(beyond_c, 0.0):10.3f} {max(beyond_d, 0.0):15.3f} {p.gap:12.3f}")
 
 
 if __name__ == "__main__":
