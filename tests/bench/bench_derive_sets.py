@@ -86,7 +86,7 @@ def main() -> None:
             print(f"{af.name:26s} {af.n_rotors:6d} {'yes' if af.tilting else 'no':>6s} "
                   f"{len(sets.s0.b):11d} {derive * 1e3:9.2f} {init * 1e3:8.2f} "
                   f"{design * 1e3:14.0f} {design / derive:5.0f}x "
-                  f"{max(beyond_c, 0.0):10.3f} {max(beyond_d, 0.0):15.3f} {p.gap:12.3f}")
+                  f"{max(0.0, beyond_c):10.3f} {max(0.0, beyond_d):15.3f} {p.gap:12.3f}")
 
 
 if __name__ == "__main__":
