@@ -32,6 +32,15 @@ def free_port() -> int:
         return s.getsockname()[1]
 
 
+def stream(f: Flight, seconds: float, send: Callable[[], None]) -> None:
+    """Call ``send`` every 20 ms of wall time for ``seconds``, draining what comes back."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        send()
+        f.drain()
+        time.sleep(0.02)
+
+
 class Flight:
     """``config`` goes to BridgeConfig (``urls`` aside: the client's port); ``setup_from_gcs``
     names the client's link for SETUP_SIGNING."""

@@ -194,33 +194,60 @@ def test_another_vehicles_sets_are_refused():
 
 
 def test_given_sets_of_this_vehicle_are_used_as_given():
-    """The design tool's sets for the paper hexacopter pass the check (they differ from the
-    derived ones by less than its 10 % tolerance) and are flown as given: the guidance QP's
-    constraint rows are the given facets (read back from the FMU state)."""
+    """The design tool's S(0) for the paper hexacopter passes the check (it differs from the
+    derived one by less than the 10 % tolerance); a smaller one (a margin: offsets shrunk
+    about the hover force) passes too and is the one flown: the shaping's vertical
+    acceleration limit the FMU reports is the one that set's f_z range gives (oracle:
+    scipy's LP for the range, the documented formula of docs/controller.md)."""
+    from scipy.optimize import linprog
+
     af = plant.load_airframe("paper_hexacopter")
     params = design_set_parameters(af)
-    c = _init_ctrl(af, params)
+    n = int(params["poly_n"])
+    A = np.array([[params[f"poly_A[{i},{j}]"] for j in (1, 2, 3)] for i in range(1, n + 1)])
+    b = np.array([params[f"poly_b[{i}]"] for i in range(1, n + 1)])
+    hover = np.array([0.0, 0.0, -af.mass * af.gravity])
+    small = A @ hover + 0.6 * (b - A @ hover)
+    given = {**{k: v for k, v in params.items() if k.startswith("poly_")},
+             **{f"poly_b[{i + 1}]": float(v) for i, v in enumerate(small)}}
+    limits = []
+    for extra in ({}, given):
+        c = _init_ctrl(af, extra)
+        try:
+            c.slave.exitInitializationMode()
+            assert "another vehicle" not in _messages(c)
+            limits.append(np.array(c.read(c.signal("ref_acc_limit"))))
+        finally:
+            c.close()
+    z = [linprog(sign * np.array([0.0, 0.0, 1.0]), A_ub=A, b_ub=small,
+                 bounds=[(None, None)] * 3).fun * sign for sign in (1.0, -1.0)]
+    margin, g, tilt = 0.9, af.gravity, math.radians(15.0)
+    fz_min, fz_max = (hover[2] + margin * (v - hover[2]) for v in z)
+    up, least = -fz_min / af.mass, -fz_max / af.mass
+    a_z = 0.5 * min(up * math.cos(tilt) - g, g - least)
+    assert limits[1][1] == pytest.approx(max(a_z, 0.05 * g), rel=1e-9)
+    assert limits[1][1] < limits[0][1]  # the smaller set is the one in use
+
+
+def _refused(fmu, af) -> str:
+    """The log of an FMU given only ``af``'s parameters, which must refuse to initialize."""
+    inst = FmuInstance(fmu, "refused")
     try:
-        c.slave.exitInitializationMode()
-        assert "another vehicle" not in _messages(c)
+        inst.slave.setupExperiment(startTime=0.0)
+        inst.set_many(_airframe_params(af, inst))
+        inst.slave.enterInitializationMode()
+        with pytest.raises(FMICallException):
+            inst.slave.exitInitializationMode()
+        return _messages(inst)
     finally:
-        c.close()
+        inst.close()
 
 
 def test_too_heavy_a_vehicle_is_refused_with_its_cause():
     af = plant.load_airframe("x8_coaxial")
     heavy = dataclasses.replace(af, mass=af.k_t * af.omega_max ** 2 * 8 / af.gravity * 1.2)
-    c = FmuInstance(controller_fmu(), "ctrl")
-    try:
-        c.slave.setupExperiment(startTime=0.0)
-        c.set_many(_airframe_params(heavy, c))
-        c.slave.enterInitializationMode()
-        with pytest.raises(FMICallException):
-            c.slave.exitInitializationMode()
-        log = _messages(c)
-        assert "derived from the airframe" in log and "cannot hold" in log, log
-    finally:
-        c.close()
+    log = _refused(controller_fmu(), heavy)
+    assert "derived from the airframe" in log and "cannot hold" in log, log
 
 
 def _no_authority(af, kind):
@@ -242,19 +269,8 @@ def _no_authority(af, kind):
 @pytest.mark.parametrize("fmu", ["plant", "controller"])
 def test_no_control_authority_is_refused_by_both_fmus(kind, expect, fmu):
     af = _no_authority(plant.load_airframe("quadrotor"), kind)
-    path = plant.plant_fmu() if fmu == "plant" else controller_fmu()
-    inst = FmuInstance(path, fmu)
-    try:
-        names = {v.name for v in inst.md.modelVariables if v.causality == "parameter"}
-        inst.slave.setupExperiment(startTime=0.0)
-        inst.set_many({k: v for k, v in af.fmu_parameters().items() if k in names})
-        inst.slave.enterInitializationMode()
-        with pytest.raises(FMICallException):
-            inst.slave.exitInitializationMode()
-        log = _messages(inst)
-        assert "rotor_pos" in log and expect in log, log
-    finally:
-        inst.close()
+    log = _refused(plant.plant_fmu() if fmu == "plant" else controller_fmu(), af)
+    assert "rotor_pos" in log and expect in log, log
 
 
 def test_a_bicopter_that_tilts_keeps_its_authority():

@@ -5,7 +5,6 @@ the controller detects it and flies on that vehicle's own failure set.  The brid
 a thread at 4x speed; every wait is bounded in wall time."""
 
 import os
-import time
 
 import numpy as np
 import pytest
@@ -14,13 +13,7 @@ os.environ["MAVLINK20"] = "1"
 
 import mavlink_harness as harness
 
-
-def stream(f, seconds, send):
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        send()
-        f.drain()
-        time.sleep(0.02)
+stream = harness.stream
 
 
 @pytest.mark.parametrize("airframe", ["x8_coaxial", "y6"])

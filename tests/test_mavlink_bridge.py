@@ -35,12 +35,7 @@ def flight():
     f.close()
 
 
-def stream(f, seconds, send):
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        send()
-        f.drain()
-        time.sleep(0.02)
+stream = harness.stream
 
 
 def test_full_pose_from_position_and_attitude_setpoints(flight):

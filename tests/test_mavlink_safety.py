@@ -30,12 +30,7 @@ class Flight(harness.Flight):
     """A bridge (BridgeConfig of our own) in a thread and a pymavlink ground station."""
 
 
-def stream(f, seconds, send):
-    deadline = time.monotonic() + seconds
-    while time.monotonic() < deadline:
-        send()
-        f.drain()
-        time.sleep(0.02)
+stream = harness.stream
 
 
 @pytest.fixture
