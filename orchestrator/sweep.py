@@ -418,13 +418,16 @@ def _on_pool(workers: int, tasks: Sequence[Task],
              bar: Callable[..., None]) -> list[dict[str, Any]]:
     from orchestrator import master, runner  # noqa: F401  (forked workers inherit them)
 
-    # this process's FMU instances and the campaign's scenario, made before the workers fork
-    # so that they start flying at once: a forked worker adopts copies of both (a spawned
-    # one, where fork is not the start method, makes its own)
+    # this process's FMU instances, the campaign's scenario and what building start values
+    # reads once (the modelDescription, the design sets), made before the workers fork so
+    # that they start flying at once: a forked worker adopts copies of all of them (a
+    # spawned one, where fork is not the start method, makes its own)
+    from orchestrator.start_values import start_values
+
     parent = process_worker()
     parent.fmus()
     for campaign in {t[3] for t in tasks}:
-        parent.base(campaign)
+        start_values(parent.base(campaign).airframe)  # (its caches: variables, design sets)
     rows: list[dict[str, Any]] = []
     with ProcessPoolExecutor(max_workers=workers) as ex:
         for done in ex.map(_batch, _chunks(tasks, workers)):
