@@ -118,3 +118,18 @@ def test_a_synthesis_certifies_gains_for_the_slow_vehicle(tmp_path):
     res = cli("run", "position_step", "--airframe", str(frame), "--gains",
               str(tmp_path / "heavy.json"), "--no-plots", "--out", str(tmp_path / "r"))
     assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
+
+
+def test_fly_warns_once_outside_and_takes_gains(tmp_path):
+    frame = write_kind("heavy_tilting_hexacopter", tmp_path)
+    base = ["fly", "--airframe", str(frame), "--speed", "max", "--duration", "0.2", "--gcs",
+            "udpout:127.0.0.1:9"]
+    res = cli(*base)
+    assert res.returncode == 0, res.stderr
+    assert res.stderr.count("fullpose: warning:") == 1 and "40 ms" in res.stderr
+    assert "flying heavy_tilting_hexacopter" in res.stdout
+    gains = design_check.GainsFile("", "heavy", 0.04, design_check.shipped_blocks(), {})
+    path = design_check.write_gains(tmp_path / "g.json", gains)
+    res = cli(*base, "--gains", str(path))
+    assert res.returncode == 0, res.stderr
+    assert "warning" not in res.stderr
