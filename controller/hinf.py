@@ -86,7 +86,7 @@ from scipy import optimize, signal
 from controller import controller_fmu
 from controller.lti import SS, Diagram, Margins, hinf_norm, loop_margins
 from plant import load_airframe
-from plant.model_description import start_value
+from plant.common.model_description import start_value
 
 # The design constants, from the one place each is defined: the controller FMU's defaults
 # (sample time, measurement filter) and the shipped airframe (the actuator time constant), so

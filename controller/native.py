@@ -7,7 +7,7 @@ from __future__ import annotations
 import ctypes
 from functools import cache
 
-from plant.artifacts import load_library
+from plant.common.artifacts import load_library
 
 _DP = ctypes.POINTER(ctypes.c_double)
 _I8P = ctypes.POINTER(ctypes.c_int8)

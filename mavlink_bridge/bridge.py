@@ -40,7 +40,7 @@ from mavlink_bridge.setpoints import (
     decode_position,
 )
 from mavlink_bridge.telemetry import Snapshot, mav
-from orchestrator.live import LiveSession
+from orchestrator.sim.live import LiveSession
 from plant import Airframe
 
 DEFAULT_URLS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")

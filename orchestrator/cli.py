@@ -29,7 +29,7 @@ COMMANDS_GROUP = "fullpose.commands"
 
 
 def _cmd_hover(args: argparse.Namespace) -> int:
-    from orchestrator.hover import run_hover
+    from orchestrator.sim.hover import run_hover
 
     summary, _ = run_hover(args.airframe, args.duration, args.out)
     print(f"airframe            {summary.airframe}")
@@ -56,14 +56,14 @@ def _warn(lines: Iterable[str]) -> None:
 
 
 def _cmd_run(args: argparse.Namespace) -> int:
-    from orchestrator.outcome import EXIT_LOST
     from orchestrator.runner import prepare, run_scenario
+    from orchestrator.sim.outcome import EXIT_LOST
 
     scenario = prepare(args.scenario, args.duration, args.set, airframe=args.airframe,
                        gains=args.gains)
     _warn(scenario.warnings)
     if args.view or args.save is not None:  # no run whose view cannot be shown or written
-        from orchestrator.view import check_viewer
+        from orchestrator.results.view import check_viewer
 
         check_viewer(display=args.view)
     out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
@@ -94,7 +94,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(line)
     print(f"wrote {out}: {', '.join(f.name for f in output.files)}")
     if args.view or args.save is not None:
-        from orchestrator.view import replay
+        from orchestrator.results.view import replay
 
         rep = replay(output.result, scenario.airframe, save=args.save, spawn=args.view)
         print(f"3-D view: {rep.pose_rows} poses, {rep.series_rows} series rows in "
@@ -108,9 +108,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
-    from orchestrator.plots import resolve_airframe
-    from orchestrator.results import RunResult
-    from orchestrator.view import replay
+    from orchestrator.results.plots import resolve_airframe
+    from orchestrator.results.run_result import RunResult
+    from orchestrator.results.view import replay
     from plant.airframe import load_airframe
 
     result = RunResult.read(args.results)
@@ -129,7 +129,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
-    from orchestrator.scenario import list_scenarios
+    from orchestrator.scenario.definition import list_scenarios
 
     for sc in list_scenarios():
         print(f"{sc.name:30s} {sc.duration:6g} s  {sc.airframe.name:22s} {sc.description}")
@@ -151,7 +151,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_export_ssp(args: argparse.Namespace) -> int:
-    from orchestrator.ssp import export_ssp
+    from orchestrator.build.ssp import export_ssp
 
     euler0 = tuple(math.radians(x) for x in args.euler0_deg)
     path = export_ssp(args.output, airframe=args.airframe, pos0=tuple(args.pos0),
@@ -223,8 +223,8 @@ def _cmd_fmus(args: argparse.Namespace) -> int:
 
 
 def _cmd_build_fmus(args: argparse.Namespace) -> int:
-    from orchestrator.fmu_build import build_fmus
-    from orchestrator.platforms import parse_platforms
+    from orchestrator.build.fmu_build import build_fmus
+    from orchestrator.build.platforms import parse_platforms
 
     platforms = parse_platforms(args.platforms)
     print(f"building the FMUs for {', '.join(p.name for p in platforms)} (Zig, from each "

@@ -1,11 +1,11 @@
 """The co-simulation master of scenario runs: plant and controller FMUs at a fixed step.
 
 fmpy extracts, loads, instantiates and initializes both FMUs with the start values of
-``orchestrator.start_values``; ``orchestrator.engine`` connects them, lays out the recording
+``orchestrator.sim.start_values``; ``orchestrator.sim.engine`` connects them, lays out the recording
 and steps them (the C kernel by default, the Python oracle with ``engine="python"``).  The
 references and disturbances are sampled into their columns of the recording before the loop,
 a chunk of rows at a time; the loop checks each chunk of 500 steps for a lost vehicle
-(``orchestrator.outcome``) and stops there.
+(``orchestrator.sim.outcome``) and stops there.
 
 Memory: a recording up to :data:`SPILL_BYTES` is held in memory; a larger one goes to the
 file the caller offers (``spill``; the results runner puts it beside the results folder),
@@ -33,7 +33,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from controller import controller_fmu
-from orchestrator.engine import (
+from orchestrator.results.run_result import RunResult
+from orchestrator.sim.engine import (
     COUPLINGS,
     DIST_INPUTS,
     ENGINES,
@@ -44,14 +45,13 @@ from orchestrator.engine import (
     RunError,
     make_engine,
 )
-from orchestrator.fmu import FmuInstance
-from orchestrator.outcome import Lost, LostCriteria, first_lost
-from orchestrator.results import RunResult
-from orchestrator.start_values import Pose, StartValues, start_values
+from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
+from orchestrator.sim.start_values import Pose, StartValues, start_values
 from plant import plant_fmu
 
 if TYPE_CHECKING:
-    from orchestrator.scenario import Scenario
+    from orchestrator.scenario.definition import Scenario
 
 __all__ = ["COUPLINGS", "ENGINES", "CoSimulation", "RecordingTooLarge", "RunError", "run"]
 
@@ -213,7 +213,7 @@ class CoSimulation:
 
     def run(self, on_chunk: Callable[[int, int], None] | None = None) -> RunResult:
         """The whole run; stops early, with ``meta["outcome"]`` saying so, when the vehicle
-        is lost (``orchestrator.outcome``)."""
+        is lost (``orchestrator.sim.outcome``)."""
         if self.fmus is not None:
             return self._run(*self.fmus, on_chunk)
         plant_inst = FmuInstance(plant_fmu(), "plant")
@@ -231,7 +231,7 @@ class CoSimulation:
     def initialize_only(self) -> None:
         """Instantiate and initialize both FMUs exactly as a run would, then stop: whatever
         the FMUs refuse (a parameter out of range, an infeasible hover, unstable gains) is
-        an :class:`~orchestrator.fmu.FmuError`; a recording too large for memory a
+        an :class:`~orchestrator.sim.fmu.FmuError`; a recording too large for memory a
         :class:`RecordingTooLarge`."""
         with FmuInstance(plant_fmu(), "plant") as plant_inst, \
                 FmuInstance(controller_fmu(), "controller") as ctrl_inst:

@@ -46,8 +46,8 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from orchestrator.fmu import FmuInstance
-    from orchestrator.scenario import Scenario
+    from orchestrator.scenario.definition import Scenario
+    from orchestrator.sim.fmu import FmuInstance
 
 NOISE = {"noise_pos": 0.002, "noise_vel": 0.005, "noise_acc": 0.05, "noise_att": 0.002,
          "noise_rate": 0.005, "noise_ang_acc": 0.05}
@@ -149,7 +149,7 @@ def perturbed(base: Scenario, case: dict[str, float], design: str,
     nominal airframe (``NAME_matched``: it is told the perturbed mass and inertia).  It
     differs from ``base`` only in the plant's airframe, parameters and disturbances, never
     in the pose or the references."""
-    from orchestrator.signals import Steps
+    from orchestrator.scenario.signals import Steps
 
     af = base.airframe
     given = base.plant_parameters
@@ -211,9 +211,9 @@ def run_case(case: dict[str, float], design: str, params: dict[str, float],
     """One closed-loop run; returns a table row.  With a ``worker`` the run uses its FMU
     instances, reset (fmi2Reset) from the previous case; without, it loads fresh FMUs as a
     single run does (the reference the reused path is tested against, bit for bit)."""
-    from orchestrator.engine import RunError
-    from orchestrator.fmu import FmuError
     from orchestrator.master import CoSimulation
+    from orchestrator.sim.engine import RunError
+    from orchestrator.sim.fmu import FmuError
 
     t0 = time.perf_counter()
     duration = campaign.duration
@@ -283,7 +283,7 @@ class Worker:
         """(plant, controller) in the Instantiated state, ready for a run: instantiated at
         the first call, reset at every call (whatever the previous run left: completed,
         lost, refused).  A pair that cannot be reset (an FMU gone Fatal) is replaced."""
-        from orchestrator.fmu import FmuError
+        from orchestrator.sim.fmu import FmuError
 
         if self._fmus is None:
             self._fmus, self._owns_fmus = _instantiate(), True
@@ -319,7 +319,7 @@ class Worker:
 
 def _instantiate() -> tuple[FmuInstance, FmuInstance]:
     from controller import controller_fmu
-    from orchestrator.fmu import FmuInstance
+    from orchestrator.sim.fmu import FmuInstance
     from plant import plant_fmu
 
     plant = FmuInstance(plant_fmu(), "plant")
@@ -416,13 +416,16 @@ def _chunks(tasks: Sequence[Task], workers: int) -> list[list[Task]]:
 
 def _on_pool(workers: int, tasks: Sequence[Task],
              bar: Callable[..., None]) -> list[dict[str, Any]]:
-    from orchestrator import master, runner  # noqa: F401  (forked workers inherit them)
+    from orchestrator import (
+        master,  # noqa: F401
+        runner,  # noqa: F401  (forked workers inherit them)
+    )
 
     # this process's FMU instances, the campaign's scenario and what building start values
     # reads once (the modelDescription, the design sets), made before the workers fork so
     # that they start flying at once: a forked worker adopts copies of all of them (a
     # spawned one, where fork is not the start method, makes its own)
-    from orchestrator.start_values import start_values
+    from orchestrator.sim.start_values import start_values
 
     parent = process_worker()
     parent.fmus()

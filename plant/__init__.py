@@ -3,7 +3,7 @@
 from pathlib import Path
 
 from plant.airframe import Airframe, AirframeError, list_airframes, load_airframe
-from plant.artifacts import NativeBuildMissing, find_artifact
+from plant.common.artifacts import NativeBuildMissing, find_artifact
 from plant.effectiveness import RotorSet, rotor_rotation, thrust_direction
 
 PLANT_FMU = "MultirotorPlant"

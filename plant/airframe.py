@@ -20,9 +20,9 @@ from typing import Any
 
 import numpy as np
 
+from plant.common.toml_reader import FieldError, TomlTable, resolve_file, shipped_names
 from plant.effectiveness import RotorSet
 from plant.native import multirotor
-from plant.toml_reader import FieldError, TomlTable, resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
     import tomllib

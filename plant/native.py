@@ -6,7 +6,7 @@ from __future__ import annotations
 import ctypes
 from functools import cache
 
-from plant.artifacts import load_library
+from plant.common.artifacts import load_library
 
 _DP = ctypes.POINTER(ctypes.c_double)
 _I32P = ctypes.POINTER(ctypes.c_int32)

@@ -13,7 +13,7 @@ import pytest
 from fmpy import extract
 
 import plant
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 
 # helper modules of the tests (mavlink_harness.py) import by name: pytest's importlib mode
 # does not put this folder on sys.path itself
@@ -25,7 +25,7 @@ H = 0.002
 
 @pytest.fixture(scope="session")
 def plant_fmu() -> Path:
-    """Path of the built MultirotorPlant FMU (plant.artifacts also finds the installed one
+    """Path of the built MultirotorPlant FMU (plant.common.artifacts also finds the installed one
     when the source tree is imported first, as with `python -m pytest`)."""
     return plant.plant_fmu()
 
@@ -45,8 +45,8 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Both FMUs built for every platform (``fullpose build-fmus --platforms all``), once per
     session: about 35 s with Zig's cache warm."""
     pytest.importorskip("ziglang", reason="the Zig cross compiler (pip install -e '.[test]')")
-    from orchestrator.fmu_build import build_fmus
-    from orchestrator.platforms import PLATFORMS
+    from orchestrator.build.fmu_build import build_fmus
+    from orchestrator.build.platforms import PLATFORMS
 
     folder = tmp_path_factory.mktemp("dist")
     report = build_fmus(PLATFORMS, folder)

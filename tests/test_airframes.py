@@ -152,7 +152,7 @@ def test_both_fmus_declare_the_one_airframe_table_with_equal_defaults():
 
     from controller import controller_fmu
     from plant.airframe import airframe_table
-    from plant.model_description import fmu_variables
+    from plant.common.model_description import fmu_variables
 
     rows = airframe_table()
     assert {r.name for r in rows} >= {"n_rotors", "mass", "inertia", "rotor_pos", "tau_servo"}

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 
 import plant
-from orchestrator.results import RunResult
+from orchestrator.results.run_result import RunResult
 from plant.airframe import Airframe
 
 

@@ -144,3 +144,42 @@ def test_constants_shared_by_c_and_python_agree():
                          ("FP_FAIL_POLYTOPE_FACETS", fp.FAIL_FACETS)):
         assert int(re.search(rf"#define {macro} (\d+)", text).group(1)) == value
 
+
+
+def test_the_package_table_of_architecture_md_lists_every_module():
+    """docs/architecture.md's package table names every module of the four Python packages
+    (by its path below the package) and nothing that does not exist: the layout a newcomer
+    reads there is the layout on disk."""
+    text = (ROOT / "docs" / "architecture.md").read_text()
+    for package in PACKAGES:
+        listed = set()
+        for row in re.findall(rf"^\| `{package}/[^|]*` \|(.*)\|$", text, re.M):
+            listed |= set(re.findall(r"`([\w/]+\.py)`", row))
+        on_disk = {p.relative_to(ROOT / package).as_posix() for p in _modules(package)
+                   if p.name != "__init__.py"}
+        assert listed - on_disk == set(), f"{package}: listed but missing"
+        assert on_disk - listed == set(), f"{package}: not in docs/architecture.md"
+
+
+ORCHESTRATOR_FLOORS = {
+    "results": {"results"},
+    "sim": {"results", "sim"},
+    "scenario": {"results", "sim", "scenario"},
+    "build": {"results", "sim", "build"},
+}
+"""What each orchestrator subpackage may import of its siblings (docs/architecture.md)."""
+
+
+@pytest.mark.parametrize("sub", sorted(ORCHESTRATOR_FLOORS))
+def test_orchestrator_subpackages_import_only_the_floors_below(sub):
+    bad = []
+    for path in sorted((ROOT / "orchestrator" / sub).rglob("*.py")):
+        for line, module, names in _imports(path):
+            parts = module.split(".")
+            if parts[0] != "orchestrator":
+                continue
+            targets = [parts[1]] if len(parts) > 1 else names
+            for target in targets:
+                if target not in ORCHESTRATOR_FLOORS[sub]:
+                    bad.append(f"{path.relative_to(ROOT)}:{line} imports orchestrator.{target}")
+    assert not bad, "\n".join(bad)

@@ -64,7 +64,7 @@ _HUGE_PAGES_PROBE = """
 import re, sys
 import numpy as np  # first, its huge-page hint on (its default on Linux >= 4.6)
 if sys.argv[1] == "recording":  # as a run's recording is allocated
-    from orchestrator.engine import zeroed
+    from orchestrator.sim.engine import zeroed
     a = zeroed((40_000, 210))
 else:
     a = np.zeros((40_000, 210))

@@ -14,7 +14,7 @@ import pytest
 
 from controller import controller_fmu
 from controller.force_sets import feasible_force_set
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 from plant import load_airframe, plant_fmu
 
 H = 0.002

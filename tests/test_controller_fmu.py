@@ -15,7 +15,7 @@ from fmpy.validation import validate_fmu
 import plant
 from controller import controller_fmu
 from controller.qp_record import ALLOCATION, GUIDANCE, TWIN, qp_from_state
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 
 H = 0.002
 REF = ["pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref"]

@@ -22,9 +22,9 @@ from controller.derived_sets import controller_sets, derive_force_set
 from controller.failures import airframe_without
 from controller.force_sets import _set_support, feasible_force_set
 from controller.polytope_cache import design_set_parameters, shipped
-from orchestrator.fmu import FmuInstance
 from orchestrator.master import run
 from orchestrator.runner import prepare
+from orchestrator.sim.fmu import FmuInstance
 
 H = 0.002
 SHIPPED = plant.list_airframes()

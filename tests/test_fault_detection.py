@@ -25,9 +25,9 @@ from typing import Any
 import numpy as np
 import pytest
 
-from orchestrator.results import RunResult
+from orchestrator.results.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
-from orchestrator.scenario import parse_scenario, scenario_names
+from orchestrator.scenario.definition import parse_scenario, scenario_names
 from orchestrator.sweep import NOISE
 
 T_FAULT = 3.0

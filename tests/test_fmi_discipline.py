@@ -37,7 +37,7 @@ from fmpy.fmi2 import (
 )
 
 from controller import controller_fmu
-from orchestrator.fmu import FmuError, FmuInstance
+from orchestrator.sim.fmu import FmuError, FmuInstance
 from plant import plant_fmu
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -79,7 +79,7 @@ STATE_CHILD = textwrap.dedent(r"""
     import ctypes, json
     from ctypes import byref, c_int, c_size_t, c_void_p, POINTER
     from controller import controller_fmu
-    from orchestrator.fmu import FmuInstance
+    from orchestrator.sim.fmu import FmuInstance
     from plant import plant_fmu
 
     plant = FmuInstance(plant_fmu(), "plant"); plant.initialize()
@@ -167,7 +167,7 @@ def test_reusing_an_own_state_in_fmi2GetFMUstate_overwrites_it_in_place(make):
 DOUBLE_FREE_CHILD = textwrap.dedent(r"""
     import ctypes, json
     from ctypes import byref, c_int, c_void_p, POINTER
-    from orchestrator.fmu import FmuInstance
+    from orchestrator.sim.fmu import FmuInstance
     from plant import plant_fmu
     inst = FmuInstance(plant_fmu(), "plant"); inst.initialize()
     state = inst.slave.getFMUstate()
@@ -356,7 +356,7 @@ def test_a_refused_set_changes_nothing_and_the_instance_stays_usable(make):
 def test_the_live_session_survives_a_refused_controller_parameter():
     """The MAVLink bridge applies ground-station parameters through
     LiveSession.set_controller_parameter and keeps flying when one is refused."""
-    from orchestrator.live import LiveSession
+    from orchestrator.sim.live import LiveSession
 
     with LiveSession(chunk=2) as live:
         live.advance()

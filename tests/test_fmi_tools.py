@@ -24,7 +24,7 @@ import numpy as np
 import pytest
 from fmpy.validation import validate_fmu
 
-from orchestrator.fmu import installed_fmu
+from orchestrator.sim.fmu import installed_fmu
 
 MODELS = ("MultirotorPlant", "FullPoseController")
 # the paper's airframe, as published: Ixx + Iyy < Izz (docs/airframes.md)

@@ -15,11 +15,11 @@ import pytest
 
 from controller import controller_fmu
 from orchestrator import sweep
-from orchestrator.fmu import FmuError, FmuInstance
 from orchestrator.master import CoSimulation
-from orchestrator.results import RunResult
+from orchestrator.results.run_result import RunResult
 from orchestrator.runner import prepare
-from orchestrator.scenario import Scenario
+from orchestrator.scenario.definition import Scenario
+from orchestrator.sim.fmu import FmuError, FmuInstance
 from plant import plant_fmu
 
 DURATION = 2.0

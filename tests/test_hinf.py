@@ -313,7 +313,7 @@ def test_the_controller_fmu_runs_the_filter_and_sample_time_the_synthesis_design
     own: with K_pos = 0 and K_vel = 1 the commanded acceleration is -H[vel], so a unit step
     on the measured velocity returns the FMU's filter step response in ``acc_c``."""
     from controller import controller_fmu
-    from orchestrator.fmu import FmuInstance
+    from orchestrator.sim.fmu import FmuInstance
 
     zero = {f"K_{loop}_{n}[{i}]": 0.0 for loop in ("pos", "vel") for n in "ABCD"
             for i in (1, 2, 3)}

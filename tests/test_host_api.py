@@ -18,9 +18,9 @@ from pathlib import Path
 import pytest
 
 from controller import native as controller_native
-from orchestrator import native as orchestrator_native
+from orchestrator.sim import native as orchestrator_native
 from plant import native as plant_native
-from plant.artifacts import library_path
+from plant.common.artifacts import library_path
 
 HOST = Path(__file__).resolve().parents[1] / "fmu_src" / "host"
 

@@ -3,9 +3,9 @@
 import numpy as np
 import pytest
 
-from orchestrator.live import LiveSession
 from orchestrator.master import run
 from orchestrator.runner import prepare
+from orchestrator.sim.live import LiveSession
 
 
 @pytest.mark.parametrize("coupling", ["gauss-seidel", "jacobi"])

@@ -17,9 +17,9 @@ import pytest
 
 from orchestrator import master
 from orchestrator.master import RecordingTooLarge, check_memory
-from orchestrator.results import RESULTS_FILE, RunResult
+from orchestrator.results.run_result import RESULTS_FILE, RunResult
 from orchestrator.runner import run_scenario
-from orchestrator.scenario import load_scenario
+from orchestrator.scenario.definition import load_scenario
 
 FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
 
@@ -97,7 +97,7 @@ _MEMORY_PROBE = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     from orchestrator import master
-    from orchestrator.scenario import load_scenario
+    from orchestrator.scenario.definition import load_scenario
 
     def anon_kib():
         with open("/proc/self/status") as f:

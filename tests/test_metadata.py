@@ -37,7 +37,7 @@ from fmpy import read_model_description
 from fmpy.fmi1 import FMICallException
 from fmpy.validation import validate_fmu
 
-from orchestrator.fmu import FmuError, FmuInstance, installed_fmu
+from orchestrator.sim.fmu import FmuError, FmuInstance, installed_fmu
 
 if sys.version_info >= (3, 11):
     import tomllib

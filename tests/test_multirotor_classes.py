@@ -11,7 +11,7 @@ import pytest
 import plant
 from controller.failures import airframe_without, failure_polytopes, hover_possible
 from orchestrator.master import run
-from orchestrator.metrics import compute_metrics
+from orchestrator.results.metrics import compute_metrics
 from orchestrator.runner import prepare
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -119,7 +119,7 @@ def test_losing_two_rotors_of_a_quadrotor_is_reported(tmp_path):
 
 
 def test_rotor_health_input_is_validated():
-    from orchestrator.live import LiveSession
+    from orchestrator.sim.live import LiveSession
 
     with LiveSession(chunk=1) as live:
         with pytest.raises(ValueError):

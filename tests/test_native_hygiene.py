@@ -11,7 +11,7 @@ import zipfile
 import pytest
 
 import plant
-from plant.artifacts import library_path
+from plant.common.artifacts import library_path
 
 FMI2_CS_FUNCTIONS = {
     "fmi2GetTypesPlatform", "fmi2GetVersion", "fmi2SetDebugLogging", "fmi2Instantiate",

@@ -13,8 +13,8 @@ import numpy as np
 import pytest
 
 from orchestrator.master import run
-from orchestrator.metrics import compute_metrics
-from orchestrator.results import RunResult
+from orchestrator.results.metrics import compute_metrics
+from orchestrator.results.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
 
 PAPER = ["hover_varying_orientation", "translation_frequency_sweep", "full_pose_with_disturbances"]

@@ -1,6 +1,6 @@
 """MultirotorPlant FMU against independent oracles: analytic solutions and numpy/scipy.
 
-Every check talks to the FMU through FMI (orchestrator.fmu.FmuInstance, the way users'
+Every check talks to the FMU through FMI (orchestrator.sim.fmu.FmuInstance, the way users'
 tools do, and raw fmpy FMU2Slave calls where the exact call sequence matters).  The
 expected values are computed here from the documented conventions (eq. 1-3 of *Full-Pose
 Tracking via Robust Control for Over-Actuated Multirotors*, fmu_src/common/multirotor.h),

@@ -32,8 +32,8 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
+from orchestrator.build.platforms import PLATFORMS, platform_named
 from orchestrator.master import run
-from orchestrator.platforms import PLATFORMS, platform_named
 from orchestrator.runner import prepare
 
 pytest.importorskip("ziglang", reason="the Zig cross compiler (pip install -e '.[test]')")

@@ -237,7 +237,7 @@ def test_a_failure_between_the_two_moves_restores_the_previous_results(tmp_path,
 
 
 def test_first_lost_finds_the_first_sample_beyond_any_bound():
-    from orchestrator.outcome import LostCriteria, first_lost
+    from orchestrator.sim.outcome import LostCriteria, first_lost
 
     n = 10
     t = np.arange(n) * 0.002

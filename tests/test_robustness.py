@@ -18,8 +18,8 @@ from fmpy.fmi1 import FMICallException
 
 from controller import controller_fmu
 from controller.wls import solve
-from orchestrator.fmu import FmuInstance
-from orchestrator.start_values import Pose, start_values
+from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.start_values import Pose, start_values
 from plant import load_airframe, plant_fmu
 
 H = 0.002

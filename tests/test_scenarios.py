@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.scenario import (
+from orchestrator.scenario.definition import (
     Scenario,
     ScenarioError,
     check_scenario,
@@ -23,7 +23,7 @@ from orchestrator.scenario import (
     load_scenario,
     scenario_names,
 )
-from orchestrator.signals import (
+from orchestrator.scenario.signals import (
     Chirp,
     Constant,
     Ramp,

@@ -22,8 +22,7 @@ from lxml import etree
 
 from controller.force_sets import feasible_force_set, same_polytope
 from controller.polytope_cache import polytope_from_doc, shipped
-from orchestrator.fmu import installed_fmu
-from orchestrator.ssp import (
+from orchestrator.build.ssp import (
     CONTROLLER,
     PLANT,
     connection_table,
@@ -33,6 +32,7 @@ from orchestrator.ssp import (
     parameter_set,
     unconnected_inputs,
 )
+from orchestrator.sim.fmu import installed_fmu
 from plant import AirframeError, load_airframe
 
 SCHEMAS = Path(fmpy.ssp.__file__).parent / "schema"
@@ -154,7 +154,7 @@ def test_connection_table_is_the_name_match(hover_ssp, mds, caplog):
                 if n in names(p_md, "output")]
     expected += [(CONTROLLER, n, PLANT, n) for n in names(p_md, "input")
                  if n in names(c_md, "output")]
-    with caplog.at_level(logging.INFO, logger="orchestrator.ssp"):
+    with caplog.at_level(logging.INFO, logger="orchestrator.build.ssp"):
         table = connection_table(p_md, c_md)
     assert table == expected
     # 3 x 5 rigid-body signals + 3 x 8 actuator states + the pose's age measured; 3 x 8

@@ -34,7 +34,7 @@ import pytest
 from fmpy.fmi1 import FMICallException
 
 from controller import controller_fmu
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 from plant import plant_fmu
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -130,7 +130,7 @@ CHILD = textwrap.dedent("""
     import json, sys
     import numpy as np
     from controller import controller_fmu
-    from orchestrator.fmu import FmuInstance
+    from orchestrator.sim.fmu import FmuInstance
     from plant import plant_fmu
     which, blob_path, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
     inst = FmuInstance(plant_fmu() if which == "plant" else controller_fmu(), "restored")

@@ -5,8 +5,8 @@ steps"): the plant integrates h in ceil(h / h_internal) equal RK4 steps, the con
 samples its own grid k Ts with the inputs held since the last communication point.  Each case
 runs a shipped scenario through the orchestrator's master (fmpy-loaded FMU archives, the C
 step kernel) at step h and compares it with the same scenario at 2 ms, at the instants both
-share.  The scenario files only take multiples of Ts (orchestrator.scenario), so the step is
-replaced on the loaded scenario.
+share.  The scenario files only take multiples of Ts (orchestrator.scenario.definition), so
+the step is replaced on the loaded scenario.
 
 Bounds, from requirements and a delay argument rather than from the measurements:
 
@@ -42,8 +42,8 @@ import numpy as np
 import pytest
 
 from orchestrator.master import run
-from orchestrator.results import RunResult
-from orchestrator.scenario import Scenario, load_scenario
+from orchestrator.results.run_result import RunResult
+from orchestrator.scenario.definition import Scenario, load_scenario
 
 TS = 0.002
 ACCURACY = 0.02  # m: the paper's position accuracy

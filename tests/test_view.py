@@ -1,5 +1,5 @@
-"""The 3-D replay (orchestrator/view.py) read back through Rerun's own dataframe API (a local
-catalog server over the written .rrd), checked against the results file it came from.
+"""The 3-D replay (orchestrator/results/view.py) read back through Rerun's own dataframe API (a
+local catalog server over the written .rrd), checked against the results file it came from.
 
 Oracles: the results (Parquet) the run wrote; scipy's rotations for the quaternions; the
 plant's C thrust direction (plant.effectiveness) for the rotors' axes; the scenario's fault
@@ -16,8 +16,8 @@ import pytest
 
 rr = pytest.importorskip("rerun", reason="the view extra: pip install '.[view]'")
 
-from orchestrator.results import RunResult  # noqa: E402
-from orchestrator.view import LIVE_HZ, VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
+from orchestrator.results.run_result import RunResult  # noqa: E402
+from orchestrator.results.view import LIVE_HZ, VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
 from plant.airframe import load_airframe  # noqa: E402
 from plant.effectiveness import thrust_direction  # noqa: E402
 
@@ -191,8 +191,8 @@ def test_fly_writes_a_live_view_of_the_flight(tmp_path):
 
 
 def test_live_view_marks_mode_and_setpoint_changes(tmp_path):
-    from orchestrator.live import LiveSession
-    from orchestrator.view import LiveView
+    from orchestrator.results.view import LiveView
+    from orchestrator.sim.live import LiveSession
 
     af = load_airframe("paper_hexacopter")
     rrd = tmp_path / "live.rrd"

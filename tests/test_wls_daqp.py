@@ -25,7 +25,7 @@ import pytest
 
 from controller import controller_fmu
 from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, dense_form, qp_from_state
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 from plant import plant_fmu
 
 daqp = pytest.importorskip("daqp", reason="daqp is a test extra: pip install '.[test]'")

@@ -42,7 +42,7 @@ import piqp
 from controller import controller_fmu
 from controller.qp_record import ALLOCATION, GUIDANCE, RecordedQP, dense_form, qp_from_state
 from controller.wls import WlsSolver
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 from plant import plant_fmu
 
 try:

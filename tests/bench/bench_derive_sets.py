@@ -35,7 +35,7 @@ import plant
 from controller import controller_fmu
 from controller.derived_sets import controller_sets
 from controller.force_sets import _set_support, feasible_force_set
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 
 
 def init_seconds(af: plant.Airframe, repeats: int) -> float:

@@ -20,7 +20,7 @@ import time
 import numpy as np
 from fmpy import simulate_fmu
 
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 from plant import plant_fmu
 
 H = 0.002

@@ -20,8 +20,8 @@ from pathlib import Path
 
 from mavlink_bridge.bridge import Bridge, BridgeConfig
 from orchestrator.master import run
+from orchestrator.results.view import LiveView, replay
 from orchestrator.runner import prepare, run_scenario
-from orchestrator.view import LiveView, replay
 
 
 def fly_cpu(seconds: float, rrd: Path | None) -> tuple[float, float]:

@@ -26,7 +26,7 @@ from fmpy.fmi2 import (
 )
 from fmpy.model_description import ModelDescription
 
-from plant.model_description import model_description
+from plant.common.model_description import model_description
 
 LogSink = Callable[[int, str, str], None]
 """Receives (status, category, message) for every message the FMU logs."""

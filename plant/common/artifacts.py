@@ -6,7 +6,7 @@ them: ``plant/fmus`` and ``plant/lib`` (``libfp_multirotor``), ``controller/fmus
 ``controller/lib`` (``libfp_controller``), ``orchestrator/lib`` (``libfp_cosim``).
 ``FULLPOSE_BUILD_DIR`` points at a CMake build directory instead, for C development
 without reinstalling.  Each package declares its own library's functions
-(``plant.native``, ``controller.native``, ``orchestrator.native``).
+(``plant.native``, ``controller.native``, ``orchestrator.sim.native``).
 """
 
 from __future__ import annotations

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from orchestrator.results import RunResult
+from orchestrator.results.run_result import RunResult
 
 if TYPE_CHECKING:
     from plant.airframe import Airframe
@@ -52,7 +52,7 @@ worker has ~0.4 s of drawing (measured warm: forces 0.24 + actuators 0.18 agains
 0.26 + disturbance_timing 0.13 CPU s); the first worker, the zygote, also serves the
 main process's first messages."""
 RUN_FIGURES = ("tracking", "actuators", "forces", "disturbance_timing")
-"""The figures of every run (``orchestrator.plots``), here so that naming them needs no
+"""The figures of every run (``orchestrator.results.plots``), here so that naming them needs no
 matplotlib."""
 POLL = 0.05  # s between checks that the workers are alive while waiting
 
@@ -75,7 +75,7 @@ class _Job:
 
 
 def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
-    from orchestrator.plots import figure_inputs, render_png
+    from orchestrator.results.plots import figure_inputs, render_png
 
     result = None
     if job.data is not None:
@@ -98,7 +98,7 @@ def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
             af = job.airframe if isinstance(job.airframe, Airframe) else None
             afs = s0 = None
             if af is not None:
-                from orchestrator.plots import force_sets
+                from orchestrator.results.plots import force_sets
 
                 afs, s0 = force_sets(af)
         png = render_png(job.name, result, af, afs, s0)
@@ -111,7 +111,7 @@ def _warm() -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from orchestrator.plots import png_bytes
+    from orchestrator.results.plots import png_bytes
 
     fig = Figure(figsize=(1.0, 1.0))
     FigureCanvasAgg(fig)

@@ -91,8 +91,8 @@ from fmpy.ssp.ssd import Parameter, ParameterSet, System, read_ssd
 from lxml import etree
 
 from controller import CONTROLLER_FMU, controller_fmu
-from orchestrator.fmu import FmuInstance
-from orchestrator.start_values import Pose, controller_start_values, plant_start_values
+from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.start_values import Pose, controller_start_values, plant_start_values
 from plant import PLANT_FMU, load_airframe, plant_fmu
 
 log = logging.getLogger(__name__)
@@ -276,7 +276,7 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
     root = etree.Element(_q(NS_SSD, "SystemStructureDescription"),
                          nsmap={"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP}, version="1.0",
                          name=name,
-                         generationTool="fullpose orchestrator.ssp")
+                         generationTool="fullpose orchestrator.build.ssp")
     system = etree.SubElement(root, _q(NS_SSD, "System"), name=SYSTEM,
                               description="Multirotor plant flown by the full-pose controller")
     elements = etree.SubElement(system, _q(NS_SSD, "Elements"))

@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.engine import Connections, Recording, make_engine
-from orchestrator.fmu import FmuInstance
-from orchestrator.start_values import Pose, plant_start_values
+from orchestrator.sim.engine import Connections, Recording, make_engine
+from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.start_values import Pose, plant_start_values
 from plant import load_airframe, plant_fmu
 
 STEP = 0.002  # s, the co-simulation rate of 500 Hz

@@ -59,7 +59,7 @@ from itertools import pairwise
 import numpy as np
 from numpy.typing import ArrayLike
 
-from orchestrator.scenario_reader import FieldReader, ScenarioError, is_number
+from orchestrator.scenario.reader import FieldReader, ScenarioError, is_number
 
 SIGNAL_TYPES = ("constant", "sine", "chirp", "steps", "ramp", "waypoints", "sum")
 

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance
 
 MAX_ROTORS = 8
 ROTOR_SIGNALS = frozenset({"omega_cmd", "alpha_cmd", "beta_cmd", "omega", "alpha", "beta",
@@ -420,7 +420,7 @@ class NativeEngine(Engine):
     def __init__(self, plant: FmuInstance, ctrl: FmuInstance | None, conn: Connections,
                  rec: Recording, h: float, jacobi: bool) -> None:
         super().__init__(plant, ctrl, conn, rec, h, jacobi)
-        from orchestrator.native import cosim
+        from orchestrator.sim.native import cosim
 
         self._lib = cosim()
         vp = ctypes.c_void_p

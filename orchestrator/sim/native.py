@@ -1,12 +1,12 @@
 """``libfp_cosim``: the co-simulation step kernel (``fmu_src/host/fp_cosim.h``), declared for
-ctypes.  Used by :class:`orchestrator.engine.NativeEngine`."""
+ctypes.  Used by :class:`orchestrator.sim.engine.NativeEngine`."""
 
 from __future__ import annotations
 
 import ctypes
 from functools import cache
 
-from plant.artifacts import load_library
+from plant.common.artifacts import load_library
 
 _VP = ctypes.c_void_p
 _L = ctypes.c_long

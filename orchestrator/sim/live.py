@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 import numpy as np
 
 from controller import controller_fmu
-from orchestrator.engine import (
+from orchestrator.sim.engine import (
     COUPLINGS,
     DIST_INPUTS,
     ENGINES,
@@ -22,8 +22,8 @@ from orchestrator.engine import (
     Recording,
     make_engine,
 )
-from orchestrator.fmu import FmuInstance
-from orchestrator.start_values import Pose, start_values
+from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.start_values import Pose, start_values
 from plant import Airframe, load_airframe, plant_fmu
 
 

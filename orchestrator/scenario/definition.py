@@ -45,7 +45,7 @@ Layout (units SI, angles in rad unless the key ends in ``_deg``; world frame NED
     [controller]                  # ... and FullPoseController parameters
     K_pos_D = [3.0, 3.0, 2.2]     #   a whole vector as an array (a matrix: array of rows)
 
-Signals (``orchestrator.signals``): a number is a constant; a table with
+Signals (``orchestrator.scenario.signals``): a number is a constant; a table with
 ``type = "constant" | "sine" | "chirp" | "steps" | "ramp" | "waypoints" | "sum"`` is that
 signal; an array of signals is their sum.  Their analytic derivatives give the feed-forward
 inputs: ``vel_ref``/``acc_ref`` from the position, ``euler_rate_ref`` (time derivatives of
@@ -82,11 +82,8 @@ import numpy as np
 from numpy.typing import ArrayLike
 
 from controller import CONTROLLER_FMU, controller_fmu
-from orchestrator.engine import COUPLINGS
-from orchestrator.fmu import installed_fmu
-from orchestrator.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
-from orchestrator.scenario_reader import FieldReader, ScenarioError
-from orchestrator.signals import (
+from orchestrator.scenario.reader import FieldReader, ScenarioError
+from orchestrator.scenario.signals import (
     ZERO,
     Chirp,
     Constant,
@@ -100,10 +97,13 @@ from orchestrator.signals import (
     parse_signal,
     value_range,
 )
+from orchestrator.sim.engine import COUPLINGS
+from orchestrator.sim.fmu import installed_fmu
+from orchestrator.sim.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
 from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
-from plant.model_description import fmu_variables, start_value
-from plant.toml_reader import resolve_file, shipped_names
+from plant.common.model_description import fmu_variables, start_value
+from plant.common.toml_reader import resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
     import tomllib

@@ -1,7 +1,7 @@
 """A validating TOML reader: typed access to tables whose errors name file and field.
 
 The base of the airframe files' reader (``plant.airframe``) and the scenario files'
-(``orchestrator.scenario_reader``).
+(``orchestrator.scenario.reader``).
 
 Every error names the file, the dotted field and what is expected.
 """

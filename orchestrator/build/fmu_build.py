@@ -2,7 +2,7 @@
 from each FMU's own ``sources/`` (so every cross build also proves the sources complete).
 
 Each archive written holds the installed FMU's ``modelDescription.xml`` and ``sources/``
-unchanged and ``binaries/<folder>/`` for every platform asked for (``orchestrator.platforms``).
+unchanged and ``binaries/<folder>/`` for every platform asked for (``orchestrator.build.platforms``).
 The archives are deterministic: entries sorted, fixed timestamps and permissions.  Nothing is
 written to the output folder until both FMUs are built: they are made in a temporary folder
 beside it and moved in at the end.
@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from orchestrator.platforms import Platform, PlatformBuildError, build_platform, zig_command
+from orchestrator.build.platforms import Platform, PlatformBuildError, build_platform, zig_command
 
 ZIP_TIME = (2020, 1, 1, 0, 0, 0)  # the timestamp of every entry (as the CMake build's)
 

@@ -1,7 +1,7 @@
 """The scenario file's reader: typed TOML tables whose errors are :class:`ScenarioError`.
 
 Every error names the file, the dotted field and what is expected; the generic parts are
-``plant.toml_reader``'s, shared with the airframe files.
+``plant.common.toml_reader``'s, shared with the airframe files.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ import math
 from collections.abc import Callable
 from itertools import pairwise
 
-from plant.toml_reader import FieldError, TomlTable
+from plant.common.toml_reader import FieldError, TomlTable
 
 
 class ScenarioError(FieldError):

@@ -21,7 +21,7 @@ from dataclasses import dataclass, field
 from controller import controller_fmu
 from controller.polytope_cache import design_set_parameters
 from plant import Airframe
-from plant.model_description import fmu_variables
+from plant.common.model_description import fmu_variables
 
 Value = float | int | bool
 Vec3 = tuple[float, float, float]
