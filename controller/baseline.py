@@ -61,6 +61,8 @@ PROTOTYPE = {"pos": 2.2, "vel": 6.0, "att": 9.0, "rate": 20.0}
 
 
 def compute_gains() -> dict[str, float]:
+    """The baseline's P gains per loop (pos, vel, att, rate), tuned to the shipped design's
+    crossover frequencies."""
     bw = shipped_bandwidths()
     kp, kv = tune(hinf.TRANSLATION, bw["vel"], bw["pos"])
     ka, kr = tune(hinf.ROTATION, bw["rate"], bw["att"])

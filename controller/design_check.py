@@ -86,6 +86,7 @@ class LoopCheck:
 
     @property
     def certified(self) -> bool:
+        """Whether gamma <= 1: every weighted requirement met on every model."""
         return self.gamma <= 1.0
 
 
@@ -100,6 +101,7 @@ class DesignCheck:
 
     @property
     def certified(self) -> bool:
+        """Whether both cascades are certified."""
         return all(lp.certified for lp in self.loops)
 
     def report(self) -> list[str]:

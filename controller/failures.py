@@ -41,4 +41,5 @@ def failure_polytopes(af: Airframe, n_directions: int = FAIL_FACETS) -> list[Pol
 
 
 def hover_possible(poly: Polytope | None, af: Airframe) -> bool:
+    """Whether the hover force of af lies in poly (None: no set, no hover)."""
     return poly is not None and bool(poly.contains(np.array([0.0, 0.0, -af.mass * af.gravity])))

@@ -483,10 +483,12 @@ class Polytope:
 
     @property
     def n_facets(self) -> int:
+        """Number of facets (rows of A)."""
         return int(self.A.shape[0])
 
     @property
     def tol(self) -> float:
+        """The absolute tolerance (N) of the set's checks: REL_TOL times its force scale."""
         return REL_TOL * self.scale
 
     def contains(self, f: ArrayLike, tol: float | None = None) -> bool | NDArray[np.bool_]:
@@ -549,10 +551,12 @@ class Polytope:
 
     @cached_property
     def volume(self) -> float:
+        """Volume (N^3) of the outer polytope."""
         return _volume(self.vertices)
 
     @cached_property
     def inner_volume(self) -> float:
+        """Volume (N^3) of the inner hull (attainable forces)."""
         return _volume(self.inner_points)
 
 

@@ -89,6 +89,8 @@ def _canonical(value: object) -> str:
 
 
 def inputs_hash() -> str:
+    """SHA-256 of everything the synthesis reads: the sources of hinf.py and lti.py and this
+    module, and the run-time inputs (synthesis_inputs)."""
     h = hashlib.sha256()
     for rel in SOURCES:
         h.update(rel.encode())
@@ -129,6 +131,7 @@ def _db(x: float) -> str:
 
 
 def render(result: dict) -> str:
+    """The header default_gains.h of a synthesis result."""
     lines = [
         "/*",
         f" * GENERATED FILE - do not edit.  Regenerate with:   {COMMAND}",
@@ -189,6 +192,7 @@ def check(full: bool = False) -> tuple[bool, str]:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command: run the synthesis and write the header, or --check it; the exit status."""
     parser = argparse.ArgumentParser(prog=COMMAND, description=__doc__.splitlines()[0])
     parser.add_argument("--check", action="store_true",
                         help="do not write; exit 1 if the header is stale")

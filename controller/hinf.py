@@ -112,6 +112,7 @@ class Block:
 
     @staticmethod
     def p(gain: float) -> Block:
+        """A pure gain block (no state)."""
         return Block(0.0, 0.0, float(gain))
 
     @staticmethod
@@ -126,12 +127,14 @@ class Block:
         return self.a, 1.0, self.g, self.d
 
     def ss(self, Ts: float = TS) -> SS:
+        """The block as a discrete state space at Ts."""
         A, B, C, D = self.fmu()
         if B == 0.0:
             return SS.gain(D, Ts)
         return SS.make([[A]], [[B]], [[C]], [[D]], Ts)
 
     def dc_gain(self) -> float:
+        """Gain at z = 1."""
         return self.d + self.g / (1.0 - self.a)
 
     def hf_gain(self) -> float:
@@ -419,6 +422,8 @@ def _objective(x: np.ndarray, ev: FastEval) -> float:
 
 @dataclass(frozen=True)
 class ChannelNorm:
+    """One requirement channel's weighted H-infinity norm on one model (k, tau) and the frequency
+    of its peak."""
     channel: str
     model: tuple[float, float]
     gamma: float
@@ -427,6 +432,9 @@ class ChannelNorm:
 
 @dataclass(frozen=True)
 class Design:
+    """A cascade's synthesized (or given) blocks with their certified gamma, the norms of every
+    channel and model, the margins of the three loops, the crossovers and the closed loop's
+    largest spectral radius."""
     spec: LoopSpec
     outer: Block
     inner: Block
@@ -481,6 +489,8 @@ def loops(spec: LoopSpec, k1: Block, k2: Block) -> dict[str, SS]:
 
 
 def analyse(spec: LoopSpec, k1: Block, k2: Block) -> Design:
+    """The design of the blocks k1, k2 on spec: exact gamma, margins, crossovers and the
+    closed loop's spectral radius."""
     gamma, norms = exact_gamma(spec, k1, k2)
     L = loops(spec, k1, k2)
     margins = {name: loop_margins(Ls) for name, Ls in L.items()}
@@ -492,6 +502,8 @@ def analyse(spec: LoopSpec, k1: Block, k2: Block) -> Design:
 
 
 def default_grid(n: int = 160) -> np.ndarray:
+    """Frequencies (rad/s) of the synthesis objective: n log-spaced from 0.01 to just below
+    Nyquist."""
     return np.logspace(-2, np.log10(0.999 * math.pi / TS), n)
 
 
@@ -537,10 +549,12 @@ def synthesize(spec: LoopSpec, starts: Sequence[Sequence[float] | np.ndarray] | 
 
 
 def design_all() -> dict[str, Design]:
+    """The synthesis of both cascades (translation, rotation)."""
     return {s.name: synthesize(s) for s in SPECS}
 
 
 def summary(d: Design) -> str:
+    """A design as text: gamma, the blocks, the worst norm per channel, the loops' margins."""
     lines = [f"{d.spec.name}: gamma = {d.gamma:.4f} (spectral radius {d.spectral_radius:.5f})"]
     for name, blk in ((d.spec.outer, d.outer), (d.spec.inner, d.inner)):
         A, B, C, D = blk.fmu()

@@ -34,6 +34,7 @@ class SS:
 
     @staticmethod
     def make(A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, Ts: float) -> SS:
+        """A discrete state space (A, B, C, D) with sample time Ts, matrices as float arrays."""
         D = np.atleast_2d(np.asarray(D, dtype=float))
         ny, nu = D.shape
         A = np.asarray(A, dtype=float).reshape(-1, int(np.sqrt(np.size(A))) or 0) \
@@ -45,12 +46,15 @@ class SS:
 
     @staticmethod
     def gain(k: float | np.ndarray, Ts: float) -> SS:
+        """A static gain k (scalar or matrix) as a state space without states."""
         D = np.atleast_2d(np.asarray(k, dtype=float))
         return SS(np.zeros((0, 0)), np.zeros((0, D.shape[1])), np.zeros((D.shape[0], 0)), D, Ts)
 
     @staticmethod
     def from_continuous(A: ArrayLike, B: ArrayLike, C: ArrayLike, D: ArrayLike, Ts: float,
                         method: str = "zoh") -> SS:
+        """The continuous (A, B, C, D) discretized at Ts by scipy's cont2discrete (method: zoh,
+        tustin, ...)."""
         Ad, Bd, Cd, Dd, _ = signal.cont2discrete(
             (np.atleast_2d(A), np.atleast_2d(B), np.atleast_2d(C), np.atleast_2d(D)), Ts,
             method=method)
@@ -67,9 +71,11 @@ class SS:
 
     @property
     def n(self) -> int:
+        """Number of states."""
         return self.A.shape[0]
 
     def sub(self, outputs: Sequence[int], inputs: Sequence[int]) -> SS:
+        """The subsystem from the given inputs to the given outputs (indices)."""
         return SS(self.A, self.B[:, list(inputs)], self.C[list(outputs), :],
                   self.D[np.ix_(list(outputs), list(inputs))], self.Ts)
 
@@ -84,9 +90,11 @@ class SS:
         return self.C[None] @ X + self.D[None]
 
     def spectral_radius(self) -> float:
+        """Largest eigenvalue magnitude of A (below 1: stable); 0 without states."""
         return float(np.max(np.abs(np.linalg.eigvals(self.A)))) if self.n else 0.0
 
     def dlti(self) -> signal.dlti:
+        """The system as scipy.signal.dlti."""
         return signal.dlti(self.A, self.B, self.C, self.D, dt=self.Ts)
 
 
@@ -124,12 +132,15 @@ class Diagram:
     blocks: list[tuple[SS, list[dict[str, float]], list[str]]] = field(default_factory=list)
 
     def add(self, sys: SS, inputs: Sequence[Combo], outputs: Sequence[str]) -> None:
+        """Add sys, its inputs each a signal name or a weighted sum of names, its outputs named."""
         if sys.D.shape != (len(outputs), len(inputs)):
             raise ValueError(f"block {outputs}: shape {sys.D.shape} vs {len(outputs)}x"
                              f"{len(inputs)}")
         self.blocks.append((sys, [_combo(c) for c in inputs], list(outputs)))
 
     def build(self, inputs: Sequence[str], outputs: Sequence[Combo]) -> SS:
+        """The interconnection from the named inputs to the outputs (names or weighted sums) as one
+        state space."""
         big = append([b[0] for b in self.blocks])
         names = [o for b in self.blocks for o in b[2]]
         if len(set(names)) != len(names):
@@ -244,6 +255,8 @@ def hinf_norm(sys: SS, rtol: float = 1e-9, max_iter: int = 60) -> tuple[float, f
 
 @dataclass(frozen=True)
 class Margins:
+    """Margins of a SISO loop L(z) in negative feedback: crossover, gain and phase margins, the
+    symmetric disk margin and the sensitivity peaks."""
     crossover: float           # rad/s, |L| = 1 (the highest crossing)
     gain_margin: float         # factor (inf if the phase never crosses -180 deg)
     phase_crossover: float     # rad/s

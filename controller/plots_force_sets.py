@@ -69,6 +69,7 @@ def force_axes(ax: Axes, points: np.ndarray | None) -> None:
 
 def draw_polytope(ax: Axes, poly: Polytope, color: str, alpha: float, edges: bool,
                    label: str) -> None:
+    """Draw a polytope on a 3-D axis: its faces (or its segment when flat)."""
     if poly.dimension < 3:
         pts = poly.vertices
         ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color=color, lw=3, label=label)
@@ -165,6 +166,7 @@ def force_set_figure(af: Airframe, afs: Polytope, s0: Polytope) -> Figure:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """The command: draw an airframe's force sets (Fig. 3) into a PNG."""
     args = sys.argv[1:] if argv is None else argv
     name = args[0] if args else "paper_hexacopter"
     out = Path(args[1]) if len(args) > 1 else Path(f"force_sets_{Path(name).stem}.png")

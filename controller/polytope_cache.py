@@ -180,6 +180,7 @@ def compute_polytope(kind: str, airframe: Airframe) -> Polytope:
 
 
 def shipped_path(name: str) -> Path:
+    """The shipped design-time sets file of the airframe called name."""
     return SHIPPED_DIR / f"{name}.json"
 
 

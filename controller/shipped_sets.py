@@ -95,6 +95,7 @@ def check(af: Airframe) -> list[str]:
 
 
 def main(argv: Sequence[str] | None = None) -> int:
+    """The command: write the shipped airframes' set files, or --check them; the exit status."""
     ap = argparse.ArgumentParser(prog=COMMAND, description=__doc__.splitlines()[0])
     ap.add_argument("airframes", nargs="*", help="shipped airframe names (default: all)")
     ap.add_argument("--check", action="store_true", help="compare, write nothing")

@@ -85,12 +85,14 @@ class WlsSolver:
 
     @property
     def working_set(self) -> NDArray[np.int8]:
+        """The working set of the last solve, one int8 per variable bound and constraint."""
         ws = np.zeros(self.n_vars + self.n_cons, dtype=np.int8)
         solver().fp_wls_get_working_set_api(self._buf, ws.ctypes.data_as(_I8P))
         return ws
 
     @working_set.setter
     def working_set(self, ws: ArrayLike) -> None:
+        """Start the next solve from this working set (a warm start)."""
         arr = np.ascontiguousarray(np.asarray(ws, dtype=np.int8).reshape(-1))
         if arr.shape != (self.n_vars + self.n_cons,):
             raise ValueError(f"working set must have {self.n_vars + self.n_cons} entries")
@@ -121,6 +123,8 @@ class WlsSolver:
         C: ArrayLike | None = None,
         d: ArrayLike | None = None,
     ) -> None:
+        """Set the problem data: A (rows x vars), b, the bounds lb, ub (default unbounded) and the
+        constraints C x <= d (C None keeps the stored rows: a constant set)."""
         n, m, p = self.n_vars, self.n_rows, self.n_cons
         a = np.ascontiguousarray(np.asarray(A, dtype=np.float64))
         if a.shape != (m, n):

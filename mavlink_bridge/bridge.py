@@ -95,9 +95,11 @@ class PacingStats:
 
     @property
     def achieved_speed(self) -> float:
+        """Simulated seconds per wall second over the run."""
         return self.sim_time / self.wall_time if self.wall_time > 0 else 0.0
 
     def lines(self) -> list[str]:
+        """The run's pacing summary, a line each, for a terminal."""
         target = "max" if math.isinf(self.speed) else f"{self.speed:g}x"
         return [
             f"simulated           {self.sim_time:.3f} s in {self.wall_time:.3f} s wall "
@@ -113,6 +115,9 @@ class PacingStats:
 
 @dataclass
 class BridgeConfig:
+    """What a bridge flies and how: the airframe, start pose, FMU parameter overrides and coupling;
+    its MAVLink endpoints, speed (simulated seconds per wall second; math.inf: as fast as
+    possible), signing, duration, chunk size, safety limits and geodetic origin."""
     airframe: str | Airframe = "paper_hexacopter"
     pos0: Sequence[float] = (0.0, 0.0, -3.0)
     euler0: Sequence[float] = (0.0, 0.0, 0.0)
@@ -132,6 +137,9 @@ class BridgeConfig:
 
 
 class Bridge:
+    """The co-simulation paced to wall-clock time behind MAVLink 2 endpoints: one thread steps the
+    loop in chunks, handles what the ground stations send and streams telemetry
+    (docs/mavlink.md)."""
     def __init__(self, config: BridgeConfig) -> None:
         if not config.speed > 0:
             raise ValueError("speed must be positive (math.inf: as fast as possible)")
@@ -212,6 +220,8 @@ class Bridge:
         self.limits.rate, self.limits.tilt = g("FPB_SP_RATE_MAX"), g("FPB_SP_TILT_MAX")
 
     def set_signing(self, key: bytes | None, initial_timestamp: int = 0) -> None:
+        """Sign outgoing and require signed incoming messages with key on every endpoint (None:
+        signing off)."""
         self.signing.enable(key, initial_timestamp)
         for ep in self.endpoints:
             ep.set_signing(self.signing)
@@ -219,9 +229,11 @@ class Bridge:
     # -- the loop ----------------------------------------------------------------
 
     def stop(self) -> None:
+        """Ask the loop to end after its current chunk (thread-safe)."""
         self._stop = True
 
     def run(self) -> PacingStats:
+        """Fly until stop() or the configured duration; returns the pacing statistics."""
         cfg, s = self.config, self.session
         chunk_dt = s.step_size * s.chunk
         t0 = time.perf_counter()
@@ -273,6 +285,7 @@ class Bridge:
 
     @property
     def control_active(self) -> bool:
+        """Whether offboard setpoints steer the vehicle (armed and in OFFBOARD)."""
         return self.armed and self.mode == "OFFBOARD"
 
     def _watch(self) -> None:
@@ -314,6 +327,7 @@ class Bridge:
     # -- vehicle state -------------------------------------------------------------
 
     def vehicle(self) -> VehicleState:
+        """The vehicle's position and attitude now (copies)."""
         p = self._state["plant"]
         return VehicleState(p["pos"].copy(), p["euler"].copy())
 
@@ -363,6 +377,7 @@ class Bridge:
     # -- output ----------------------------------------------------------------------
 
     def snapshot(self) -> Snapshot:
+        """Everything the telemetry of this chunk is built from (made once per chunk)."""
         if self._snapshot is None:
             af = self.airframe
             n = af.n_rotors
@@ -802,6 +817,7 @@ class Bridge:
     }
 
     def close(self) -> None:
+        """Close the endpoints and the co-simulation."""
         for ep in self.endpoints:
             ep.close()
         self.session.close()

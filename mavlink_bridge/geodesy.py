@@ -20,6 +20,8 @@ PX4_SITL_HOME = (47.397742, 8.545594, 488.0)
 
 @dataclass(frozen=True)
 class Origin:
+    """The WGS84 point (lat, lon deg; alt m AMSL) of the local NED frame's origin (default: PX4
+    SITL's home)."""
     lat: float = PX4_SITL_HOME[0]  # deg
     lon: float = PX4_SITL_HOME[1]  # deg
     alt: float = PX4_SITL_HOME[2]  # m AMSL

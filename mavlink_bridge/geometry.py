@@ -44,4 +44,5 @@ def body_rates_to_euler_rates(phi: float, theta: float, p: float, q: float,
 
 
 def wrap_pi(a: float) -> float:
+    """The angle wrapped into [-pi, pi)."""
     return (a + math.pi) % (2 * math.pi) - math.pi

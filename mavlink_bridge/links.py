@@ -40,6 +40,7 @@ MAX_DATAGRAM = 65535
 
 
 def signing_now() -> int:
+    """The MAVLink 2 signing timestamp of now (10 us units since 2015-01-01 UTC)."""
     return int((time.time() - SIGNING_EPOCH) * 100_000)
 
 
@@ -71,9 +72,12 @@ class Signing:
 
     @property
     def enabled(self) -> bool:
+        """Whether signing is on (a key is set)."""
         return self.key is not None
 
     def enable(self, key: bytes | None, initial_timestamp: int = 0) -> None:
+        """Use key from now on (None: off), the timestamp never going backwards; the streams' last
+        timestamps are forgotten."""
         self.key = key
         self.streams.clear()
         self.timestamp = max(self.timestamp, initial_timestamp, signing_now())
@@ -101,6 +105,7 @@ class Signing:
         return None
 
     def count(self, reason: str) -> None:
+        """Count an incoming message refused for reason."""
         self.refused[reason] = self.refused.get(reason, 0) + 1
 
 
@@ -132,12 +137,14 @@ class Endpoint:
         self.sent = 0
 
     def set_signing(self, signing: Signing) -> None:
+        """Sign what this endpoint sends with the shared signing state."""
         s = self.sender.signing
         s.secret_key = signing.key
         s.sign_outgoing = signing.key is not None
         s.timestamp = signing.timestamp
 
     def send(self, msg: Any) -> None:
+        """Send one message; a socket error drops it, never the loop."""
         try:
             self.sender.send(msg)
             self.sent += 1
@@ -173,6 +180,7 @@ class Endpoint:
                          else m)
 
     def close(self) -> None:
+        """Close the endpoint's socket."""
         self.conn.close()
 
 

@@ -66,6 +66,7 @@ class Range:
     integer: bool = False
 
     def contains(self, v: float) -> bool:
+        """Whether v is finite, an integer where the range is, and within the bounds."""
         if not math.isfinite(v) or (self.integer and v != int(v)):
             return False
         if self.lo is not None and (v < self.lo or (self.lo_open and v == self.lo)):
@@ -73,6 +74,7 @@ class Range:
         return not (self.hi is not None and (v > self.hi or (self.hi_open and v == self.hi)))
 
     def text(self) -> str:
+        """The range as a message shows it: 0..10, [0, 1], (0, inf)."""
         if self.integer and self.lo is not None and self.hi is not None:
             return f"{self.lo:g}..{self.hi:g}"
         lo = "-inf" if self.lo is None else f"{self.lo:g}"
@@ -96,6 +98,7 @@ def fmu_range(var: Any) -> Range:
 
 @dataclass(frozen=True)
 class BridgeParam:
+    """A parameter of the bridge itself (FPB_*): its name, default, range and description."""
     name: str
     default: float
     range: Range
@@ -163,6 +166,8 @@ def decode(raw: float, param_type: int) -> float | None:
 
 @dataclass
 class Parameter:
+    """A parameter as ground stations see it: its MAVLink id, the controller FMU variable it stands
+    for (None: a bridge parameter), value, range and MAVLink type."""
     name: str  # MAVLink id
     fmu_name: str | None  # None: a bridge parameter
     value: float
@@ -171,6 +176,7 @@ class Parameter:
 
     @property
     def integer(self) -> bool:
+        """Whether it is an integer parameter (sent as INT32)."""
         return self.range.integer
 
 
@@ -200,9 +206,11 @@ class ParameterTable:
         return len(self.items)
 
     def index(self, name: str) -> int | None:
+        """The parameter's index in PARAM_VALUE messages, or None for an unknown name."""
         return self._by_name.get(name)
 
     def get(self, name: str) -> float:
+        """The value of a parameter, by MAVLink id."""
         return self.items[self._by_name[name]].value
 
     def mapping(self) -> dict[str, str]:
@@ -210,6 +218,7 @@ class ParameterTable:
         return {p.name: p.fmu_name for p in self.items if p.fmu_name is not None}
 
     def controller_values(self) -> dict[str, float]:
+        """The controller FMU's tunable variables as the parameters now set them."""
         return {p.fmu_name: p.value for p in self.items if p.fmu_name is not None}
 
     def set(self, name: str, value: float, param_type: int = MAV_PARAM_TYPE_REAL32

@@ -35,6 +35,7 @@ MODES: dict[str, tuple[int, int]] = {
 
 
 def custom_mode(mode: str) -> int:
+    """HEARTBEAT's custom_mode of a PX4 mode (main mode in bits 16-23, sub mode in 24-31)."""
     main, sub = MODES[mode]
     return (main << 16) | (sub << 24)
 

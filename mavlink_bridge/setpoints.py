@@ -53,6 +53,8 @@ class PositionSetpoint:
 
 @dataclass
 class AttitudeSetpoint:
+    """A decoded SET_ATTITUDE_TARGET: Euler angles, Euler-angle rates and thrust, each None where
+    the message's mask ignores it."""
     euler: np.ndarray | None  # roll, pitch, yaw (rad); None: attitude ignored
     euler_rate: np.ndarray | None  # Euler-angle rates from the body rates; None: ignored
     thrust: float | None  # collective thrust 0..1 (decoded, not flown: see docs)
@@ -61,6 +63,8 @@ class AttitudeSetpoint:
 
 @dataclass
 class Limits:
+    """Safety limits of setpoints (FPB_SP_* parameters): the largest |x|, |y| and |z| of a
+    position (m), speed (m/s), acceleration (m/s^2), rate (rad/s), roll/pitch (rad)."""
     xy: float = 100.0
     z: float = 100.0
     vel: float = 10.0
@@ -71,6 +75,7 @@ class Limits:
 
 @dataclass
 class VehicleState:
+    """The vehicle's position (NED, m) and Euler angles (rad) that relative setpoints refer to."""
     pos: np.ndarray
     euler: np.ndarray
 
@@ -82,6 +87,8 @@ def _fields(msg: object, names: tuple[str, ...], mask: int, bits: tuple[int, int
 
 
 def decode_position(msg: object, state: VehicleState, limits: Limits) -> PositionSetpoint:
+    """A SET_POSITION_TARGET_LOCAL_NED (local, offset or body frames) as a setpoint in the local
+    NED frame, checked against the limits; Rejected with the reason otherwise."""
     mask = int(msg.type_mask)  # type: ignore[attr-defined]
     frame = int(msg.coordinate_frame)  # type: ignore[attr-defined]
     if frame not in (MAV_FRAME_LOCAL_NED, MAV_FRAME_LOCAL_OFFSET_NED, MAV_FRAME_BODY_NED,
@@ -199,6 +206,8 @@ def _limit(sp: PositionSetpoint, lim: Limits) -> None:
 
 
 def decode_attitude(msg: object, limits: Limits) -> AttitudeSetpoint:
+    """A SET_ATTITUDE_TARGET as an attitude setpoint, checked against the limits; Rejected with the
+    reason otherwise."""
     mask = int(msg.type_mask)  # type: ignore[attr-defined]
     euler: np.ndarray | None = None
     if not mask & ATTITUDE_IGNORE:
@@ -252,9 +261,12 @@ class Reference:
 
     @classmethod
     def hold(cls, pos: np.ndarray, euler: np.ndarray) -> Reference:
+        """A reference that holds pos and euler still."""
         return cls(np.array(pos, float), np.array(euler, float))
 
     def apply_position(self, sp: PositionSetpoint) -> None:
+        """Take the given components of a position setpoint (ignored ones keep their value;
+        velocity and acceleration as given, zero where ignored)."""
         have = ~np.isnan(sp.pos)
         self.pos[have] = sp.pos[have]
         self.vel = np.nan_to_num(sp.vel)
@@ -264,6 +276,8 @@ class Reference:
         self.euler_rate[2] = 0.0 if math.isnan(sp.yaw_rate) else sp.yaw_rate
 
     def apply_attitude(self, sp: AttitudeSetpoint) -> None:
+        """Take an attitude setpoint's angles where given, and its Euler-angle rates (zero where
+        ignored)."""
         if sp.euler is not None:
             self.euler = sp.euler.copy()
         self.euler_rate = np.zeros(3) if sp.euler_rate is None else sp.euler_rate.copy()
@@ -281,5 +295,6 @@ class Reference:
             self.euler[2] = wrap_pi(self.euler[2])
 
     def as_inputs(self) -> dict[str, np.ndarray]:
+        """The reference as the controller FMU's reference inputs by name."""
         return {"pos_ref": self.pos, "euler_ref": self.euler, "vel_ref": self.vel,
                 "acc_ref": self.acc, "euler_rate_ref": self.euler_rate}

@@ -78,15 +78,18 @@ class Battery:
     current_a: float = 0.0
 
     def update(self, thrust_fraction: float, dt: float) -> None:
+        """Draw the current of the commanded thrust fraction (0..1) for dt seconds."""
         self.current_a = self.current_full_a * min(1.0, max(0.0, thrust_fraction))
         self.consumed_mah += self.current_a * dt / 3.6
 
     @property
     def remaining(self) -> float:
+        """Charge left, 0..1."""
         return max(0.0, 1.0 - self.consumed_mah / self.capacity_mah)
 
     @property
     def cell_v(self) -> float:
+        """Open-circuit cell voltage (V) at the charge left."""
         return 3.5 + 0.7 * self.remaining
 
 
@@ -101,6 +104,7 @@ def build(msg_id: int, s: Snapshot) -> Any:
 
 
 def heartbeat(s: Snapshot) -> Any:
+    """HEARTBEAT: vehicle type, autopilot, PX4 mode and armed state."""
     base = BASE_MODE_CUSTOM | mav.MAV_MODE_FLAG_STABILIZE_ENABLED | \
         mav.MAV_MODE_FLAG_GUIDED_ENABLED
     if s.armed:
@@ -125,22 +129,26 @@ def _f(v: Any) -> list[float]:
 
 
 def attitude(s: Snapshot) -> Any:
+    """ATTITUDE: Euler angles and body rates."""
     e, w = s.plant["euler"], s.plant["rate"]
     return mav.MAVLink_attitude_message(_ms(s), *_f(e), *_f(w))
 
 
 def attitude_quaternion(s: Snapshot) -> Any:
+    """ATTITUDE_QUATERNION: the attitude quaternion [w, x, y, z] and body rates."""
     w = s.plant["rate"]
     return mav.MAVLink_attitude_quaternion_message(_ms(s), *_f(s.plant["quat"]), *_f(w),
                                                    [0.0, 0.0, 0.0, 0.0])
 
 
 def local_position(s: Snapshot) -> Any:
+    """LOCAL_POSITION_NED: position and velocity in the local NED frame."""
     return mav.MAVLink_local_position_ned_message(_ms(s), *_f(s.plant["pos"]),
                                                   *_f(s.plant["vel"]))
 
 
 def odometry(s: Snapshot) -> Any:
+    """ODOMETRY: position (local NED), attitude quaternion, velocity and rates (body FRD)."""
     r = rotation(*s.plant["euler"])
     v_body = r.T @ s.plant["vel"]
     nan21 = [math.nan] * 21
@@ -151,6 +159,7 @@ def odometry(s: Snapshot) -> Any:
 
 
 def position_target(s: Snapshot) -> Any:
+    """POSITION_TARGET_LOCAL_NED: the position and yaw setpoint in use."""
     r = s.reference
     mask = 2048  # yaw rate ignored; yaw = commanded feasible yaw
     return mav.MAVLink_position_target_local_ned_message(
@@ -159,6 +168,7 @@ def position_target(s: Snapshot) -> Any:
 
 
 def attitude_target(s: Snapshot) -> Any:
+    """ATTITUDE_TARGET: the attitude the controller commands (mu_c)."""
     mu = s.ctrl["mu_c"]  # the commanded *feasible* attitude
     f = float(np.linalg.norm(s.ctrl["f_b_c"]))
     thrust = min(1.0, f / s.thrust_max) if s.thrust_max > 0 else 0.0
@@ -183,6 +193,7 @@ HEALTH_ONLY = mav.MAV_SYS_STATUS_GEOFENCE
 
 
 def sys_status(s: Snapshot) -> Any:
+    """SYS_STATUS: sensors present and healthy, the loop's load, battery voltage and current."""
     load = int(min(1000, max(0, round(s.load * 1000))))
     b = s.battery
     return mav.MAVLink_sys_status_message(
@@ -191,6 +202,7 @@ def sys_status(s: Snapshot) -> Any:
 
 
 def battery_status(s: Snapshot) -> Any:
+    """BATTERY_STATUS: cell voltages, current, consumed charge and charge left."""
     b = s.battery
     cells = [round(b.cell_v * 1000)] * b.cells + [65535] * (10 - b.cells)
     return mav.MAVLink_battery_status_message(
@@ -212,6 +224,7 @@ def _hdg_cdeg(s: Snapshot) -> int:
 
 
 def global_position_int(s: Snapshot) -> Any:
+    """GLOBAL_POSITION_INT: WGS84 position, altitudes and NED velocity."""
     lat, lon, alt, rel = _global(s)
     v = [round(100 * x) for x in _f(s.plant["vel"])]
     return mav.MAVLink_global_position_int_message(_ms(s), lat, lon, alt, rel, *v,
@@ -222,6 +235,7 @@ def gps_raw_int(s: Snapshot) -> Any:
     # as PX4 SITL's simulated GPS (PX4-Autopilot src/modules/simulation/sensor_gps_sim/
     # SensorGpsSim.cpp, SensorGpsSim::Run): 3-D fix, 10 satellites (SIM_GPS_USED), HDOP 0.7,
     # VDOP 1.1 (eph/epv carry the DOPs x 100), accuracies 0.9 m / 1.78 m / 0.4 m/s
+    """GPS_RAW_INT: a 3-D fix at the WGS84 position."""
     lat, lon, alt, _ = _global(s)
     v = s.plant["vel"]
     vel = round(100 * math.hypot(float(v[0]), float(v[1])))
@@ -237,17 +251,20 @@ def _home_fields(s: Snapshot) -> tuple[int, int, int]:
 
 
 def home_position(s: Snapshot) -> Any:
+    """HOME_POSITION: the origin of the local frame as home."""
     lat, lon, alt = _home_fields(s)
     return mav.MAVLink_home_position_message(lat, lon, alt, 0.0, 0.0, 0.0,
                                              [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, _us(s))
 
 
 def gps_global_origin(s: Snapshot) -> Any:
+    """GPS_GLOBAL_ORIGIN: the WGS84 point of the local NED origin."""
     lat, lon, alt = _home_fields(s)
     return mav.MAVLink_gps_global_origin_message(lat, lon, alt, _us(s))
 
 
 def vfr_hud(s: Snapshot) -> Any:
+    """VFR_HUD: ground speed, heading, throttle, altitude and climb rate."""
     v = s.plant["vel"]
     ground = math.hypot(float(v[0]), float(v[1]))
     f = float(np.linalg.norm(s.ctrl["f_b_c"]))
@@ -258,6 +275,7 @@ def vfr_hud(s: Snapshot) -> Any:
 
 
 def altitude(s: Snapshot) -> Any:
+    """ALTITUDE: the altitudes PX4 reports (AMSL, local, relative to home)."""
     _, _, alt, rel = _global(s)
     amsl = alt / 1000
     local = -float(s.plant["pos"][2])
@@ -266,11 +284,13 @@ def altitude(s: Snapshot) -> Any:
 
 
 def system_time(s: Snapshot) -> Any:
+    """SYSTEM_TIME: Unix time and time since boot (simulated)."""
     return mav.MAVLink_system_time_message(s.unix_us, _ms(s))
 
 
 def extended_sys_state(s: Snapshot) -> Any:
     # the simulated vehicle has no ground: it is always in the air
+    """EXTENDED_SYS_STATE: not a VTOL, in the air."""
     return mav.MAVLink_extended_sys_state_message(mav.MAV_VTOL_STATE_UNDEFINED,
                                                   mav.MAV_LANDED_STATE_IN_AIR)
 
@@ -310,6 +330,7 @@ def servo_output_raw_beta(s: Snapshot) -> Any:
 
 
 def autopilot_version(s: Snapshot) -> Any:
+    """AUTOPILOT_VERSION: capabilities and the PX4 version the bridge presents."""
     caps = (mav.MAV_PROTOCOL_CAPABILITY_MAVLINK2 | mav.MAV_PROTOCOL_CAPABILITY_PARAM_FLOAT |
             mav.MAV_PROTOCOL_CAPABILITY_PARAM_ENCODE_BYTEWISE |  # INT32 params, as PX4
             mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT |

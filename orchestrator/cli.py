@@ -283,6 +283,7 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    """The fullpose command line: every subcommand and its options."""
     parser = argparse.ArgumentParser(
         prog="fullpose",
         description="Co-simulation of over-actuated multirotors (FMI 2.0 plant and controller).",
@@ -424,6 +425,8 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
+    """Run the fullpose command: exit status 0, 2 for bad input (one line, no traceback), 3 for a
+    lost vehicle."""
     parser = build_parser()
     args = parser.parse_args(argv)
     if args.command is None:

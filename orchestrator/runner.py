@@ -51,6 +51,8 @@ class OutputError(OSError):
 
 @dataclass
 class RunOutput:
+    """What a run gives back: the result, the metrics, the files written, the lines comparing the
+    paper's claims and the phases' wall times."""
     result: RunResult
     metrics: dict[str, Any]
     files: list[Path]
@@ -323,6 +325,7 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
 
 
 def plot_files(result: RunResult, out_dir: Path, scenario: Scenario) -> list[Path]:
+    """Draw the run's figures into out_dir (in this process)."""
     from orchestrator.results.plots import plot_run
 
     return plot_run(result, out_dir, force_set_png=True, airframe=scenario.airframe)

@@ -473,6 +473,7 @@ def _bar(total: int, enabled: bool) -> Callable[..., None]:
 
 
 def table_rows(rows: Sequence[dict[str, Any]], deterministic: bool = True) -> list[list[str]]:
+    """The table of rows as text cells, header first (without wall times when deterministic)."""
     cols = [c for c in COLUMNS if not (deterministic and c == "wall_time")]
     out = [cols]
     for r in rows:
@@ -481,6 +482,8 @@ def table_rows(rows: Sequence[dict[str, Any]], deterministic: bool = True) -> li
 
 
 def write_outputs(rows: Sequence[dict[str, Any]], out: Path, meta: dict[str, Any]) -> list[Path]:
+    """Write the sweep's files into out (sweep.csv, sweep.parquet, report.md, the figures);
+    the paths written."""
     out.mkdir(parents=True, exist_ok=True)
     files = []
     path = out / "sweep.csv"
@@ -504,6 +507,7 @@ def write_outputs(rows: Sequence[dict[str, Any]], out: Path, meta: dict[str, Any
 
 
 def summarize(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, float]]:
+    """Per design: stable fraction, mean and worst max error, mean RMS error and recovery time."""
     out = {}
     for d in sorted({r["design"] for r in rows}):
         rs = [r for r in rows if r["design"] == d]
@@ -544,6 +548,7 @@ def sensitivity(rows: Sequence[dict[str, Any]]) -> dict[str, dict[str, dict[str,
 
 def report_markdown(stats: dict[str, dict[str, float]], meta: dict[str, Any],
                     sens: dict[str, dict[str, dict[str, float]]] | None = None) -> str:
+    """The sweep's report as Markdown."""
     lines = ["# Robustness sweep", "",
              f"{meta.get('n')} cases x {len(stats)} designs, seed {meta.get('seed')}, "
              f"{meta.get('duration')} s each; plant mass +-30 %, inertia +-50 %, actuator time "
@@ -596,6 +601,7 @@ def _reduction(x: float, ref: float) -> str:
 
 
 def plot(rows: Sequence[dict[str, Any]], out: Path) -> list[Path]:
+    """The sweep's figures (errors per design, the worst cases) into out; the paths."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
@@ -640,5 +646,6 @@ def _mpl_new() -> bool:
 
 
 def default_workers() -> int:
+    """The processes this one may run on."""
     return max(1, len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity")
                else os.cpu_count() or 1)

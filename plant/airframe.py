@@ -62,6 +62,7 @@ class Airframe:
 
     @property
     def n_rotors(self) -> int:
+        """Number of rotors."""
         return int(self.positions.shape[0])
 
     def native_buffer(self) -> ctypes.Array[ctypes.c_char]:
@@ -247,6 +248,7 @@ def list_airframes() -> list[str]:
 
 
 def resolve_airframe(name_or_path: str | Path) -> Path:
+    """The airframe file a name or path stands for (a shipped name, or a file)."""
     return resolve_file(name_or_path, "plant", "airframes", "airframe", AirframeError)
 
 
@@ -346,6 +348,7 @@ def _per_rotor(reader: _Reader, key: str, n: int, default: float) -> list[float]
 
 
 def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe:
+    """An airframe from a TOML document already read (source names it in errors)."""
     top = _Reader(source, data)
     name = top.string("name")
     description = top.string("description", "")

@@ -47,6 +47,7 @@ class RotorSet:
 
     @property
     def n(self) -> int:
+        """Number of rotors."""
         return int(self.positions.shape[0])
 
     def native_buffer(self) -> ctypes.Array[ctypes.c_char]:
@@ -65,9 +66,11 @@ class RotorSet:
         return out
 
     def B1(self) -> Array:
+        """The force rows of B (3 x 3n)."""
         return self.B()[:3]
 
     def B2(self) -> Array:
+        """The torque rows of B (3 x 3n)."""
         return self.B()[3:]
 
     def B_prime(self, alpha: object, beta: object) -> Array:

@@ -33,6 +33,7 @@ class BuildReport:
     total_seconds: float = 0.0
 
     def sizes(self) -> dict[str, int]:
+        """Size in bytes of each FMU built."""
         return {p.name: p.stat().st_size for p in self.fmus}
 
 

@@ -67,6 +67,7 @@ class Platform:
 
     @property
     def suffix(self) -> str:
+        """The binary's file suffix (.so, .dll, .dylib)."""
         return self.targets[0].suffix
 
 
@@ -94,6 +95,7 @@ def host_platform() -> Platform:
 
 
 def platform_named(name: str) -> Platform:
+    """The platform called name (or an alias), or PlatformBuildError naming the known ones."""
     for p in PLATFORMS:
         if name in (p.name, *p.aliases):
             return p

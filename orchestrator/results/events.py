@@ -23,6 +23,7 @@ MAX_PER_KIND = 200
 
 @dataclass(frozen=True)
 class Event:
+    """A moment on a run's timeline: its time (s), kind (KINDS) and text."""
     time: float
     kind: str  # one of KINDS
     text: str

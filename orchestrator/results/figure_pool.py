@@ -303,6 +303,7 @@ class FigurePool:
         return list(self._pids)
 
     def close(self) -> None:
+        """Stop the workers and free what they hold."""
         for q in self._queues:
             with contextlib.suppress(Exception):
                 q.put(None)

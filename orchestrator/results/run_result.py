@@ -121,9 +121,11 @@ class RunResult:
 
     @property
     def time(self) -> np.ndarray:
+        """The time column (s)."""
         return self.data[:, self._index["time"]]
 
     def has(self, name: str) -> bool:
+        """Whether the result has a column name (a scalar, or a vector's first element)."""
         return name in self._index or f"{name}[1]" in self._index
 
     def column(self, name: str) -> np.ndarray:
@@ -318,6 +320,7 @@ class RunResult:
 
     @classmethod
     def read_npz(cls, path: Path) -> RunResult:
+        """A results file of earlier versions (numpy archive)."""
         with np.load(path, allow_pickle=False) as z:
             if int(z["format_version"]) != FORMAT_VERSION:
                 raise ResultsFileError(f"{path}: result format {int(z['format_version'])}, "
@@ -328,6 +331,7 @@ class RunResult:
 
     @classmethod
     def read_csv(cls, path: Path) -> RunResult:
+        """A results.csv written by write_csv."""
         import pyarrow as pa
         import pyarrow.csv as pacsv
 

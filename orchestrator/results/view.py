@@ -397,6 +397,7 @@ class LiveView:
         self._named = True
 
     def close(self) -> None:
+        """Close the recording (and the file, with save)."""
         t0 = time.perf_counter()
         self._flush()
         self.rec.flush()

@@ -676,6 +676,7 @@ def list_scenarios() -> list[Scenario]:
 
 
 def resolve_scenario(name_or_path: str | Path) -> Path:
+    """The scenario file a name or path stands for (a shipped name, or a file)."""
     return resolve_file(name_or_path, "orchestrator", "scenarios", "scenario", ScenarioError)
 
 

@@ -18,6 +18,7 @@ class ScenarioError(FieldError):
 
 
 def is_number(value: object) -> bool:
+    """Whether value is an int or float (not a bool)."""
     return isinstance(value, (int, float)) and not isinstance(value, bool)
 
 
@@ -37,6 +38,7 @@ class FieldReader(TomlTable):
         return FieldReader(self.source, value, f"{self.field(key)}.")
 
     def integer(self, key: str) -> int:
+        """The integer at key; an error naming the field when missing or not an integer."""
         self.used.add(key)
         value = self.data.get(key)
         if key not in self.data:
@@ -46,6 +48,7 @@ class FieldReader(TomlTable):
         return value
 
     def numbers(self, key: str, *, increasing: bool = False) -> tuple[float, ...]:
+        """The non-empty array of numbers at key (strictly increasing with increasing)."""
         self.used.add(key)
         if key not in self.data:
             raise self.fail(key, "missing (expected an array of numbers)")
@@ -60,6 +63,7 @@ class FieldReader(TomlTable):
         return out
 
     def reject_unknown(self, hint: Callable[[str], str] | None = None) -> None:
+        """An error for the first key the reader was never asked for."""
         for key in self.data:
             if key not in self.used:
                 extra = hint(key) if hint is not None else ""

@@ -93,11 +93,13 @@ class Signal(ABC):
         return Sum((self, other))
 
     def scaled(self, factor: float) -> Signal:
+        """The signal times factor."""
         return Scaled(float(factor), self)
 
 
 @dataclass(frozen=True)
 class Constant(Signal):
+    """A constant level."""
     level: float
 
     def _eval(self, t: np.ndarray, order: int) -> np.ndarray:

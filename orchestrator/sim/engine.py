@@ -111,10 +111,12 @@ class Connections:
 
     @property
     def ref_names(self) -> list[str]:
+        """The controller's reference inputs the master drives, in order."""
         return [v for g in self.ref for v in g]
 
     @property
     def dist_names(self) -> list[str]:
+        """The plant's disturbance inputs the master drives, in order."""
         return [v for g in self.dist for v in g]
 
     @staticmethod
@@ -223,6 +225,7 @@ class Recording:
 
     @property
     def time(self) -> np.ndarray:
+        """The recorded time column."""
         return self.data[:, 0]
 
     def result_data(self, rows: int) -> np.ndarray:
@@ -239,6 +242,7 @@ class Recording:
 
     @property
     def commands(self) -> np.ndarray:
+        """The controller's actuator-command columns of every row."""
         return self.ctrl[:, :self.n_commands]
 
     @property
@@ -315,6 +319,7 @@ class Engine(ABC):
         """Rows first .. last-1: each FMU called as the coupling says; RunError on a failure."""
 
     def fail(self, t: float, row: int = -1) -> None:
+        """Raise RunError at t (row: the last complete row), with the FMUs' last error messages."""
         insts = [i for i in (self.plant, self.ctrl) if i is not None]
         msgs = [f"{i.md.modelName}: {m}" for i in insts
                 for s, _, m in i.messages if s in ("ERROR", "FATAL", "DISCARD")]
@@ -369,6 +374,8 @@ class PythonEngine(Engine):
     """The per-step call sequence from Python: the oracle of :class:`NativeEngine`."""
 
     def steps(self, first: int, last: int, t0: float) -> None:
+        """Run rows first..last (exclusive) from t0: the reference Python loop of the native
+        kernel."""
         rec, v, h, jacobi = self.rec, self.vrs, self.h, self.jacobi
         pc = self.plant.slave.component
         p_set, p_step, p_get, p_geti = (self._p[n] for n in _PLANT_FNS)
@@ -445,6 +452,7 @@ class NativeEngine(Engine):
                       _address(rec.data, rec.spare), offsets)
 
     def steps(self, first: int, last: int, t0: float) -> None:
+        """Run rows first..last (exclusive) from t0 in the C step kernel (libfp_cosim)."""
         if self._lib.fp_cosim_steps(*self._args, t0, self.h, int(self.jacobi), first, last,
                                     ctypes.byref(self._failed)):
             k = int(self._failed.value)

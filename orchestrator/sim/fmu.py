@@ -48,6 +48,7 @@ def installed_fmu(model: str) -> Path:
 
 
 def status_name(status: int) -> str:
+    """The FMI status name of a status code (fmi2OK -> 'OK', ...)."""
     return _STATUS[status] if 0 <= status < len(_STATUS) else str(status)
 
 
@@ -131,6 +132,7 @@ class FmuInstance:
     # -- variables -------------------------------------------------------------
 
     def vr(self, name: str) -> int:
+        """The value reference of the variable called name."""
         try:
             return int(self.variables[name].valueReference)
         except KeyError:
@@ -147,6 +149,8 @@ class FmuInstance:
         return names
 
     def signal(self, names: str | Iterable[str]) -> Signal:
+        """The Real variables called names (a name or several; a vector name stands for all
+        its elements) as one signal, read and written in one fmi2GetReal / fmi2SetReal."""
         expanded: list[str] = []
         for n in [names] if isinstance(names, str) else names:
             expanded += self.expand(n)
@@ -154,15 +158,18 @@ class FmuInstance:
         return Signal(expanded, refs, np.zeros(len(expanded)))
 
     def read(self, sig: Signal) -> np.ndarray:
+        """The current values of a signal, as float64."""
         sig.values[:] = self.slave.getReal(sig.refs)
         return sig.values
 
     def write(self, sig: Signal, values: Iterable[float] | np.ndarray) -> None:
+        """Set a signal's variables to values (in the signal's order)."""
         more = ", ..." if len(sig.names) > 3 else ""
         with self.call(f"setting {', '.join(sig.names[:3])}{more}"):
             self.slave.setReal(sig.refs, list(np.asarray(values, dtype=float).reshape(-1)))
 
     def get(self, name: str) -> float | int | bool:
+        """The current value of one variable, by name."""
         v = self.variables[name]
         ref = [int(v.valueReference)]
         if v.type == "Real":
@@ -172,6 +179,7 @@ class FmuInstance:
         return bool(self.slave.getBoolean(ref)[0])
 
     def set(self, name: str, value: float | int | bool) -> None:
+        """Set one variable, by name."""
         try:
             v = self.variables[name]
         except KeyError:
@@ -236,11 +244,13 @@ class FmuInstance:
         self.time = start_time
 
     def exit_initialization(self) -> None:
+        """fmi2ExitInitializationMode: the FMU validates its parameters and is ready to step."""
         with self.call("fmi2ExitInitializationMode"):
             self.slave.exitInitializationMode()
 
     def initialize(self, start_time: float = 0.0,
                    parameters: Mapping[str, float | int | bool] | None = None) -> None:
+        """Enter and exit initialization at start_time with these parameter start values."""
         self.enter_initialization(start_time, parameters)
         self.exit_initialization()
 
@@ -256,11 +266,13 @@ class FmuInstance:
         self.time = 0.0
 
     def step(self, h: float) -> None:
+        """fmi2DoStep from the instance's time by h seconds (an error raises FmuError)."""
         with self.call(f"fmi2DoStep at t = {self.time:.6g} s"):
             self.slave.doStep(currentCommunicationPoint=self.time, communicationStepSize=h)
         self.time += h
 
     def close(self) -> None:
+        """Terminate and free the instance, and remove its unzipped files when it unzipped them."""
         try:
             self.slave.terminate()
         except Exception:

@@ -28,6 +28,8 @@ OUTPUTS = ("pos", "vel", "euler")
 
 @dataclass
 class HoverSummary:
+    """What the open-loop hover demo reports: the airframe, duration, steps and the largest
+    position and attitude drifts."""
     airframe: str
     duration: float
     steps: int

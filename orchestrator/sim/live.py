@@ -146,6 +146,7 @@ class LiveSession:
         return {fmu: {k: np.array(v) for k, v in d.items()} for fmu, d in out.items()}
 
     def close(self) -> None:
+        """Free both FMU instances."""
         for inst in (getattr(self, "plant_inst", None), getattr(self, "ctrl_inst", None)):
             if inst is not None:
                 inst.close()

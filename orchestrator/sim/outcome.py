@@ -42,6 +42,7 @@ class LostCriteria:
     tilt_deg: float = DEFAULT_TILT_DEG  # deg
 
     def summary(self) -> dict[str, float]:
+        """The criteria as JSON-ready data."""
         return {"position_error": self.position_error, "tilt_deg": self.tilt_deg}
 
 
@@ -55,6 +56,7 @@ class Lost:
     nonfinite: bool = False  # the row itself is not finite (the recording ends before it)
 
     def summary(self) -> dict[str, Any]:
+        """The outcome as JSON-ready data."""
         return {"outcome": "lost", "time": self.time, "reason": self.reason}
 
 

@@ -44,6 +44,7 @@ class Pose:
     @staticmethod
     def of(pos: Sequence[float] = (0.0, 0.0, -3.0), euler: Sequence[float] = (0.0, 0.0, 0.0),
            vel: Sequence[float] = (0.0, 0.0, 0.0)) -> Pose:
+        """A pose from any 3-sequences (checked to have 3 elements)."""
         return Pose(_vec3("pos", pos), _vec3("euler", euler), _vec3("vel", vel))
 
 

@@ -38,20 +38,25 @@ class TomlTable:
         self.used: set[str] = set()
 
     def field(self, key: str) -> str:
+        """The field's full name in messages (with its table prefix)."""
         return f"{self.prefix}{key}"
 
     def fail(self, key: str, reason: str) -> FieldError:
+        """The error for key: the file, the field and reason."""
         return self.error(self.source, self.field(key), reason)
 
     def has(self, key: str) -> bool:
+        """Whether the table has key."""
         return key in self.data
 
     def raw(self, key: str) -> Any:
+        """The value at key as it is (None when missing)."""
         self.used.add(key)
         return self.data.get(key)
 
     def number(self, key: str, default: float | None = None, *, positive: bool = False,
                nonnegative: bool = False) -> float:
+        """The number at key (default when missing), checked positive or non-negative on request."""
         self.used.add(key)
         if key not in self.data:
             if default is None:
@@ -71,6 +76,7 @@ class TomlTable:
 
     def string(self, key: str, default: str | None = None,
                choices: Sequence[str] | None = None) -> str:
+        """The string at key (default when missing)."""
         self.used.add(key)
         if key not in self.data:
             if default is None:
