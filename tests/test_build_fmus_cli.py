@@ -97,6 +97,7 @@ def test_a_failing_compile_names_the_target_and_leaves_the_output_untouched(tmp_
     assert (out / "MultirotorPlant.fmu").read_bytes() == b"the previous build"
 
 
+@pytest.mark.platforms
 def test_host_build_prints_times_and_sizes_and_is_byte_for_byte_reproducible(tmp_path, capsys):
     pytest.importorskip("ziglang", reason="the Zig cross compiler (pip install -e '.[test]')")
     archives = []

@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 from airframe_kinds import KINDS, load_kind, write_kind
 from fmpy.fmi1 import FMICallException
+from helpers import problems
 
 import plant
 from controller import controller_fmu
@@ -142,17 +143,13 @@ def _init_ctrl(af, extra=None, pos_ref=(0.0, 0.0, -3.0)):
     return c
 
 
-def _messages(c):
-    return " | ".join(m for s, _, m in c.messages if s in ("ERROR", "WARNING"))
-
-
 @pytest.mark.parametrize("name", ["x8_coaxial", "y6", "quadrotor"])
 def test_the_fmu_with_only_airframe_parameters_hovers_without_false_warnings(name):
     af = plant.load_airframe(name)
     c = _init_ctrl(af)
     try:
         c.slave.exitInitializationMode()
-        log = _messages(c)
+        log = problems(c)
         assert "leaves no hover force" not in log or name == "quadrotor", log
         for _ in range(50):
             c.step(H)
@@ -187,7 +184,7 @@ def test_another_vehicles_sets_are_refused():
     try:
         with pytest.raises(FMICallException):
             c.slave.exitInitializationMode()
-        log = _messages(c)
+        log = problems(c)
         assert "poly_A, poly_b" in log and "another vehicle" in log, log
     finally:
         c.close()
@@ -215,7 +212,7 @@ def test_given_sets_of_this_vehicle_are_used_as_given():
         c = _init_ctrl(af, extra)
         try:
             c.slave.exitInitializationMode()
-            assert "another vehicle" not in _messages(c)
+            assert "another vehicle" not in problems(c)
             limits.append(np.array(c.read(c.signal("ref_acc_limit"))))
         finally:
             c.close()
@@ -238,7 +235,7 @@ def _refused(fmu, af) -> str:
         inst.slave.enterInitializationMode()
         with pytest.raises(FMICallException):
             inst.slave.exitInitializationMode()
-        return _messages(inst)
+        return problems(inst)
     finally:
         inst.close()
 
@@ -299,7 +296,7 @@ def test_a_bicopter_that_tilts_keeps_its_authority():
                     inst.slave.exitInitializationMode()
             else:
                 inst.slave.exitInitializationMode()
-            assert ("moment arms" in _messages(inst)) == refused
+            assert ("moment arms" in problems(inst)) == refused
         finally:
             inst.close()
 

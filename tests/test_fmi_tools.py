@@ -58,6 +58,7 @@ def checker_counts(text: str) -> tuple[int, int]:
     return int(m.group(1)), int(m.group(2))
 
 
+@pytest.mark.fmitools
 @pytest.mark.parametrize("model", MODELS)
 def test_fmpy_validator_finds_no_problem(model):
     assert validate_fmu(str(installed_fmu(model))) == []
@@ -89,6 +90,7 @@ def check(fmu: Path, model: str, step: float | None, tmp_path: Path) -> None:
 
 @pytest.mark.parametrize("model", MODELS)
 @pytest.mark.parametrize("step", [None, 0.002, 0.0007])
+@pytest.mark.fmitools
 def test_compliance_checker_reports_nothing(model, step, tmp_path):
     """The installed FMUs with the communication step the checker derives (stop / 500 =
     20 ms), the FMUs' own 2 ms, or a step that divides neither FMU's internal step."""
@@ -96,6 +98,7 @@ def test_compliance_checker_reports_nothing(model, step, tmp_path):
 
 
 @pytest.mark.parametrize("model", MODELS)
+@pytest.mark.fmitools
 def test_the_multi_platform_archives_pass_the_checker_and_fmusim(model, dist, tmp_path):
     """``fullpose build-fmus --platforms all``: the same checks on the archives that carry
     every platform's binary (the checker and fmusim run the linux64 one)."""
@@ -143,12 +146,14 @@ def simulate(fmu: Path, stop_time: float, out: Path) -> tuple[dict[str, int], np
 
 
 @pytest.mark.parametrize("model", MODELS)
+@pytest.mark.fmitools
 def test_fmusim_validates_the_archive(model):
     text = fmusim("validate", str(installed_fmu(model)))
     assert "Validating model description" in text
     assert "Validating build description" in text
 
 
+@pytest.mark.fmitools
 def test_fmusim_flies_the_plant_at_hover(tmp_path):
     """fmusim runs the plant alone for 10 s with its default inputs (rotors at hover trim,
     init_trim = true, at the origin): the vehicle holds its start point, as physics says for
@@ -159,6 +164,7 @@ def test_fmusim_flies_the_plant_at_hover(tmp_path):
     assert np.abs(pos - pos[0]).max() < 1e-6
 
 
+@pytest.mark.fmitools
 def test_fmusim_steps_the_controller_alone(tmp_path):
     """The controller with its default inputs (the paper's hexacopter at hover trim at the
     origin, reference the same point) commands the trim it is given: rotor speed commands

@@ -140,6 +140,7 @@ def assert_bit_identical(shipped, rebuilt):
 
 
 @pytest.mark.skipif(fmpy.platform != "linux64", reason="the rebuild runs on x86_64 Linux")
+@pytest.mark.platforms
 def test_fmpy_builder_rebuilds_both_fmus_bit_identically(tmp_path, monkeypatch, shipped_run):
     if shutil.which("cmake") is None:
         pytest.fail("cmake is needed by fmpy's platform-binary builder")
@@ -156,6 +157,7 @@ def test_fmpy_builder_rebuilds_both_fmus_bit_identically(tmp_path, monkeypatch, 
 
 
 @pytest.mark.skipif(fmpy.platform != "linux64", reason="the one-line command is for Linux")
+@pytest.mark.platforms
 def test_documented_one_line_command_rebuilds_both_fmus_bit_identically(tmp_path, monkeypatch,
                                                                          shipped_run):
     out = tmp_path / "fmus"

@@ -10,6 +10,7 @@ import time
 from pathlib import Path
 
 import mavlink_harness as harness
+import pytest
 from mavlink_harness import free_port
 
 os.environ["MAVLINK20"] = "1"
@@ -33,6 +34,7 @@ def finish(bridge, thread):
     assert not thread.is_alive()
 
 
+@pytest.mark.clients
 def test_mavproxy_headless_sees_mode_attitude_and_position(tmp_path):
     # MAVProxy without a console or map: commands on stdin, no default modules (no GUI)
     out, _ = harness.mavproxy_session(
@@ -43,6 +45,7 @@ def test_mavproxy_headless_sees_mode_attitude_and_position(tmp_path):
     assert "LOCAL_POSITION_NED {" in out and "z : -3.0" in out, out
 
 
+@pytest.mark.clients
 def test_mavsdk_arms_starts_offboard_and_reaches_a_position():
     from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
     from mavsdk.plugins.action import Action

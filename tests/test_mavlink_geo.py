@@ -254,7 +254,10 @@ def test_body_offset_ned_is_an_offset_in_the_body_frame(flight):
     hold = lambda: f.local(0.0, 0.0, -3.0, yaw=yaw, mask=POS_YAW)  # noqa: E731
     hold()
     f.command(176, 1, 6, 0)
-    f.settle(6.0, hold)
+    deadline = time.monotonic() + 10.0  # the turn takes ~4 s simulated (1 s wall at 4x)
+    while (abs(f.wait("ATTITUDE", during=hold).yaw - yaw) >= 0.01
+           and time.monotonic() < deadline):
+        pass
     assert abs(f.wait("ATTITUDE", during=hold).yaw - yaw) < 0.01
     before = f.pos(hold)
     # once: 1 m forward, 0.5 m right (= south), 0.4 m down in the body frame; then only the
@@ -267,6 +270,7 @@ def test_body_offset_ned_is_an_offset_in_the_body_frame(flight):
 
 # -- MAVSDK --------------------------------------------------------------------------------
 
+@pytest.mark.clients
 def test_mavsdk_position_home_health_battery_and_set_position_global():
     from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
     from mavsdk.plugins.action import Action
@@ -344,6 +348,7 @@ def test_mavsdk_position_home_health_battery_and_set_position_global():
 
 # -- MAVProxy ------------------------------------------------------------------------------
 
+@pytest.mark.clients
 def test_mavproxy_sees_the_global_position_and_no_fence_breach(tmp_path):
     # no GUI modules; the fence module is the one that printed "fence breach"
     out, fly_out = harness.mavproxy_session(

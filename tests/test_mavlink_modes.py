@@ -307,6 +307,7 @@ def qgc_sequence(g):
     assert g.thread.is_alive() and g.bridge.stats.ignored == 0
 
 
+@pytest.mark.clients
 def test_mavros_connect_and_offboard_sequence_replayed():
     """MAVROS (mavros/src/plugins/): sys_status autopilot_version_cb sends REQUEST_AUTOPILOT_
     CAPABILITIES (param1 1, broadcast first); param param_request_list; waypoint, geofence
@@ -346,6 +347,7 @@ def test_mavros_connect_and_offboard_sequence_replayed():
         g.close()
 
 
+@pytest.mark.clients
 def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
     out, _ = harness.mavproxy_session(
         tmp_path, ["--duration", "60"], "ftp,param,cmdlong",
@@ -363,6 +365,7 @@ def test_mavproxy_changes_mode_with_long_do_set_mode(tmp_path):
     assert "DO_SET_MODE" in out and "DENIED" in out, out
 
 
+@pytest.mark.clients
 def test_mavsdk_downloads_empty_plans_and_changes_mode():
     from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
     from mavsdk.plugins.action import Action, ActionError

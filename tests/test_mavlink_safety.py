@@ -214,6 +214,7 @@ def test_integer_parameter_is_int32_byte_wise_and_set_by_its_type(flight):
     assert pv.param_type == REAL32 and pv.param_value == pytest.approx(1.0)  # COM_OF_LOSS_T
 
 
+@pytest.mark.clients
 def test_mavsdk_int_and_float_parameter_round_trips():
     from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
     from mavsdk.plugins.param import Param, ParamError

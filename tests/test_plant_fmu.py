@@ -23,6 +23,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
 )
 from fmpy.validation import validate_fmu
+from helpers import logged
 from scipy.spatial.transform import Rotation
 
 from plant import load_airframe
@@ -110,10 +111,6 @@ def trim_feedback(inst: object) -> None:
     """Command exactly the actuator state the FMU measured after initialization."""
     for meas, cmd in (("omega", "omega_cmd"), ("alpha", "alpha_cmd"), ("beta", "beta_cmd")):
         inst.write(inst.signal(cmd), inst.read(inst.signal(meas)))
-
-
-def errors(inst: object) -> list[str]:
-    return [m for status, _, m in inst.messages if status == "ERROR"]
 
 
 def snapshot(inst: object) -> np.ndarray:
@@ -637,13 +634,13 @@ def test_deserializing_garbage_fails_with_a_message(make_plant):
     with pytest.raises(FMICallException) as e:
         inst.slave.deSerializeFMUstate(b"garbage")
     assert e.value.status == FMI2_ERROR
-    assert any("fmi2DeSerializeFMUstate" in m and str(size) in m for m in errors(inst))
+    assert any("fmi2DeSerializeFMUstate" in m and str(size) in m for m in logged(inst, "ERROR"))
     inst.messages.clear()
     noise = np.random.default_rng(0).integers(0, 256, size, dtype=np.uint8).tobytes()
     with pytest.raises(FMICallException) as e:
         inst.slave.deSerializeFMUstate(noise)
     assert e.value.status == FMI2_ERROR
-    assert any("not serialized by this model" in m for m in errors(inst)), inst.messages
+    assert any("not serialized by this model" in m for m in logged(inst, "ERROR")), inst.messages
     # the instance itself is untouched
     trim_feedback(inst)
     inst.step(H)
@@ -669,7 +666,7 @@ def test_restoring_a_structurally_corrupt_state_is_refused(make_plant):
     state = inst.slave.deSerializeFMUstate(bytes(bad))  # resealed: only the model can tell
     with pytest.raises(FMICallException):
         inst.slave.setFMUstate(state)
-    assert any("rotor count 40" in m for m in errors(inst)), inst.messages
+    assert any("rotor count 40" in m for m in logged(inst, "ERROR")), inst.messages
     inst.slave.setFMUstate(inst.slave.deSerializeFMUstate(bytes(good)))  # still usable
     trim_feedback(inst)
     inst.step(H)
@@ -682,7 +679,7 @@ def test_non_finite_input_at_initialization_is_refused(make_plant):
     inst.slave.enterInitializationMode()
     with pytest.raises(FMICallException):
         inst.slave.exitInitializationMode()
-    assert any("input f_d[1]" in m for m in errors(inst))
+    assert any("input f_d[1]" in m for m in logged(inst, "ERROR"))
 
 
 def test_reset_then_reinitialize_reproduces_the_run(make_plant, run_steps):
@@ -818,7 +815,8 @@ def test_a_latency_beyond_the_kept_points_is_an_error(make_plant):
     with pytest.raises(FMICallException):
         for _ in range(200):
             inst.step(0.0005)
-    assert any("mocap_delay = 0.3 s" in m and "512" in m for m in errors(inst)), inst.messages
+    assert any("mocap_delay = 0.3 s" in m and "512" in m
+               for m in logged(inst, "ERROR")), inst.messages
 
 
 def test_attitude_noise_keeps_quaternion_consistent(make_plant, run_steps):
@@ -860,7 +858,7 @@ def test_bad_parameters_are_refused(make_plant, params, name):
         inst.initialize(parameters=params)
     assert e.value.status == FMI2_ERROR
     assert e.value.function == "fmi2ExitInitializationMode"
-    msgs = errors(inst)
+    msgs = logged(inst, "ERROR")
     assert any(f"parameter {name}" in m for m in msgs), inst.messages
 
 
@@ -868,7 +866,7 @@ def test_paper_inertia_warns_but_initializes(make_plant):
     inst = make_plant()  # Iz = 0.0599 > Ix + Iy = 0.0089, as published
     warnings = [m for s, _, m in inst.messages if s == "WARNING"]
     assert any("inertia" in m for m in warnings), inst.messages
-    assert not errors(inst)
+    assert not logged(inst, "ERROR")
     inst.step(H)
     ok = make_plant(load_airframe("quadrotor").fmu_parameters())
     assert not [m for s, _, m in ok.messages if s in ("WARNING", "ERROR")], ok.messages
@@ -894,7 +892,7 @@ def test_bad_input_fails_the_step_without_corrupting_state(make_plant, run_steps
     with pytest.raises(FMICallException) as e:
         inst.step(H)
     assert e.value.status == FMI2_ERROR
-    assert any(name in m for m in errors(inst)), inst.messages
+    assert any(name in m for m in logged(inst, "ERROR")), inst.messages
     np.testing.assert_array_equal(snapshot(inst), before)
     # back to the saved state, the run continues as if nothing had happened
     inst.slave.setFMUstate(state)
@@ -1007,7 +1005,7 @@ def test_bad_step_size_is_refused(make_plant, h, fragment):
     with pytest.raises(FMICallException) as e:
         inst.slave.doStep(inst.time, h)
     assert e.value.status == FMI2_ERROR
-    assert any(fragment in m for m in errors(inst)), inst.messages
+    assert any(fragment in m for m in logged(inst, "ERROR")), inst.messages
     np.testing.assert_array_equal(snapshot(inst), before)
 
 
@@ -1017,7 +1015,7 @@ def test_wrong_communication_point_is_refused(make_plant):
     with pytest.raises(FMICallException) as e:
         inst.slave.doStep(inst.time + 0.001, H)
     assert e.value.status == FMI2_ERROR
-    assert any("currentCommunicationPoint" in m for m in errors(inst)), inst.messages
+    assert any("currentCommunicationPoint" in m for m in logged(inst, "ERROR")), inst.messages
 
 
 # ---------------------------------------------------------------------------
@@ -1029,7 +1027,7 @@ def _assert_refused(inst, call, fragment: str) -> None:
     with pytest.raises(FMICallException) as e:
         call()
     assert e.value.status == FMI2_ERROR
-    assert any(fragment in m for m in errors(inst)), inst.messages
+    assert any(fragment in m for m in logged(inst, "ERROR")), inst.messages
 
 
 def test_illegal_calls_leave_the_state_unchanged(make_plant, run_steps):
@@ -1043,7 +1041,7 @@ def test_illegal_calls_leave_the_state_unchanged(make_plant, run_steps):
     trim_feedback(inst)
     _assert_refused(inst, lambda: inst.set("pos[1]", 1.0), "cannot set pos[1]: it is an output")
     _assert_refused(inst, lambda: inst.set("mass", 1.0), "cannot set mass")
-    assert "fixed parameter" in errors(inst)[0]
+    assert "fixed parameter" in logged(inst, "ERROR")[0]
     _assert_refused(inst, lambda: inst.slave.setReal([9999], [1.0]),
                     "unknown value reference 9999")
     _assert_refused(inst, lambda: inst.slave.getReal([9999]), "unknown value reference 9999")
@@ -1092,7 +1090,7 @@ def test_inputs_of_unused_rotors_are_ignored(make_plant):
     inst.set("efficiency[7]", 5.0)
     inst.step(H)
     assert inst.get("omega[6]") == 0.0
-    assert not errors(inst)
+    assert not logged(inst, "ERROR")
 
 
 def test_wrong_guid_is_refused(plant_fmu, plant_unzip_dir):
@@ -1155,4 +1153,4 @@ def test_quadrotor_cannot_trim_at_a_roll(make_plant):
     with pytest.raises(FMICallException) as e:
         inst.initialize(parameters=params)
     assert e.value.status == FMI2_ERROR
-    assert any("init_trim" in m for m in errors(inst)), inst.messages
+    assert any("init_trim" in m for m in logged(inst, "ERROR")), inst.messages

@@ -15,6 +15,7 @@ from contextlib import contextmanager
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
+from helpers import logged
 
 from controller import controller_fmu
 from controller.wls import solve
@@ -33,10 +34,6 @@ def _plant_at_trim(inst: FmuInstance) -> None:
     inst.write(inst.signal(COMMANDS), inst.read(inst.signal(ACTUATORS)))
 
 
-def _errors(inst: FmuInstance) -> list[str]:
-    return [m for s, _, m in inst.messages if s in ("ERROR", "WARNING")]
-
-
 def test_plant_refuses_a_step_that_leaves_the_physical_range_and_keeps_its_state():
     with FmuInstance(plant_fmu(), "plant") as inst:
         _plant_at_trim(inst)
@@ -48,8 +45,8 @@ def test_plant_refuses_a_step_that_leaves_the_physical_range_and_keeps_its_state
                 before = inst.read(outputs).copy()
                 inst.step(H)
                 assert np.all(np.isfinite(inst.read(outputs)))
-        assert any("rate[1]" in m and "physical range" in m for m in _errors(inst)), \
-            inst.messages
+        assert any("rate[1]" in m and "physical range" in m
+                   for m in logged(inst, "ERROR", "WARNING")), inst.messages
         after = inst.read(outputs)
         assert np.all(np.isfinite(after))
         np.testing.assert_array_equal(after, before)  # the state from before the step
@@ -83,7 +80,7 @@ def test_plant_in_closed_loop_never_answers_nan_with_ok():
             assert np.all(np.isfinite(p.read(y_p)))
         assert refused or np.all(np.isfinite(p.read(y_p)))
         if refused:
-            assert any("physical range" in m for m in _errors(p))
+            assert any("physical range" in m for m in logged(p, "ERROR", "WARNING"))
 
 
 def _hovering_controller(c: FmuInstance):
@@ -111,13 +108,14 @@ def test_one_absurd_measurement_is_held_and_control_recovers_at_once():
         c.write(pos, [1e300, y["pos"][1], y["pos"][2]])  # finite, absurd
         c.step(H)
         np.testing.assert_array_equal(c.read(status), held)  # last valid command held
-        assert any("pos[1]" in m and "plausible range" in m for m in _errors(c)), c.messages
+        assert any("pos[1]" in m and "plausible range" in m
+                   for m in logged(c, "ERROR", "WARNING")), c.messages
         c.write(pos, y["pos"])
         c.step(H)  # the next sane sample: the guidance works again, nothing poisoned
         assert c.get("guid_status") == 0
         assert np.all(np.isfinite(c.read(status)))
         np.testing.assert_allclose(c.read(status), held, rtol=1e-6, atol=1e-6)
-        assert any("control resumed" in m for m in _errors(c))
+        assert any("control resumed" in m for m in logged(c, "ERROR", "WARNING"))
 
 
 def test_an_absurd_reference_is_refused_loudly_not_flown():
@@ -133,8 +131,8 @@ def test_an_absurd_reference_is_refused_loudly_not_flown():
         got = c.read(outputs)
         assert np.all(np.isfinite(got))
         np.testing.assert_array_equal(got, good)
-        assert any("acc_ref[1]" in m and "plausible range" in m for m in _errors(c)), \
-            c.messages
+        assert any("acc_ref[1]" in m and "plausible range" in m
+                   for m in logged(c, "ERROR", "WARNING")), c.messages
         c.write(c.signal("acc_ref"), [0.0, 0.0, 0.0])
         c.step(H)
         assert c.get("guid_status") == 0
@@ -191,7 +189,7 @@ def test_one_dostep_has_a_bounded_cost(model, h, limit):
         with pytest.raises(FMICallException):
             inst.step(h)
         assert time.perf_counter() - t0 < 1.0
-        assert any(limit in m for m in _errors(inst)), inst.messages
+        assert any(limit in m for m in logged(inst, "ERROR", "WARNING")), inst.messages
 
 
 @pytest.mark.parametrize("model", ["plant", "controller"])
@@ -199,4 +197,4 @@ def test_a_nan_step_size_is_refused_with_a_message(model):
     with _ready(model) as inst:
         with pytest.raises(FMICallException):
             inst.step(float("nan"))
-        assert _errors(inst), inst.messages
+        assert logged(inst, "ERROR", "WARNING"), inst.messages

@@ -32,6 +32,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from fmpy.fmi1 import FMICallException
+from helpers import logged
 
 from controller import controller_fmu
 from orchestrator.sim.fmu import FmuInstance
@@ -70,10 +71,6 @@ def reseal(blob: bytes | bytearray) -> bytes:
     return bytes(b)
 
 
-def errors(inst: FmuInstance) -> str:
-    return " | ".join(m for s, _, m in inst.messages if s == "ERROR")
-
-
 @pytest.fixture
 def make():
     made: list[FmuInstance] = []
@@ -106,7 +103,7 @@ def refused(inst: FmuInstance, blob: bytes, fragment: str) -> None:
         state = inst.slave.deSerializeFMUstate(blob)
         inst.slave.setFMUstate(state)  # reached only if deserialization let it through
     assert e.value.status == FMI2_ERROR
-    assert fragment in errors(inst), inst.messages
+    assert fragment in " | ".join(logged(inst, "ERROR")), inst.messages
 
 
 @pytest.mark.parametrize("which", ["plant", "controller"])
@@ -197,7 +194,8 @@ def test_a_state_continues_bit_identically_in_another_process(make, which, tmp_p
 def test_a_state_of_another_fmu_is_refused(make):
     plant, ctrl = make("plant"), make("controller")
     refused(ctrl, serialize(plant), "belongs to another FMU")
-    assert plant.md.guid in errors(ctrl) and ctrl.md.guid in errors(ctrl)
+    said = " | ".join(logged(ctrl, "ERROR"))
+    assert plant.md.guid in said and ctrl.md.guid in said
     refused(plant, serialize(ctrl), "belongs to another FMU")
 
 
