@@ -2,7 +2,14 @@
 
 from __future__ import annotations
 
+import os
+import subprocess
+import sys
+import sysconfig
+from pathlib import Path
 from typing import Any
+
+import pytest
 
 
 def logged(inst: Any, *statuses: str) -> list[str]:
@@ -14,3 +21,23 @@ def logged(inst: Any, *statuses: str) -> list[str]:
 def problems(inst: Any) -> str:
     """The instance's errors and warnings, joined into one line for assertions on text."""
     return " | ".join(logged(inst, "ERROR", "WARNING"))
+
+
+# the command installed beside the running interpreter, never one a PATH happens to find
+FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
+
+
+def fullpose(*args: str, check: bool = False, cwd: Path | None = None,
+             timeout: float = 600) -> subprocess.CompletedProcess[str]:
+    """Run the installed ``fullpose`` command as a user types it (output captured)."""
+    if not FULLPOSE.is_file():
+        pytest.fail(f"{FULLPOSE} missing: `pip install .` installs the fullpose command")
+    return subprocess.run([str(FULLPOSE), *args], capture_output=True, text=True, check=check,
+                          timeout=timeout, cwd=cwd)
+
+
+def cli(*args: str, cwd: Path | None = None,
+        timeout: float = 300) -> subprocess.CompletedProcess[str]:
+    """Run the CLI of this interpreter's orchestrator (``python -m orchestrator.cli``)."""
+    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args],
+                          capture_output=True, text=True, timeout=timeout, cwd=cwd)

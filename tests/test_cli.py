@@ -5,30 +5,20 @@ import json
 import os
 import subprocess
 import sys
-import sysconfig
 from pathlib import Path
 
 import pytest
-
-# the command installed beside the running interpreter, never one a PATH happens to find
-FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
-
-
-def run(*args, check=True):
-    if not FULLPOSE.is_file():
-        pytest.fail(f"{FULLPOSE} missing: `pip install .` installs the fullpose command")
-    cmd = [str(FULLPOSE), *args]
-    return subprocess.run(cmd, capture_output=True, text=True, check=check, timeout=300)
+from helpers import fullpose
 
 
 def test_help_lists_commands():
-    out = run("--help").stdout
+    out = fullpose("--help", check=True).stdout
     for command in ("hover", "airframes", "fmus"):
         assert command in out
 
 
 def test_hover_demo_writes_results(tmp_path):
-    out = run("hover", "--duration", "1", "--out", str(tmp_path)).stdout
+    out = fullpose("hover", "--duration", "1", "--out", str(tmp_path), check=True).stdout
     assert "max position drift" in out
     summary = json.loads((tmp_path / "hover_summary.json").read_text())
     assert summary["steps"] == 500
@@ -43,21 +33,21 @@ def test_hover_demo_writes_results(tmp_path):
 
 @pytest.mark.parametrize("frame", ["fixed_tilt_hexarotor", "quadrotor"])
 def test_hover_other_airframes(frame):
-    out = run("hover", "--airframe", frame, "--duration", "0.5").stdout
+    out = fullpose("hover", "--airframe", frame, "--duration", "0.5", check=True).stdout
     assert frame in out
 
 
 def test_bad_airframe_file_is_named(tmp_path):
     bad = tmp_path / "frame.toml"
     bad.write_text('name = "x"\n[body]\nmass = -1\n')
-    res = run("hover", "--airframe", str(bad), check=False)
+    res = fullpose("hover", "--airframe", str(bad), check=False)
     assert res.returncode == 2
     assert str(bad) in res.stderr and "body.mass" in res.stderr
 
 
 def test_airframes_and_fmus_listing():
-    assert "paper_hexacopter" in run("airframes").stdout
-    assert "MultirotorPlant.fmu" in run("fmus").stdout
+    assert "paper_hexacopter" in fullpose("airframes", check=True).stdout
+    assert "MultirotorPlant.fmu" in fullpose("fmus", check=True).stdout
 
 
 _HUGE_PAGES_PROBE = """

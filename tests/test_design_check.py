@@ -9,12 +9,10 @@ of the certified set (the design airframe's actuator lag x [0.7, 1.3])."""
 from __future__ import annotations
 
 import json
-import subprocess
-import sys
-from pathlib import Path
 
 import pytest
 from airframe_kinds import write_kind
+from helpers import cli
 
 import plant
 from controller import design_check
@@ -23,9 +21,6 @@ from controller.gains_defaults import CACHE
 SHIPPED_GAMMA = json.loads(CACHE.read_text())["report"]
 
 
-def cli(*args: str, cwd: Path | None = None) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args],
-                          capture_output=True, text=True, timeout=300, cwd=cwd)
 
 
 @pytest.mark.parametrize("name", plant.list_airframes())

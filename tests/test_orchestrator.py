@@ -4,13 +4,10 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import os
-import subprocess
-import sysconfig
-from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import fullpose as cli
 
 from orchestrator.master import run
 from orchestrator.results.metrics import compute_metrics
@@ -18,15 +15,6 @@ from orchestrator.results.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
 
 PAPER = ["hover_varying_orientation", "translation_frequency_sweep", "full_pose_with_disturbances"]
-# the command installed beside the running interpreter, never one a PATH happens to find
-FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
-
-
-def cli(*args, check=False):
-    if not FULLPOSE.is_file():
-        pytest.fail(f"{FULLPOSE} missing: `pip install .` installs the fullpose command")
-    cmd = [str(FULLPOSE), *args]
-    return subprocess.run(cmd, capture_output=True, text=True, check=check, timeout=600)
 
 
 def check_paper_bounds(name, m, full):

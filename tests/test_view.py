@@ -16,6 +16,8 @@ import pytest
 
 rr = pytest.importorskip("rerun", reason="the view extra: pip install '.[view]'")
 
+from helpers import cli  # noqa: E402
+
 from orchestrator.results.run_result import RunResult  # noqa: E402
 from orchestrator.results.view import LIVE_HZ, VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
 from plant.airframe import load_airframe  # noqa: E402
@@ -24,9 +26,6 @@ from plant.effectiveness import thrust_direction  # noqa: E402
 SCENARIO, DURATION = "rotor_failure_detected", 4.0
 
 
-def cli(*args: str) -> subprocess.CompletedProcess[str]:
-    return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args],
-                          capture_output=True, text=True, timeout=300)
 
 
 def read_rrd(path: Path):
