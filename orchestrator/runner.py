@@ -268,7 +268,8 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
     phase("metrics")
 
     def write(folder: Path) -> None:
-        from orchestrator.results.figure_pool import HANDOFF_BYTES, RUN_FIGURES
+        from orchestrator.results.figure_names import RUN_FIGURES
+        from orchestrator.results.figure_pool import HANDOFF_BYTES
 
         handed = False  # whether the workers have the run
         if pool is not None and plots and spilled:  # they map the recording's file

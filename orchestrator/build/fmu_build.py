@@ -2,7 +2,8 @@
 from each FMU's own ``sources/`` (so every cross build also proves the sources complete).
 
 Each archive written holds the installed FMU's ``modelDescription.xml`` and ``sources/``
-unchanged and ``binaries/<folder>/`` for every platform asked for (``orchestrator.build.platforms``).
+unchanged and ``binaries/<folder>/`` for every platform asked for
+(``orchestrator.build.platforms``).
 The archives are deterministic: entries sorted, fixed timestamps and permissions.  Nothing is
 written to the output folder until both FMUs are built: they are made in a temporary folder
 beside it and moved in at the end.

@@ -51,9 +51,6 @@ while the run steps, and is drawn during the loop; it imports scipy.optimize for
 worker has ~0.4 s of drawing (measured warm: forces 0.24 + actuators 0.18 against tracking
 0.26 + disturbance_timing 0.13 CPU s); the first worker, the zygote, also serves the
 main process's first messages."""
-RUN_FIGURES = ("tracking", "actuators", "forces", "disturbance_timing")
-"""The figures of every run (``orchestrator.results.plots``), here so that naming them needs no
-matplotlib."""
 POLL = 0.05  # s between checks that the workers are alive while waiting
 
 

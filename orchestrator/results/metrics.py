@@ -1,7 +1,7 @@
 """Metrics of a recorded run (the JSON summary) and the paper's claims beside ours.
 
-:func:`compute_metrics` reduces a :class:`~orchestrator.results.run_result.RunResult` to a plain dict
-(str keys; float, int, str, None, lists and dicts of these; never NaN or inf), which the caller
+:func:`compute_metrics` reduces a :class:`~orchestrator.results.run_result.RunResult` to a plain
+dict (str keys; float, int, str, None, lists and dicts of these; never NaN or inf), which the caller
 writes as JSON.  Every sample (row) has the same weight: rows are equally spaced communication
 points.  A value that cannot be computed (signal not recorded, timing not measured, wall time
 unknown) is ``None``; so is a statistic whose samples are not all finite (the run diverged),

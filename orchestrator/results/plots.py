@@ -57,8 +57,8 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullFormatter
 
-from orchestrator.results import figure_pool
 from orchestrator.results.events import Event, events
+from orchestrator.results.figure_names import RUN_FIGURES
 from orchestrator.results.metrics import wrap_deg
 from orchestrator.results.run_result import RunResult
 
@@ -718,10 +718,6 @@ def force_sets(airframe: Airframe) -> tuple[Polytope, Polytope]:
     from controller.polytope_cache import force_sets as sets
 
     return sets(airframe)
-
-
-RUN_FIGURES = figure_pool.RUN_FIGURES
-"""The figures of every run, in the order :func:`plot_run` writes them (then ``force_set``)."""
 
 
 def render_png(name: str, result: RunResult | None, airframe: Airframe | None,
