@@ -39,6 +39,8 @@ if TYPE_CHECKING:
     from plant.airframe import Airframe
 
 WORKERS = 2
+HANDOFF_PREFIX = "fullpose-run-"
+"""The hand-over files' name prefix, followed by the process id of the run."""
 HANDOFF_BYTES = 512 * 2**20
 """Runs up to this size reach the workers as a copy in shared memory (~2 min of 500 Hz
 recording); larger ones through their written ``results.parquet``, so a long run never
@@ -227,7 +229,8 @@ class FigurePool:
                 raise ValueError(f"a {result.data.nbytes / 2**20:.0f} MiB run reaches the "
                                  "figure workers through its results file: pass written=")
             shm = Path("/dev/shm")  # memory, not disk, where the OS has it
-            fd, path = tempfile.mkstemp(prefix="fullpose-run-", suffix=".npy",
+            # the process in the name: whose hand-over a file is stays visible
+            fd, path = tempfile.mkstemp(prefix=f"{HANDOFF_PREFIX}{os.getpid()}-", suffix=".npy",
                                         dir=shm if shm.is_dir() else None)
             os.close(fd)
             self._data = path  # from here close() removes it, whatever interrupts the copy
