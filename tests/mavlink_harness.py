@@ -41,6 +41,19 @@ def stream(f: Flight, seconds: float, send: Callable[[], None]) -> None:
         time.sleep(0.02)
 
 
+def flight_fixture(make: Callable[[], Flight]) -> Any:
+    """The ``flight`` fixture of a test module: a flight made by ``make`` for each test,
+    closed after it (``flight = harness.flight_fixture(Flight)``)."""
+
+    @pytest.fixture
+    def flight() -> Any:
+        f = make()
+        yield f
+        f.close()
+
+    return flight
+
+
 class Flight:
     """``config`` goes to BridgeConfig (``urls`` aside: the client's port); ``setup_from_gcs``
     names the client's link for SETUP_SIGNING."""

@@ -28,11 +28,7 @@ class Flight(harness.Flight):
         super().__init__(speed, signing_key=key, duration=duration)
 
 
-@pytest.fixture
-def flight():
-    f = Flight()
-    yield f
-    f.close()
+flight = harness.flight_fixture(Flight)
 
 
 stream = harness.stream

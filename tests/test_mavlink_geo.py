@@ -167,11 +167,7 @@ def pace(send, period=0.05):
     return run
 
 
-@pytest.fixture
-def flight():
-    f = Flight()
-    yield f
-    f.close()
+flight = harness.flight_fixture(Flight)
 
 
 def test_global_telemetry_home_battery_and_sensor_bits(flight):

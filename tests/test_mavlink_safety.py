@@ -33,11 +33,7 @@ class Flight(harness.Flight):
 stream = harness.stream
 
 
-@pytest.fixture
-def flight():
-    f = Flight()
-    yield f
-    f.close()
+flight = harness.flight_fixture(Flight)
 
 
 def text_seen(f, fragment, timeout=3.0):
