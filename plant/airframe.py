@@ -20,14 +20,14 @@ from typing import Any
 
 import numpy as np
 
-from plant.common.toml_reader import FieldError, TomlTable, resolve_file, shipped_names
+from plant.common.toml_reader import FieldError, TomlTable, read_toml, resolve_file, shipped_names
 from plant.effectiveness import RotorSet
 from plant.native import multirotor
 
 if sys.version_info >= (3, 11):
-    import tomllib
+    pass
 else:  # pragma: no cover
-    import tomli as tomllib
+    pass
 
 MAX_ROTORS = 8
 RPM = 2.0 * math.pi / 60.0
@@ -255,14 +255,7 @@ def resolve_airframe(name_or_path: str | Path) -> Path:
 def load_airframe(name_or_path: str | Path) -> Airframe:
     """Load and validate an airframe file, or a shipped airframe by name."""
     path = resolve_airframe(name_or_path)
-    source = str(path)
-    try:
-        data = tomllib.loads(path.read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise AirframeError(source, "", "file not found") from None
-    except tomllib.TOMLDecodeError as e:
-        raise AirframeError(source, "", f"not valid TOML: {e}") from None
-    return parse_airframe(data, source)
+    return parse_airframe(read_toml(path, AirframeError), str(path))
 
 
 class _Reader(TomlTable):

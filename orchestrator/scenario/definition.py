@@ -103,7 +103,7 @@ from orchestrator.sim.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, L
 from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
 from plant.airframe import MAX_ROTORS
 from plant.common.model_description import fmu_variables, start_value
-from plant.common.toml_reader import resolve_file, shipped_names
+from plant.common.toml_reader import read_toml, resolve_file, shipped_names
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -683,18 +683,8 @@ def resolve_scenario(name_or_path: str | Path) -> Path:
 def load_scenario(name_or_path: str | Path) -> Scenario:
     """Load and validate a scenario file, or a shipped scenario by name."""
     path = resolve_scenario(name_or_path)
-    source = str(path)
-    try:
-        text = path.read_text(encoding="utf-8")
-    except FileNotFoundError:
-        raise ScenarioError(source, "", "file not found") from None
-    except OSError as e:
-        raise ScenarioError(source, "", f"cannot read the file: {e}") from None
-    try:
-        data = tomllib.loads(text)
-    except tomllib.TOMLDecodeError as e:
-        raise ScenarioError(source, "", f"not valid TOML: {e}") from None
-    return parse_scenario(data, source, default_name=path.stem, base_dir=path.parent)
+    return parse_scenario(read_toml(path, ScenarioError), str(path), default_name=path.stem,
+                          base_dir=path.parent)
 
 
 def check_scenario(path: str | Path) -> Scenario:

@@ -9,10 +9,16 @@ Every error names the file, the dotted field and what is expected.
 from __future__ import annotations
 
 import math
+import sys
 from collections.abc import Sequence
 from importlib import resources
 from pathlib import Path
 from typing import Any, ClassVar
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 
 class FieldError(ValueError):
@@ -108,3 +114,19 @@ def resolve_file(name_or_path: str | Path, package: str, folder: str, what: str,
         return Path(str(shipped))
     raise error(str(name_or_path), "", f"no such file or shipped {what} (shipped: "
                 f"{', '.join(shipped_names(package, folder))})")
+
+
+def read_toml(path: Path, error: type[FieldError] = FieldError) -> dict[str, Any]:
+    """The TOML document of the file at path; ``error`` naming the file when it is missing,
+    unreadable or not TOML."""
+    source = str(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except FileNotFoundError:
+        raise error(source, "", "file not found") from None
+    except OSError as e:
+        raise error(source, "", f"cannot read the file: {e}") from None
+    try:
+        return tomllib.loads(text)
+    except tomllib.TOMLDecodeError as e:
+        raise error(source, "", f"not valid TOML: {e}") from None
