@@ -13,7 +13,8 @@ from collections.abc import Iterable
 import numpy as np
 
 from controller.fmu_parameters import FAIL_FACETS
-from controller.force_sets import EmptyForceSetError, Polytope, feasible_force_set
+from controller.force_sets import feasible_force_set
+from controller.polytope import EmptyForceSetError, Polytope
 from plant import Airframe
 
 

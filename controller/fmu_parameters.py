@@ -13,7 +13,7 @@ from collections.abc import Mapping, Sequence
 from typing import TYPE_CHECKING
 
 if TYPE_CHECKING:
-    from controller.force_sets import Polytope
+    from controller.polytope import Polytope
 
 Parameters = dict[str, float | int]
 

@@ -4,7 +4,7 @@ The controller FMU derives S(0) and every single-failure set from its airframe p
 at initialization (fmu_src/controller/derive_sets.c), in milliseconds.  The scipy design tool
 (:mod:`controller.force_sets`, a finer servo grid) is its oracle and computes the sets the
 figures, the 3-D view and ``fullpose force-set`` show: the attainable force set and S(0) as
-whole :class:`~controller.force_sets.Polytope` objects, which take seconds per airframe.
+whole :class:`~controller.polytope.Polytope` objects, which take seconds per airframe.
 They depend only on the rotors (:data:`SET_PARAMETERS`) and on the generator's code, so
 they are cached by content: the key is a SHA-256 of those numbers and of the generator
 modules' source, so an edited rotor or a changed algorithm can never be served a stale set,
@@ -43,9 +43,10 @@ from controller.fmu_parameters import Parameters, s0_parameters
 from plant import Airframe
 
 if TYPE_CHECKING:
-    from controller.force_sets import Polytope
+    from controller.polytope import Polytope
 
-_GENERATORS = ("controller.force_sets", "controller.failures", "controller.fmu_parameters",
+_GENERATORS = ("controller.force_sets", "controller.polytope", "controller.failures",
+               "controller.fmu_parameters",
                "controller.polytope_cache", "plant.effectiveness")
 """The modules whose code decides the sets: their source is part of every key."""
 _FORMAT = 2
@@ -145,7 +146,7 @@ def polytope_doc(p: Polytope) -> dict[str, Any]:
 
 def polytope_from_doc(doc: dict[str, Any]) -> Polytope:
     """The inverse of :func:`polytope_doc`; raises ValueError on a malformed document."""
-    from controller.force_sets import Polytope
+    from controller.polytope import Polytope
 
     def arr(key: str, cols: int | None = 3) -> np.ndarray:
         a = np.array(doc[key], dtype=float)

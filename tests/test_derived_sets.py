@@ -21,7 +21,8 @@ import plant
 from controller import controller_fmu
 from controller.derived_sets import controller_sets, derive_force_set
 from controller.failures import airframe_without
-from controller.force_sets import _set_support, feasible_force_set
+from controller.force_sets import feasible_force_set
+from controller.polytope import set_support
 from controller.polytope_cache import design_set_parameters, shipped
 from orchestrator.master import run
 from orchestrator.runner import prepare
@@ -38,9 +39,9 @@ def _agree(derived, A, b, inner_points, gap, scale):
     between its inner and outer hulls: the true set lies between them)."""
     tol = 1e-9 * scale
     assert np.max(inner_points @ derived.A.T - derived.b) <= tol
-    beyond_design = max(_set_support(derived.A, derived.b, a) - bb for a, bb in zip(A, b,
+    beyond_design = max(set_support(derived.A, derived.b, a) - bb for a, bb in zip(A, b,
                                                                                      strict=True))
-    beyond_derived = max(_set_support(A, b, a) - bb for a, bb in zip(derived.A, derived.b,
+    beyond_derived = max(set_support(A, b, a) - bb for a, bb in zip(derived.A, derived.b,
                                                                        strict=True))
     assert beyond_design <= gap + tol, (beyond_design, gap)
     assert beyond_derived <= gap + tol, (beyond_derived, gap)
@@ -112,11 +113,11 @@ def test_a_vertical_rotor_set_is_the_exact_thrust_segment():
     sets = controller_sets(af)
     assert sets.s0.dimension == 1
     down = np.array([0.0, 0.0, 1.0])
-    assert _set_support(sets.s0.A, sets.s0.b, -down) == pytest.approx(8 * t_max, rel=1e-9)
-    assert _set_support(sets.s0.A, sets.s0.b, down) == pytest.approx(0.0, abs=1e-9)
+    assert set_support(sets.s0.A, sets.s0.b, -down) == pytest.approx(8 * t_max, rel=1e-9)
+    assert set_support(sets.s0.A, sets.s0.b, down) == pytest.approx(0.0, abs=1e-9)
     for f in sets.failures:
         assert f is not None and f.dimension == 1
-        up = _set_support(f.A, f.b, -down)
+        up = set_support(f.A, f.b, -down)
         assert 4 * t_max - 1e-9 <= up <= 7 * t_max + 1e-9
 
 

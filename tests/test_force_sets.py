@@ -21,15 +21,13 @@ from scipy.spatial import ConvexHull
 import plant
 from controller.force_sets import (
     MAX_FACETS,
-    EmptyForceSetError,
     attainable_force_set,
-    canonical_facets,
     feasible_force_set,
     hover_force,
     is_feasible,
-    same_polytope,
 )
 from controller.plots_force_sets import plot_force_sets
+from controller.polytope import EmptyForceSetError, canonical_facets, same_polytope
 from plant.effectiveness import thrust_direction
 
 AIRFRAMES = ["paper_hexacopter", "fixed_tilt_hexarotor", "quadrotor"]

@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from controller import polytope_cache
-from controller.force_sets import feasible_force_set, same_polytope
+from controller.force_sets import feasible_force_set
+from controller.polytope import same_polytope
 from orchestrator.runner import OutputError, paper_conditions, prepare, publish
 from plant import load_airframe
 

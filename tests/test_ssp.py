@@ -20,7 +20,8 @@ from fmpy import read_model_description
 from fmpy.ssp.ssd import read_ssd
 from lxml import etree
 
-from controller.force_sets import feasible_force_set, same_polytope
+from controller.force_sets import feasible_force_set
+from controller.polytope import same_polytope
 from controller.polytope_cache import polytope_from_doc, shipped
 from orchestrator.build.ssp import (
     CONTROLLER,

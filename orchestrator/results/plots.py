@@ -63,7 +63,7 @@ from orchestrator.results.metrics import wrap_deg
 from orchestrator.results.run_result import RunResult
 
 if TYPE_CHECKING:
-    from controller.force_sets import Polytope
+    from controller.polytope import Polytope
     from plant.airframe import Airframe
 
 MAX_POINTS = 4000
@@ -503,8 +503,8 @@ def _forces_lateral(ax: Axes, trajectories: list[tuple[np.ndarray, str, str]],
     for pts, color, label in trajectories:
         ax.plot(pts[:, 0], pts[:, 1], ".", color=color, ms=1.5, label=label)
     if s0 is not None and trajectories:
-        from controller.force_sets import EmptyForceSetError
         from controller.plots_force_sets import GREEN, RED
+        from controller.polytope import EmptyForceSetError
 
         fz = trajectories[0][0][:, 2]
         levels = np.unique(np.round(np.percentile(fz, [0.0, 50.0, 100.0]), 6))

@@ -34,7 +34,8 @@ from airframe_kinds import KINDS, load_kind
 import plant
 from controller import controller_fmu
 from controller.derived_sets import controller_sets
-from controller.force_sets import _set_support, feasible_force_set
+from controller.force_sets import feasible_force_set
+from controller.polytope import set_support
 from orchestrator.sim.fmu import FmuInstance
 
 
@@ -79,9 +80,9 @@ def main() -> None:
             t0 = time.perf_counter()
             p = feasible_force_set(af)
             design = time.perf_counter() - t0
-            beyond_c = max(_set_support(sets.s0.A, sets.s0.b, a) - b for a, b in zip(
+            beyond_c = max(set_support(sets.s0.A, sets.s0.b, a) - b for a, b in zip(
                 p.A, p.b, strict=True))
-            beyond_d = max(_set_support(p.A, p.b, a) - b for a, b in zip(
+            beyond_d = max(set_support(p.A, p.b, a) - b for a, b in zip(
                 sets.s0.A, sets.s0.b, strict=True))
             print(f"{af.name:26s} {af.n_rotors:6d} {'yes' if af.tilting else 'no':>6s} "
                   f"{len(sets.s0.b):11d} {derive * 1e3:9.2f} {init * 1e3:8.2f} "
