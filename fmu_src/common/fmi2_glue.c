@@ -3,7 +3,7 @@
  *
  * It owns the FMI call-sequence state machine, logging through the
  * importer's callback, value-reference dispatch into the model struct and
- * FMU state snapshots.  The model behind it is reached only through
+ * FMU state snapshots (their format: fmu_state.c).  The model behind it is reached only through
  * FpModelInfo (fp_model.h) and never sees an FMI type.
  */
 #include <math.h>
@@ -12,59 +12,14 @@
 #include <string.h>
 
 #include "fmi2Functions.h"
+#include "fmu_state.h"
 #include "fp_model.h"
 
-/* States of the FMI 2.0 co-simulation state machine (spec section 4.2.4). */
-enum {
-    S_INSTANTIATED = 1 << 0,
-    S_INIT = 1 << 1,
-    S_STEP_COMPLETE = 1 << 2,
-    S_STEP_FAILED = 1 << 3,
-    S_TERMINATED = 1 << 4,
-    S_ERROR = 1 << 5,
-    S_FATAL = 1 << 6
-};
-
-#define S_ANY_BUT_FATAL \
-    (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
 /* fmi2Get{Real,Integer,Boolean,String}: from initialization on, and in Error for diagnosis */
 #define S_READABLE (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
 /* fmi2Get*Status (FMI 2.0.4 co-simulation state table): StepComplete, StepInProgress,
  * StepFailed, Terminated; this FMU has no asynchronous step, so no StepInProgress */
 #define S_STATUS (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)
-/* a saved state's payload is a model after initialization */
-#define S_INITIALIZED (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)
-
-/*
- * FMU state, in memory and serialized alike: this header, then the model struct (the
- * payload, so a state's last model_size bytes are the model: host/fp_controller_api.c reads
- * it there).  Every field is naturally aligned and in the byte order of the machine that
- * saved it (the endianness marker tells).  The checksum is 64-bit FNV-1a over the header
- * with the checksum field zeroed, then the payload.
- */
-#define STATE_MAGIC "FPST"
-#define STATE_MAGIC_V1 "FPS1" /* format 1: unversioned, unchecked (before this one) */
-#define STATE_VERSION 2u
-#define STATE_ENDIAN 0x0102u
-#define STATE_FLAG_DIRTY 1u          /* parameters changed since the last initialize */
-#define STATE_FLAG_TUNABLES_DIRTY 2u /* tunable parameters changed while stepping */
-#define STATE_FLAGS_KNOWN (STATE_FLAG_DIRTY | STATE_FLAG_TUNABLES_DIRTY)
-
-typedef struct {
-    char magic[4];         /*  0: "FPST" */
-    uint16_t version;      /*  4: format version, 2 */
-    uint16_t endian;       /*  6: 0x0102 as the saving machine stores it */
-    uint32_t header_size;  /*  8: sizeof(StateHeader), 80 */
-    uint32_t payload_size; /* 12: sizeof the model struct */
-    char guid[40];         /* 16: the FMU's GUID, NUL-terminated */
-    int32_t state;         /* 56: FMI lifecycle state, one S_* bit */
-    uint32_t flags;        /* 60: STATE_FLAG_* */
-    double time;           /* 64: the FMU's time */
-    uint64_t checksum;     /* 72: FNV-1a 64 over header (this field 0) and payload */
-} StateHeader;
-
-FP_STATIC_ASSERT(sizeof(StateHeader) == 80, state_header_is_80_bytes);
-FP_STATIC_ASSERT(sizeof(StateHeader) % 8 == 0, state_payload_stays_aligned);
 
 /* The distinct warnings one initialization reports once each (beyond them, repeats show). */
 #define MAX_WARNINGS_SEEN 32
@@ -107,17 +62,7 @@ typedef struct {
     int n_warned;
 } Instance;
 
-static const char *state_name(int state) {
-    switch (state) {
-    case S_INSTANTIATED: return "Instantiated";
-    case S_INIT: return "InitializationMode";
-    case S_STEP_COMPLETE: return "StepComplete";
-    case S_STEP_FAILED: return "StepFailed";
-    case S_TERMINATED: return "Terminated";
-    case S_ERROR: return "Error";
-    default: return "Fatal";
-    }
-}
+
 
 static fmi2Status to_fmi(FpStatus s) {
     switch (s) {
@@ -206,7 +151,7 @@ static Instance *instance(fmi2Component c, const char *fn) {
 static int allowed(Instance *inst, const char *fn, int states) {
     if (inst->state & states) return 1;
     logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s may not be called in state %s", fn,
-          state_name(inst->state));
+          fp_lifecycle_name(inst->state));
     return 0;
 }
 
@@ -732,166 +677,25 @@ fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t 
 /* ------------------------------------------------------------------------ */
 /* FMU state                                                                */
 
-static size_t snapshot_size(const Instance *inst) {
-    return sizeof(StateHeader) + inst->info->model_size;
-}
-
-static uint64_t state_checksum(const StateHeader *h, const void *payload, size_t n) {
-    StateHeader copy = *h;
-    copy.checksum = 0;
-    return fp_fnv1a64(fp_fnv1a64(FP_FNV1A64_BASIS, &copy, sizeof copy), payload, n);
-}
+static size_t snapshot_size(const Instance *inst) { return fp_state_size(inst->info->model_size); }
 
 static void snapshot_write(const Instance *inst, unsigned char *buf) {
-    StateHeader h;
-    memset(&h, 0, sizeof h);
-    memcpy(h.magic, STATE_MAGIC, sizeof h.magic);
-    h.version = (uint16_t)STATE_VERSION;
-    h.endian = (uint16_t)STATE_ENDIAN;
-    h.header_size = (uint32_t)sizeof h;
-    h.payload_size = (uint32_t)inst->info->model_size;
-    memcpy(h.guid, inst->guid, sizeof h.guid);
-    h.state = inst->state;
-    h.flags = (inst->dirty ? STATE_FLAG_DIRTY : 0u) |
-              (inst->tunables_dirty ? STATE_FLAG_TUNABLES_DIRTY : 0u);
-    h.time = inst->time;
-    h.checksum = state_checksum(&h, inst->model, inst->info->model_size);
-    memcpy(buf, &h, sizeof h);
-    memcpy(buf + sizeof h, inst->model, inst->info->model_size);
+    fp_state_write(buf, inst->guid, (int32_t)inst->state,
+                   (inst->dirty ? STATE_FLAG_DIRTY : 0u) |
+                       (inst->tunables_dirty ? STATE_FLAG_TUNABLES_DIRTY : 0u),
+                   inst->time, inst->model, inst->info->model_size);
 }
 
-/* How much of a state check_state verifies. */
-enum {
-    STATE_HEADER = 0, /* magic, version, byte order, sizes, FMU identity: before reusing,
-                         sizing or freeing a state (the payload is not read) */
-    STATE_ALL = 1     /* and the checksum and the lifecycle fields: before reading it */
-};
-
-/*
- * Checks a state buffer before anything reads or writes beyond what is checked: the magic
- * first (4 bytes), then the header, then (STATE_ALL) header and payload.  `size` is the
- * buffer's size when the caller knows it (serialized data), 0 for an FMUstate (a buffer
- * this FMU allocated, whose size the header must confirm).  Logs what is wrong and returns
- * 0, or fills *out and returns 1.
- */
+/* fp_state_check (fmu_state.h) for this instance: what is wrong is logged as "FN: WHAT
+ * REASON"; 1 and *out filled, or 0. */
 static int check_state(Instance *inst, const unsigned char *buf, size_t size, int level,
                        const char *fn, const char *what, StateHeader *out) {
-    const char *model = inst->info->model_name;
-    const unsigned long expected = (unsigned long)snapshot_size(inst);
-    const int serialized = size > 0;
-    StateHeader h;
-    if (buf == NULL) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is NULL", fn, what);
-        return 0;
-    }
-    if (serialized && size < sizeof h.magic) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s is truncated: %lu bytes, a state of %s has %lu bytes", fn, what,
-              (unsigned long)size, model, expected);
-        return 0;
-    }
-    if (memcmp(buf, STATE_MAGIC, 4) != 0) {
-        if (memcmp(buf, STATE_MAGIC_V1, 4) == 0)
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s is in state format 1 (FPS1); this FMU reads format %u only", fn, what,
-                  STATE_VERSION);
-        else if (serialized)
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s was not serialized by this model (%s): no \"%s\" magic (%02x %02x "
-                  "%02x %02x); %lu bytes, a state of %s has %lu",
-                  fn, what, model, STATE_MAGIC, buf[0], buf[1], buf[2], buf[3],
-                  (unsigned long)size, model, expected);
-        else
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s was not saved by this model (%s): no \"%s\" magic (%02x %02x %02x "
-                  "%02x)",
-                  fn, what, model, STATE_MAGIC, buf[0], buf[1], buf[2], buf[3]);
-        return 0;
-    }
-    if (serialized && size < sizeof h) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s is truncated: %lu bytes, shorter than the %lu-byte header (a state of %s "
-              "has %lu bytes)",
-              fn, what, (unsigned long)size, (unsigned long)sizeof h, model, expected);
-        return 0;
-    }
-    memcpy(&h, buf, sizeof h);
-    if (h.version != STATE_VERSION) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s is in state format version %u; this FMU reads version %u only", fn, what,
-              (unsigned)h.version, STATE_VERSION);
-        return 0;
-    }
-    if (h.endian != STATE_ENDIAN) {
-        if (h.endian == (uint16_t)((STATE_ENDIAN >> 8) | ((STATE_ENDIAN & 0xffu) << 8)))
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s was saved on a machine of the other byte order", fn, what);
-        else
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s is damaged: byte-order marker 0x%04x, expected 0x%04x", fn, what,
-                  (unsigned)h.endian, STATE_ENDIAN);
-        return 0;
-    }
-    if (h.header_size != sizeof h) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s is damaged: header size %lu, expected %lu", fn, what,
-              (unsigned long)h.header_size, (unsigned long)sizeof h);
-        return 0;
-    }
-    if (memchr(h.guid, '\0', sizeof h.guid) == NULL) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is damaged: its GUID is not terminated", fn,
-              what);
-        return 0;
-    }
-    if (strcmp(h.guid, inst->guid) != 0) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s belongs to another FMU (GUID %s), not to this %s (GUID %s)", fn, what,
-              h.guid, model, inst->guid);
-        return 0;
-    }
-    if (h.payload_size != inst->info->model_size) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s is damaged: payload of %lu bytes, the model of %s has %lu", fn, what,
-              (unsigned long)h.payload_size, model, (unsigned long)inst->info->model_size);
-        return 0;
-    }
-    if (serialized && size != expected) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "%s: %s is %s: %lu bytes, its header says %lu", fn, what,
-              size < expected ? "truncated" : "too long", (unsigned long)size, expected);
-        return 0;
-    }
-    if (level == STATE_ALL) {
-        uint64_t sum = state_checksum(&h, buf + sizeof h, h.payload_size);
-        int initialized = (h.state & S_INITIALIZED) != 0;
-        if (sum != h.checksum) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s is damaged: checksum mismatch (stored %016llx, computed %016llx)", fn,
-                  what, (unsigned long long)h.checksum, (unsigned long long)sum);
-            return 0;
-        }
-        if (!(h.state & S_ANY_BUT_FATAL) || (h.state & (h.state - 1)) != 0) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s is damaged: lifecycle state 0x%x is not one FMI state", fn, what,
-                  (unsigned)h.state);
-            return 0;
-        }
-        if ((h.flags & ~STATE_FLAGS_KNOWN) != 0 ||
-            (initialized && (h.flags & STATE_FLAG_DIRTY)) ||
-            ((h.state & (S_INSTANTIATED | S_INIT)) && (h.flags & STATE_FLAG_TUNABLES_DIRTY))) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR,
-                  "%s: %s is damaged: flags 0x%x do not fit its lifecycle state %s", fn, what,
-                  (unsigned)h.flags, state_name(h.state));
-            return 0;
-        }
-        if (!isfinite(h.time)) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is damaged: its time is not finite", fn,
-                  what);
-            return 0;
-        }
-    }
-    if (out != NULL) *out = h;
-    return 1;
+    char why[320];
+    if (fp_state_check(buf, size, level, inst->guid, inst->info->model_name,
+                       inst->info->model_size, out, why, sizeof why) == FP_OK)
+        return 1;
+    logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s %s", fn, what, why);
+    return 0;
 }
 
 /* Restores a state: checked whole, its model checked on the aligned scratch copy by the
