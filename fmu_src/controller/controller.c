@@ -336,7 +336,7 @@ static void update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     int i;
     /* what is known of each rotor: what the importer says, or less where detected */
     for (i = 0; i < FP_MAX_ROTORS; i++)
-        m->health[i] = m->fault_detect ? fmin(m->rotor_health[i], m->detect.est[i])
+        m->health[i] = m->fault_detect ? fmin(m->rotor_health[i], m->roll.detect.est[i])
                                        : m->rotor_health[i];
     ctrl_rotor_losses(m->af.n_rotors, m->health, m->set_fail_n, m->hover_ok, &l);
     if (l.lost_mask == m->lost_mask) return;
@@ -505,25 +505,19 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     double age = m->inputs_age;
     double dtau_c[3], rate_c[3], dnu_c[6], t_start = m->timing ? fp_clock_seconds() : 0.0;
     /* what a sample changes besides its outputs: restored when the sample is discarded */
-    double filt_before[CTRL_N_FILTERS][2], blk_before[4][3], psi_before[4];
-    CtrlShaping shaping_before = m->shaping;
-    CtrlDetect detect_before = m->detect;
+    CtrlRolled before;
     CtrlDetectOut dout;
-    CtrlTwin twin_before = m->twin;
     int i, n = m->af.n_rotors;
     if (!inputs_valid(m, logger)) return FP_WARNING;
     /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
     fp_wls_prefetch(&m->guid);
     fp_wls_prefetch(&m->alloc);
     update_rotor_losses(m, logger);
-    memcpy(filt_before, m->filt, sizeof filt_before);
-    memcpy(blk_before, m->blk, sizeof blk_before);
-    psi_before[0] = m->psi_raw, psi_before[1] = m->psi_unwrapped;
-    psi_before[2] = m->psi_ref_raw, psi_before[3] = m->psi_ref_unwrapped;
+    before = m->roll;
     /* 0. the reference: shaped (headings unwrapped first so that +-pi crossings are no
      * jumps), then the twin's feed-forward attitude and its rate */
     mu_in[0] = m->euler_ref[0], mu_in[1] = m->euler_ref[1];
-    mu_in[2] = ctrl_unwrap(m->euler_ref[2], &m->psi_ref_raw, &m->psi_ref_unwrapped);
+    mu_in[2] = ctrl_unwrap(m->euler_ref[2], &m->roll.psi_ref_raw, &m->roll.psi_ref_unwrapped);
     memcpy(pos_in, m->pos_ref, sizeof pos_in);
     memcpy(vel_in, m->vel_ref, sizeof vel_in);
     if (age > 0.0)
@@ -538,13 +532,13 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     shp = shaping_params(m);
     shin.pos = pos_in, shin.vel = vel_in, shin.acc = m->acc_ref;
     shin.mu = mu_in, shin.mu_rate = m->euler_rate_ref;
-    ctrl_shape_reference(&shp, &shin, &m->shaping, &r);
+    ctrl_shape_reference(&shp, &shin, &m->roll.shaping, &r);
     fs = force_set_in_use(m);
     gp = guidance_params(m);
     rot_zyx_jacobian(r.mu, r_ref, NULL, NULL); /* the twin's and the guidance's R(mu_ref) */
-    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, r_ref, m->af.g, &m->twin, &m->twin_qp, mu_ff);
+    ctrl_guidance_twin(&gp, &fs, r.acc, r.mu, r_ref, m->af.g, &m->roll.twin, &m->twin_qp, mu_ff);
     for (i = 0; i < 3; i++) /* the twin's rate wherever it departs from the reference */
-        mu_rate_ff[i] = m->twin.active || twin_before.active
+        mu_rate_ff[i] = m->roll.twin.active || before.twin.active
                             ? ctrl_wrap_pi(mu_ff[i] - m->mu_ff[i]) / m->Ts
                             : r.mu_rate[i];
     /* and its angular acceleration: without it the rate loop lags every change of rate
@@ -555,33 +549,33 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age + age,
                       m->pose_now);
     fin = filter_inputs(m);
-    fin.psi = ctrl_unwrap(m->pose_now[8], &m->psi_raw, &m->psi_unwrapped);
+    fin.psi = ctrl_unwrap(m->pose_now[8], &m->roll.psi_raw, &m->roll.psi_unwrapped);
     fin.pos_ref = r.pos, fin.vel_ref = r.vel;
     fin.mu_ref = mu_ff, fin.psi_ref = mu_ff[2];
-    ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->filt);
-    ctrl_read_filters((const double(*)[2])m->filt, &m->rotors, &m->rotor_trig, m->health,
+    ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->roll.filt);
+    ctrl_read_filters((const double(*)[2])m->roll.filt, &m->rotors, &m->rotor_trig, m->health,
                       m->lost_mask, &s);
     if (m->fault_detect) {
         /* a detection counts from the next sample on (update_rotor_losses) */
-        ctrl_detect(&m->detect_p, &m->rotors, &s, &m->detect, &dout);
+        ctrl_detect(&m->detect_p, &m->rotors, &s, &m->roll.detect, &dout);
         if (dout.detected >= 0)
             fp_log(logger, FP_WARNING, FP_LOG_WARNING,
                    "rotor %d fault detected from the INDI residual: efficiency %.2f estimated",
-                   dout.detected + 1, m->detect.est[dout.detected]);
+                   dout.detected + 1, m->roll.detect.est[dout.detected]);
     }
     /* 2. guidance */
     gin.acc_ref = r.acc;
     gin.mu_ref = r.mu;
     gin.r_ref = r_ref;
-    gst.x_pos = m->blk[BLK_POS];
-    gst.x_vel = m->blk[BLK_VEL];
+    gst.x_pos = m->roll.blk[BLK_POS];
+    gst.x_vel = m->roll.blk[BLK_VEL];
     gst.qp = &m->guid;
     gst.c_rows = &m->guid_c_rows;
     ctrl_guidance(&gp, &fs, &gin, &s, &gst, &g);
     /* 3. stabilization */
     sp = stabilization_params(m);
-    sst.x_att = m->blk[BLK_ATT];
-    sst.x_rate = m->blk[BLK_RATE];
+    sst.x_att = m->roll.blk[BLK_ATT];
+    sst.x_rate = m->roll.blk[BLK_RATE];
     ctrl_stabilization(&sp, &s, g.mu_c, mu_ff, mu_rate_ff, mu_acc_ff, &sst, rate_c, dtau_c);
     /* 4. inner allocation of dnu_c = [df_b_c; dtau_c] */
     for (i = 0; i < 3; i++) {
@@ -597,14 +591,8 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
         !fp_all_finite(g.mu_c, 3) || !fp_all_finite(g.acc_c, 3) || !fp_all_finite(g.f_b_ref, 3) ||
         !fp_all_finite(g.f_b_c, 3) || !fp_all_finite(rate_c, 3) || !fp_all_finite(dnu_c, 6) ||
         !fp_all_finite(a.residual, 6) || !fp_all_finite(mu_acc_ff, 3)) {
-        memcpy(m->filt, filt_before, sizeof filt_before);
-        m->shaping = shaping_before;
-        m->detect = detect_before;
-        m->twin = twin_before;
+        m->roll = before;
         fp_wls_reset(&m->twin_qp);
-        memcpy(m->blk, blk_before, sizeof blk_before);
-        m->psi_raw = psi_before[0], m->psi_unwrapped = psi_before[1];
-        m->psi_ref_raw = psi_before[2], m->psi_ref_unwrapped = psi_before[3];
         fp_wls_reset(&m->guid);
         fp_wls_reset(&m->alloc);
         fp_log(logger, FP_WARNING, FP_LOG_WARNING,
@@ -620,8 +608,8 @@ static FpStatus control_sample(ControllerModel *m, const FpLogger *logger) {
     memcpy(m->mu_rate_ff, mu_rate_ff, sizeof m->mu_rate_ff);
     if (m->fault_detect) {
         memcpy(m->indi_residual, dout.residual, sizeof m->indi_residual);
-        memcpy(m->rotor_eff_est, m->detect.est, sizeof m->rotor_eff_est);
-        m->rotors_detected = m->detect.found_mask;
+        memcpy(m->rotor_eff_est, m->roll.detect.est, sizeof m->rotor_eff_est);
+        m->rotors_detected = m->roll.detect.found_mask;
     }
     memcpy(m->acc_c, g.acc_c, sizeof m->acc_c);
     memcpy(m->f_b_ref, g.f_b_ref, sizeof m->f_b_ref);
@@ -678,30 +666,30 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     /* filters start in steady state at the initial measurements */
     ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age, m->pose_now);
     fin = filter_inputs(m);
-    ctrl_filters_start(&fin, m->filt);
-    memset(m->blk, 0, sizeof m->blk);
-    m->psi_raw = m->psi_unwrapped = isfinite(m->pose_now[8]) ? m->pose_now[8] : 0.0;
-    m->psi_ref_raw = m->psi_ref_unwrapped = isfinite(m->euler_ref[2]) ? m->euler_ref[2] : 0.0;
+    ctrl_filters_start(&fin, m->roll.filt);
+    memset(m->roll.blk, 0, sizeof m->roll.blk);
+    m->roll.psi_raw = m->roll.psi_unwrapped = isfinite(m->pose_now[8]) ? m->pose_now[8] : 0.0;
+    m->roll.psi_ref_raw = m->roll.psi_ref_unwrapped = isfinite(m->euler_ref[2]) ? m->euler_ref[2] : 0.0;
     memcpy(m->mu_c, m->euler_ref, sizeof m->mu_c);
     /* the reference as given, no jump being shaped; the twin at the reference pose */
-    memset(&m->shaping, 0, sizeof m->shaping);
-    ctrl_detect_start(&m->detect);
+    memset(&m->roll.shaping, 0, sizeof m->roll.shaping);
+    ctrl_detect_start(&m->roll.detect);
     m->detect_p = detect_params(m);
     for (i = 0; i < FP_MAX_ROTORS; i++) m->rotor_eff_est[i] = 1.0;
     memset(m->indi_residual, 0, sizeof m->indi_residual);
     m->rotors_detected = 0;
-    memset(&m->twin, 0, sizeof m->twin);
-    memcpy(m->twin.mu, m->euler_ref, sizeof m->twin.mu);
-    m->twin.mu[2] = m->psi_ref_unwrapped;
-    m->twin.f[2] = -m->af.mass * m->af.g;
-    memcpy(m->mu_ff, m->twin.mu, sizeof m->mu_ff);
-    memcpy(m->euler_ref_s, m->twin.mu, sizeof m->euler_ref_s);
+    memset(&m->roll.twin, 0, sizeof m->roll.twin);
+    memcpy(m->roll.twin.mu, m->euler_ref, sizeof m->roll.twin.mu);
+    m->roll.twin.mu[2] = m->roll.psi_ref_unwrapped;
+    m->roll.twin.f[2] = -m->af.mass * m->af.g;
+    memcpy(m->mu_ff, m->roll.twin.mu, sizeof m->mu_ff);
+    memcpy(m->euler_ref_s, m->roll.twin.mu, sizeof m->euler_ref_s);
     memcpy(m->mu_rate_ff, m->euler_rate_ref, sizeof m->mu_rate_ff);
     memcpy(m->pos_ref_s, m->pos_ref, sizeof m->pos_ref_s);
     memcpy(m->vel_ref_s, m->vel_ref, sizeof m->vel_ref_s);
     memcpy(m->acc_ref_s, m->acc_ref, sizeof m->acc_ref_s);
     for (i = 0; i < CTRL_N_FILTERS; i++)
-        if (!isfinite(m->filt[i][0])) {
+        if (!isfinite(m->roll.filt[i][0])) {
             fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                    "initial measurements must be finite (filter slot %d)", i + 1);
             return FP_ERROR;
@@ -827,12 +815,12 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
         return FP_ERROR;
     }
-    if (!fp_all_finite(&m->filt[0][0], sizeof m->filt / sizeof(double)) ||
-        !fp_all_finite(&m->blk[0][0], sizeof m->blk / sizeof(double)) ||
-        !fp_all_finite(m->shaping.e_pos, 15) || !fp_all_finite(m->shaping.pos_in, 15) ||
+    if (!fp_all_finite(&m->roll.filt[0][0], sizeof m->roll.filt / sizeof(double)) ||
+        !fp_all_finite(&m->roll.blk[0][0], sizeof m->roll.blk / sizeof(double)) ||
+        !fp_all_finite(m->roll.shaping.e_pos, 15) || !fp_all_finite(m->roll.shaping.pos_in, 15) ||
         !isfinite(m->inputs_age) ||
-        !fp_all_finite(m->twin.mu, 3) || !fp_all_finite(m->twin.f, 3) ||
-        !fp_all_finite(m->detect.est, FP_MAX_ROTORS) ||
+        !fp_all_finite(m->roll.twin.mu, 3) || !fp_all_finite(m->roll.twin.f, 3) ||
+        !fp_all_finite(m->roll.detect.est, FP_MAX_ROTORS) ||
         !fp_all_finite(m->acc_limit, 2) ||
         !fp_all_finite(&m->set_A[0][0], sizeof m->set_A / sizeof(double)) ||
         !fp_all_finite(m->set_b, FP_POLYTOPE_MAX_FACETS) ||

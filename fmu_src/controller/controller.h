@@ -49,6 +49,18 @@ typedef struct {
     int32_t c_rows; /* which force set's rows its QP's C holds (build_qp; 0: none yet) */
 } CtrlTwin;
 
+/* What one control sample advances, in one place: a sample that computed a non-finite
+ * value is discarded by restoring a copy of this (controller.c, control_sample). */
+typedef struct {
+    double filt[CTRL_N_FILTERS][2];        /* [value, derivative] per filtered signal */
+    double psi_raw, psi_unwrapped;         /* heading unwrapping before filtering */
+    double psi_ref_raw, psi_ref_unwrapped; /* the same for the heading reference */
+    double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
+    CtrlShaping shaping;
+    CtrlDetect detect;
+    CtrlTwin twin;
+} CtrlRolled;
+
 typedef struct {
     /* parameters */
     double Ts;
@@ -91,11 +103,8 @@ typedef struct {
     /* internal state */
     FpRotorSet rotors;
     double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
-    double filt[CTRL_N_FILTERS][2];        /* [value, derivative] per filtered signal */
-    double psi_raw, psi_unwrapped;         /* heading unwrapping before filtering */
+    CtrlRolled roll; /* what a sample advances: one copy rolls a discarded sample back */
     double pose_now[9]; /* pos, vel, euler predicted over pose_age to the sample (ctrl_predict_pose) */
-    double psi_ref_raw, psi_ref_unwrapped; /* the same for the heading reference */
-    double blk[4][3];                      /* states of the pos, vel, att, rate blocks */
     double inertia_inv[3][3];
     /* The force sets in use (prepare_force_sets): the parameters poly_* / fail_poly_* where
      * given (count > 0), else derived from the airframe at initialization (derive_sets.c). */
@@ -122,11 +131,8 @@ typedef struct {
                                             * point its inputs were set at (0 at h = Ts) */
     FpRotorTrig rotor_trig;     /* sin, cos of the rotors' mounting azimuths (gamma part) */
     FpPreferredSplit pref_split; /* the preferred configuration's geometry, all rotors */
-    CtrlShaping shaping;
-    CtrlDetect detect;
     CtrlDetectParams detect_p;
     double health[FP_MAX_ROTORS]; /* efficiencies in use: rotor_health, or lower if detected */
-    CtrlTwin twin;
     double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */
     FpWls guid, alloc, twin_qp;
     int32_t guid_c_rows; /* which force set's rows guid's C holds (build_qp; 0: none yet) */
