@@ -96,7 +96,7 @@ def _fly(args: argparse.Namespace) -> int:
         except (OSError, UnicodeDecodeError) as e:
             raise ValueError(f"signing key: {e}") from None
     if args.view:  # before the sockets open: a viewer that cannot show is said at once
-        from orchestrator.results.view import check_viewer
+        from orchestrator.output.view import check_viewer
 
         check_viewer()
     with Bridge(config) as bridge:
@@ -129,7 +129,7 @@ def _fly(args: argparse.Namespace) -> int:
 
 def _live_view(bridge: Any, args: argparse.Namespace) -> Any:
     """A 3-D view fed after each chunk the bridge flies."""
-    from orchestrator.results.view import LiveView
+    from orchestrator.output.view import LiveView
 
     view = LiveView(bridge.airframe, args.save, spawn=args.view, start=bridge.config.pos0)
 

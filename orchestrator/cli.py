@@ -63,7 +63,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
                        gains=args.gains)
     _warn(scenario.warnings)
     if args.view or args.save is not None:  # no run whose view cannot be shown or written
-        from orchestrator.results.view import check_viewer
+        from orchestrator.output.view import check_viewer
 
         check_viewer(display=args.view)
     out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
@@ -94,7 +94,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         print(line)
     print(f"wrote {out}: {', '.join(f.name for f in output.files)}")
     if args.view or args.save is not None:
-        from orchestrator.results.view import replay
+        from orchestrator.output.view import replay
 
         rep = replay(output.result, scenario.airframe, save=args.save, spawn=args.view)
         print(f"3-D view: {rep.pose_rows} poses, {rep.series_rows} series rows in "
@@ -108,9 +108,9 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
 
 def _cmd_view(args: argparse.Namespace) -> int:
-    from orchestrator.results.plots import resolve_airframe
-    from orchestrator.results.run_result import RunResult
-    from orchestrator.results.view import replay
+    from orchestrator.output.plots import resolve_airframe
+    from orchestrator.output.run_result import RunResult
+    from orchestrator.output.view import replay
     from plant.airframe import load_airframe
 
     result = RunResult.read(args.results)
@@ -151,7 +151,7 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_export_ssp(args: argparse.Namespace) -> int:
-    from orchestrator.build.ssp import export_ssp
+    from orchestrator.export.ssp import export_ssp
 
     euler0 = tuple(math.radians(x) for x in args.euler0_deg)
     path = export_ssp(args.output, airframe=args.airframe, pos0=tuple(args.pos0),
@@ -223,8 +223,8 @@ def _cmd_fmus(args: argparse.Namespace) -> int:
 
 
 def _cmd_build_fmus(args: argparse.Namespace) -> int:
-    from orchestrator.build.fmu_build import build_fmus
-    from orchestrator.build.platforms import parse_platforms
+    from orchestrator.export.fmu_build import build_fmus
+    from orchestrator.export.platforms import parse_platforms
 
     platforms = parse_platforms(args.platforms)
     print(f"building the FMUs for {', '.join(p.name for p in platforms)} (Zig, from each "

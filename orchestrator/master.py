@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from controller import controller_fmu
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 from orchestrator.sim.engine import (
     COUPLINGS,
     DIST_INPUTS,

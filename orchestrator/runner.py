@@ -3,12 +3,12 @@
 Files written into the output directory:
 
 - ``results.parquet``  every recorded signal at every step, typed columns with the run's
-  metadata (``orchestrator.results.run_result``; ``RunResult.read``)
+  metadata (``orchestrator.output.run_result``; ``RunResult.read``)
 - ``results.csv``      the same in text, exact float64 (on request: ``csv=True``)
 - ``results.mcap``     the same as MCAP for Foxglove and PlotJuggler (``mcap=True``)
-- ``metrics.json``     the metrics summary (``orchestrator.results.metrics``) and the run metadata
-- ``*.png``            the paper's figures for this run (``orchestrator.results.plots``), drawn by
-  worker processes beside the run where the OS allows (``orchestrator.results.figure_pool``)
+- ``metrics.json``     the metrics summary (``orchestrator.output.metrics``) and the run metadata
+- ``*.png``            the paper's figures for this run (``orchestrator.output.plots``), drawn by
+  worker processes beside the run where the OS allows (``orchestrator.output.figure_pool``)
 
 The folder is whole or absent: everything is written into a hidden temporary folder beside
 it, which replaces the previous folder only once complete.  A run that fails or is
@@ -34,12 +34,12 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from orchestrator.master import SPILL_BYTES, run
-from orchestrator.results.metrics import compare_with_paper, compute_metrics
-from orchestrator.results.run_result import CSV_FILE, RESULTS_FILE, RunResult
+from orchestrator.output.metrics import compare_with_paper, compute_metrics
+from orchestrator.output.run_result import CSV_FILE, RESULTS_FILE, RunResult
 from orchestrator.scenario.definition import Scenario, load_scenario, scenario_names
 
 if TYPE_CHECKING:
-    from orchestrator.results.figure_pool import FigurePool
+    from orchestrator.output.figure_pool import FigurePool
 
 RESULT_MARKER = "metrics.json"
 """Every results folder holds this file; only such folders (or empty ones) are replaced."""
@@ -170,7 +170,7 @@ def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: boo
     at all: :func:`publish`).  A lost vehicle is a completed call: ``metrics["outcome"]``
     says ``"lost"``, with the time and reason in ``metrics["lost"]``.  ``figure_workers``:
     draw the figures in worker processes started before the run (None: where
-    :func:`orchestrator.results.figure_pool.available`)."""
+    :func:`orchestrator.output.figure_pool.available`)."""
     spill = None
     if out_dir is not None:
         check_output_dir(out_dir)  # before the run, not after minutes of it
@@ -230,7 +230,7 @@ def _forget(path: Path) -> None:
 
 
 def _start_pool(scenario: Scenario) -> FigurePool | None:
-    from orchestrator.results import figure_pool
+    from orchestrator.output import figure_pool
 
     if not figure_pool.available():
         return None
@@ -268,8 +268,8 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
     phase("metrics")
 
     def write(folder: Path) -> None:
-        from orchestrator.results.figure_names import RUN_FIGURES
-        from orchestrator.results.figure_pool import HANDOFF_BYTES
+        from orchestrator.output.figure_names import RUN_FIGURES
+        from orchestrator.output.figure_pool import HANDOFF_BYTES
 
         handed = False  # whether the workers have the run
         if pool is not None and plots and spilled:  # they map the recording's file
@@ -291,7 +291,7 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
             names.append(CSV_FILE)
             phase("csv")
         if mcap:
-            from orchestrator.results.mcap_export import MCAP_FILE, write_mcap
+            from orchestrator.output.mcap_export import MCAP_FILE, write_mcap
 
             write_mcap(result, folder / MCAP_FILE)
             names.append(MCAP_FILE)
@@ -327,6 +327,6 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
 
 def plot_files(result: RunResult, out_dir: Path, scenario: Scenario) -> list[Path]:
     """Draw the run's figures into out_dir (in this process)."""
-    from orchestrator.results.plots import plot_run
+    from orchestrator.output.plots import plot_run
 
     return plot_run(result, out_dir, force_set_png=True, airframe=scenario.airframe)

@@ -45,8 +45,8 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
     """Both FMUs built for every platform (``fullpose build-fmus --platforms all``), once per
     session: about 35 s with Zig's cache warm."""
     pytest.importorskip("ziglang", reason="the Zig cross compiler (pip install -e '.[test]')")
-    from orchestrator.build.fmu_build import build_fmus
-    from orchestrator.build.platforms import PLATFORMS
+    from orchestrator.export.fmu_build import build_fmus
+    from orchestrator.export.platforms import PLATFORMS
 
     folder = tmp_path_factory.mktemp("dist")
     report = build_fmus(PLATFORMS, folder)

@@ -15,7 +15,7 @@ import pytest
 from helpers import cli
 
 import plant
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 from plant.airframe import Airframe
 
 

@@ -21,7 +21,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 
 ROOT = Path(__file__).resolve().parents[1]
 DOC = ROOT / "docs" / "errors.md"

@@ -9,10 +9,10 @@ import pytest
 
 import controller
 import plant
-from orchestrator.build.fmu_build import ZIP_TIME, write_fmu
-from orchestrator.build.macho import universal_binary
-from orchestrator.build.platforms import PLATFORMS, parse_platforms
 from orchestrator.cli import main
+from orchestrator.export.fmu_build import ZIP_TIME, write_fmu
+from orchestrator.export.macho import universal_binary
+from orchestrator.export.platforms import PLATFORMS, parse_platforms
 
 
 def build(args, capsys):

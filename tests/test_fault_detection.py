@@ -25,7 +25,7 @@ from typing import Any
 import numpy as np
 import pytest
 
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
 from orchestrator.scenario.definition import parse_scenario, scenario_names
 from orchestrator.sweep import NOISE

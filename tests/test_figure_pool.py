@@ -1,4 +1,4 @@
-"""Figures drawn by worker processes (orchestrator/results/figure_pool.py) are the figures drawn in
+"""Figures drawn by worker processes (orchestrator/output/figure_pool.py) are the figures drawn in
 the caller's process, byte for byte (Agg is deterministic), whatever happens to a worker."""
 
 from __future__ import annotations
@@ -9,9 +9,9 @@ from pathlib import Path
 
 import pytest
 
-from orchestrator.results import figure_pool
-from orchestrator.results.plots import RUN_FIGURES, figure_inputs, render_png
-from orchestrator.results.run_result import RunResult
+from orchestrator.output import figure_pool
+from orchestrator.output.plots import RUN_FIGURES, figure_inputs, render_png
+from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
 
 pytestmark = pytest.mark.skipif(not figure_pool.available(),

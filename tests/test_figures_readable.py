@@ -11,7 +11,7 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from orchestrator.master import run
-from orchestrator.results.plots import (
+from orchestrator.output.plots import (
     HIST_BASELINE,
     PREEMPTION_FACTOR,
     actuators_figure,
@@ -19,7 +19,7 @@ from orchestrator.results.plots import (
     preempted,
     tracking_figure,
 )
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare
 from plant.airframe import load_airframe
 
@@ -155,7 +155,7 @@ def test_noisy_run_draws_the_truth_over_faint_measurements():
 
 def test_force_set_figure_spelled_out_large_and_uncovered():
     from controller.plots_force_sets import force_set_figure
-    from orchestrator.results.plots import force_sets
+    from orchestrator.output.plots import force_sets
 
     af = load_airframe("paper_hexacopter")
     afs, s0 = force_sets(af)
@@ -177,7 +177,7 @@ def test_force_set_figure_spelled_out_large_and_uncovered():
 def test_reference_jumps_are_jumps_not_trajectories():
     """A chirp moving 3 mm per sample is a trajectory (its velocity explains it); a step is
     the one jump of position_step, at its time."""
-    from orchestrator.results.events import events
+    from orchestrator.output.events import events
 
     chirp = run(prepare("translation_frequency_sweep", duration=20.0), timing=False)
     assert not [e for e in events(chirp) if e.kind == "reference"]

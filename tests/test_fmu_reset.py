@@ -16,7 +16,7 @@ import pytest
 from controller import controller_fmu
 from orchestrator import sweep
 from orchestrator.master import CoSimulation
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare
 from orchestrator.scenario.definition import Scenario
 from orchestrator.sim.fmu import FmuError, FmuInstance

@@ -17,7 +17,7 @@ import pytest
 
 from orchestrator import master
 from orchestrator.master import RecordingTooLarge, check_memory
-from orchestrator.results.run_result import RESULTS_FILE, RunResult
+from orchestrator.output.run_result import RESULTS_FILE, RunResult
 from orchestrator.runner import run_scenario
 from orchestrator.scenario.definition import load_scenario
 

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from mcap.reader import make_reader
 
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 
 
 @pytest.fixture(scope="module")

@@ -11,14 +11,14 @@ import numpy as np
 import pytest
 from matplotlib.image import imread
 
-from orchestrator.results.metrics import (
+from orchestrator.output.metrics import (
     PAPER_MAX_GUIDANCE_TIME,
     compare_with_paper,
     compute_metrics,
     saturation_fractions,
     wrap_deg,
 )
-from orchestrator.results.plots import (
+from orchestrator.output.plots import (
     envelope,
     envelope_indices,
     false_intervals,
@@ -26,7 +26,7 @@ from orchestrator.results.plots import (
     plot_run,
     resolve_airframe,
 )
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 
 STEP = 0.002
 
@@ -410,7 +410,7 @@ def test_plots_module_does_not_import_pyplot():
     import subprocess
     import sys
 
-    code = ("import sys, orchestrator.results.plots, orchestrator.results.metrics; "
+    code = ("import sys, orchestrator.output.plots, orchestrator.output.metrics; "
             "assert 'matplotlib.pyplot' not in sys.modules")
     root = Path(__file__).resolve().parents[1]
     res = subprocess.run([sys.executable, "-c", code], cwd=root, capture_output=True,

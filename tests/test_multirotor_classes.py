@@ -11,7 +11,7 @@ import pytest
 import plant
 from controller.failures import airframe_without, failure_polytopes, hover_possible
 from orchestrator.master import run
-from orchestrator.results.metrics import compute_metrics
+from orchestrator.output.metrics import compute_metrics
 from orchestrator.runner import prepare
 
 ROOT = Path(__file__).resolve().parents[1]

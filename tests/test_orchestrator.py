@@ -10,8 +10,8 @@ import pytest
 from helpers import fullpose as cli
 
 from orchestrator.master import run
-from orchestrator.results.metrics import compute_metrics
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.metrics import compute_metrics
+from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
 
 PAPER = ["hover_varying_orientation", "translation_frequency_sweep", "full_pose_with_disturbances"]

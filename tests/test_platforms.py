@@ -32,7 +32,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.validation import validate_fmu
 
-from orchestrator.build.platforms import PLATFORMS, platform_named
+from orchestrator.export.platforms import PLATFORMS, platform_named
 from orchestrator.master import run
 from orchestrator.runner import prepare
 

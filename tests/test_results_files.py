@@ -1,4 +1,4 @@
-"""The results files (orchestrator/results/run_result.py) read by tools that are not ours.
+"""The results files (orchestrator/output/run_result.py) read by tools that are not ours.
 
 Oracles: pyarrow's own Parquet reader (what pandas, polars and DuckDB use), Python's csv module
 with ``float()``, and the in-memory recording the files were written from.
@@ -18,7 +18,7 @@ import pyarrow as pa
 import pyarrow.parquet as pq
 import pytest
 
-from orchestrator.results.run_result import ROW_GROUP, ResultsFileError, RunResult, round_float32
+from orchestrator.output.run_result import ROW_GROUP, ResultsFileError, RunResult, round_float32
 
 INTS = ("ctrl.guid_iter", "ctrl.feasible")
 
@@ -157,7 +157,7 @@ from tests.test_results_files import sample
 r = sample(1000)
 r.write_parquet(r"{tmp_path}/r.parquet")
 r.write_csv(r"{tmp_path}/r.csv")
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 RunResult.read(r"{tmp_path}/r.parquet")
 RunResult.read(r"{tmp_path}/r.csv")
 print("pandas" in sys.modules)

@@ -23,7 +23,7 @@ from lxml import etree
 from controller.force_sets import feasible_force_set
 from controller.polytope import same_polytope
 from controller.polytope_cache import polytope_from_doc, shipped
-from orchestrator.build.ssp import (
+from orchestrator.export.ssp import (
     CONTROLLER,
     PLANT,
     connection_table,
@@ -155,7 +155,7 @@ def test_connection_table_is_the_name_match(hover_ssp, mds, caplog):
                 if n in names(p_md, "output")]
     expected += [(CONTROLLER, n, PLANT, n) for n in names(p_md, "input")
                  if n in names(c_md, "output")]
-    with caplog.at_level(logging.INFO, logger="orchestrator.build.ssp"):
+    with caplog.at_level(logging.INFO, logger="orchestrator.export.ssp"):
         table = connection_table(p_md, c_md)
     assert table == expected
     # 3 x 5 rigid-body signals + 3 x 8 actuator states + the pose's age measured; 3 x 8

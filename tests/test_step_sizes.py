@@ -42,7 +42,7 @@ import numpy as np
 import pytest
 
 from orchestrator.master import run
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 from orchestrator.scenario.definition import Scenario, load_scenario
 
 TS = 0.002

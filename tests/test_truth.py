@@ -7,8 +7,8 @@ import numpy as np
 import pytest
 
 from orchestrator import master
-from orchestrator.results.metrics import compute_metrics
-from orchestrator.results.plots import tracking_figure
+from orchestrator.output.metrics import compute_metrics
+from orchestrator.output.plots import tracking_figure
 from orchestrator.scenario.definition import load_scenario
 
 NOISE = ["plant.noise_pos=0.005", "plant.noise_vel=0.01", "plant.noise_att=0.003",

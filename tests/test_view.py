@@ -1,4 +1,4 @@
-"""The 3-D replay (orchestrator/results/view.py) read back through Rerun's own dataframe API (a
+"""The 3-D replay (orchestrator/output/view.py) read back through Rerun's own dataframe API (a
 local catalog server over the written .rrd), checked against the results file it came from.
 
 Oracles: the results (Parquet) the run wrote; scipy's rotations for the quaternions; the
@@ -18,8 +18,8 @@ rr = pytest.importorskip("rerun", reason="the view extra: pip install '.[view]'"
 
 from helpers import cli  # noqa: E402
 
-from orchestrator.results.run_result import RunResult  # noqa: E402
-from orchestrator.results.view import LIVE_HZ, VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
+from orchestrator.output.run_result import RunResult  # noqa: E402
+from orchestrator.output.view import LIVE_HZ, VIEW_HZ, quaternion_xyzw, thrust_directions  # noqa: E402
 from plant.airframe import load_airframe  # noqa: E402
 from plant.effectiveness import thrust_direction  # noqa: E402
 
@@ -190,7 +190,7 @@ def test_fly_writes_a_live_view_of_the_flight(tmp_path):
 
 
 def test_live_view_marks_mode_and_setpoint_changes(tmp_path):
-    from orchestrator.results.view import LiveView
+    from orchestrator.output.view import LiveView
     from orchestrator.sim.live import LiveSession
 
     af = load_airframe("paper_hexacopter")

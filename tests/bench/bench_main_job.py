@@ -66,7 +66,7 @@ def main() -> None:
     boot = start_up()
     print(f"process start + imports       {_stats(boot)}")
 
-    from orchestrator.results.plots import RUN_FIGURES, figure_inputs, render_png
+    from orchestrator.output.plots import RUN_FIGURES, figure_inputs, render_png
     from orchestrator.runner import prepare, run_scenario
 
     sc = prepare(args.scenario)

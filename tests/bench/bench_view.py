@@ -20,7 +20,7 @@ from pathlib import Path
 
 from mavlink_bridge.bridge import Bridge, BridgeConfig
 from orchestrator.master import run
-from orchestrator.results.view import LiveView, replay
+from orchestrator.output.view import LiveView, replay
 from orchestrator.runner import prepare, run_scenario
 
 

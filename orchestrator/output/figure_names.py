@@ -3,5 +3,5 @@ matplotlib (the run's parent process hands names to the figure workers) and the 
 module and the workers' pool need not import each other."""
 
 RUN_FIGURES = ("tracking", "actuators", "forces", "disturbance_timing")
-"""The figures of every run (``orchestrator.results.plots``), in the order
-:func:`~orchestrator.results.plots.plot_run` writes them (then ``force_set``)."""
+"""The figures of every run (``orchestrator.output.plots``), in the order
+:func:`~orchestrator.output.plots.plot_run` writes them (then ``force_set``)."""

@@ -39,7 +39,7 @@ figure's time) and are written with fast PNG compression.
 
 Each figure has a builder returning the :class:`~matplotlib.figure.Figure`
 (:data:`RUN_FIGURES`, :func:`render_png`), so a figure can be drawn in another process
-(``orchestrator.results.figure_pool``) and written by the caller.
+(``orchestrator.output.figure_pool``) and written by the caller.
 """
 
 from __future__ import annotations
@@ -57,10 +57,10 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
 from matplotlib.ticker import LogLocator, NullFormatter
 
-from orchestrator.results.events import Event, events
-from orchestrator.results.figure_names import RUN_FIGURES
-from orchestrator.results.metrics import wrap_deg
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.events import Event, events
+from orchestrator.output.figure_names import RUN_FIGURES
+from orchestrator.output.metrics import wrap_deg
+from orchestrator.output.run_result import RunResult
 
 if TYPE_CHECKING:
     from controller.polytope import Polytope

@@ -1,7 +1,7 @@
 """The moments of a run worth marking on its timeline, from its recording alone: the reference
 pose turning infeasible or feasible again, rotor faults, the controller's detections,
-disturbance steps and reference jumps.  One source for the figures (orchestrator/results/plots.py)
-and the 3-D view (orchestrator/results/view.py)."""
+disturbance steps and reference jumps.  One source for the figures (orchestrator/output/plots.py)
+and the 3-D view (orchestrator/output/view.py)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 
 KINDS = ("feasibility", "fault", "detection", "disturbance", "reference")
 JUMP = 1e-3

@@ -1,6 +1,6 @@
 """Metrics of a recorded run (the JSON summary) and the paper's claims beside ours.
 
-:func:`compute_metrics` reduces a :class:`~orchestrator.results.run_result.RunResult` to a plain
+:func:`compute_metrics` reduces a :class:`~orchestrator.output.run_result.RunResult` to a plain
 dict (str keys; float, int, str, None, lists and dicts of these; never NaN or inf), which the caller
 writes as JSON.  Every sample (row) has the same weight: rows are equally spaced communication
 points.  A value that cannot be computed (signal not recorded, timing not measured, wall time
@@ -77,7 +77,7 @@ import numpy as np
 
 from controller.fmu_parameters import SAT_FLAG_SHIFT
 from controller.wls import STATUS_NAMES
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 
 """Names of the QP status codes 0..3 (controller outputs guid_status and alloc_status)."""
 

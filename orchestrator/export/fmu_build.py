@@ -3,7 +3,7 @@ from each FMU's own ``sources/`` (so every cross build also proves the sources c
 
 Each archive written holds the installed FMU's ``modelDescription.xml`` and ``sources/``
 unchanged and ``binaries/<folder>/`` for every platform asked for
-(``orchestrator.build.platforms``).
+(``orchestrator.export.platforms``).
 The archives are deterministic: entries sorted, fixed timestamps and permissions.  Nothing is
 written to the output folder until both FMUs are built: they are made in a temporary folder
 beside it and moved in at the end.
@@ -19,7 +19,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path, PurePosixPath
 
-from orchestrator.build.platforms import Platform, PlatformBuildError, build_platform, zig_command
+from orchestrator.export.platforms import Platform, PlatformBuildError, build_platform, zig_command
 
 ZIP_TIME = (2020, 1, 1, 0, 0, 0)  # the timestamp of every entry (as the CMake build's)
 

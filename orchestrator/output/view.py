@@ -28,10 +28,10 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from orchestrator.results.metrics import wrap_deg
+from orchestrator.output.metrics import wrap_deg
 
 if TYPE_CHECKING:
-    from orchestrator.results.run_result import RunResult
+    from orchestrator.output.run_result import RunResult
     from plant.airframe import Airframe
 
 VIEW_HZ = 50.0
@@ -302,7 +302,7 @@ def _send_series(rr: Any, rec: Any, r: RunResult, n: int) -> int:
 
 
 def _send_events(rr: Any, rec: Any, r: RunResult) -> None:
-    from orchestrator.results.events import events
+    from orchestrator.output.events import events
 
     found = events(r, ("feasibility", "fault", "detection", "reference"))
     if not found:

@@ -276,7 +276,7 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
     root = etree.Element(_q(NS_SSD, "SystemStructureDescription"),
                          nsmap={"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP}, version="1.0",
                          name=name,
-                         generationTool="fullpose orchestrator.build.ssp")
+                         generationTool="fullpose orchestrator.export.ssp")
     system = etree.SubElement(root, _q(NS_SSD, "System"), name=SYSTEM,
                               description="Multirotor plant flown by the full-pose controller")
     elements = etree.SubElement(system, _q(NS_SSD, "Elements"))

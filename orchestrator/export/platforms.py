@@ -30,7 +30,7 @@ import time
 from dataclasses import dataclass
 from pathlib import Path
 
-from orchestrator.build.macho import universal_binary
+from orchestrator.export.macho import universal_binary
 
 # Every compiler warning flag of the project's own build (fmu_src/CMakeLists.txt).
 WARNINGS = ("-Wall", "-Wextra", "-Wpedantic", "-Wmissing-prototypes", "-Wstrict-prototypes")

@@ -33,7 +33,7 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
-from orchestrator.results.run_result import RunResult
+from orchestrator.output.run_result import RunResult
 
 if TYPE_CHECKING:
     from plant.airframe import Airframe
@@ -74,7 +74,7 @@ class _Job:
 
 
 def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
-    from orchestrator.results.plots import figure_inputs, render_png
+    from orchestrator.output.plots import figure_inputs, render_png
 
     result = None
     if job.data is not None:
@@ -97,7 +97,7 @@ def _draw(job: _Job, runs: dict[str, RunResult]) -> tuple[bytes, list[str]]:
             af = job.airframe if isinstance(job.airframe, Airframe) else None
             afs = s0 = None
             if af is not None:
-                from orchestrator.results.plots import force_sets
+                from orchestrator.output.plots import force_sets
 
                 afs, s0 = force_sets(af)
         png = render_png(job.name, result, af, afs, s0)
@@ -110,7 +110,7 @@ def _warm() -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from orchestrator.results.plots import png_bytes
+    from orchestrator.output.plots import png_bytes
 
     fig = Figure(figsize=(1.0, 1.0))
     FigureCanvasAgg(fig)

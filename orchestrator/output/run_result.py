@@ -45,7 +45,7 @@ Files (:meth:`RunResult.write`, :meth:`RunResult.read`):
     Header of column names, every value in float64 with the shortest representation that
     reads back to the same double (integers as integers): exact, ~20x larger.
 ``results.mcap`` (on request)
-    The same for Foxglove and PlotJuggler (orchestrator/results/mcap_export.py); not read back here.
+    The same for Foxglove and PlotJuggler (orchestrator/output/mcap_export.py); not read back here.
 ``results.npz``
     The format of earlier versions (float64, numpy archive): still read.
 """

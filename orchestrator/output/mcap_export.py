@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from orchestrator.results.run_result import RunResult
+    from orchestrator.output.run_result import RunResult
 
 MCAP_FILE = "results.mcap"
 PROFILE = ""  # no ROS: plain JSON messages
