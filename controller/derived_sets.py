@@ -15,7 +15,12 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import NDArray
 
-from controller.fmu_parameters import FAIL_FACETS, POLY_FACETS
+from controller.fmu_parameters import (
+    FAIL_FACETS,
+    POLY_FACETS,
+    facets_of,
+    failure_facets,
+)
 from controller.native import solver
 from plant import Airframe
 
@@ -108,18 +113,10 @@ def flown_sets(airframe: Airframe) -> dict[str, object]:
 
     params = design_set_parameters(airframe)
     if params:
-        def rows(prefix: str, first: int, n: int) -> dict[str, list[list[float]] | list[float]]:
-            return {"A": [[float(params[f"{prefix}_A[{r},{j}]"]) for j in (1, 2, 3)]
-                          for r in range(first + 1, first + n + 1)],
-                    "b": [float(params[f"{prefix}_b[{r}]"])
-                          for r in range(first + 1, first + n + 1)]}
-
-        fails: list[object] = []
-        for i in range(airframe.n_rotors):
-            n = int(params[f"fail_poly_n[{i + 1}]"])
-            fails.append(rows("fail_poly", i * FAIL_FACETS, n) if n else None)
-        return {"source": "design", "s0": rows("poly", 0, int(params["poly_n"])),
-                "failures": fails}
+        A, b = facets_of(params, "poly", 0, int(params["poly_n"]))
+        return {"source": "design", "s0": {"A": A, "b": b},
+                "failures": [{"A": fa, "b": fb} if fb else None
+                             for fa, fb in failure_facets(params, airframe.n_rotors)]}
     sets = controller_sets(airframe)
     return {"source": "derived", "s0": {"A": sets.s0.A.tolist(), "b": sets.s0.b.tolist()},
             "failures": [None if f is None else {"A": f.A.tolist(), "b": f.b.tolist()}

@@ -66,6 +66,24 @@ def failure_parameters(polys: Sequence[Polytope | None]) -> Parameters:
     return params
 
 
+def facets_of(params: Mapping[str, float | int], prefix: str, first_row: int,
+              n: int) -> tuple[list[list[float]], list[float]]:
+    """(A, b) of the n facets from row first_row + 1 on of the ``PREFIX_A``, ``PREFIX_b``
+    parameters: the inverse of :func:`s0_parameters` (prefix ``poly``, first_row 0) and
+    :func:`failure_parameters` (``fail_poly``, rotor i's rows from i * FAIL_FACETS)."""
+    rows = range(first_row + 1, first_row + n + 1)
+    return ([[float(params[f"{prefix}_A[{r},{j}]"]) for j in (1, 2, 3)] for r in rows],
+            [float(params[f"{prefix}_b[{r}]"]) for r in rows])
+
+
+def failure_facets(params: Mapping[str, float | int],
+                   n_rotors: int) -> list[tuple[list[list[float]], list[float]]]:
+    """(A, b) of each rotor's failure set in the ``fail_poly_*`` parameters (no rows: a
+    loss without a set)."""
+    return [facets_of(params, "fail_poly", i * FAIL_FACETS, int(params[f"fail_poly_n[{i + 1}]"]))
+            for i in range(n_rotors)]
+
+
 def block_parameters(blocks: Mapping[str, Sequence[float]]) -> dict[str, float]:
     """``K_<loop>_<A|B|C|D>[axis]`` for blocks given as ``{loop: (A, B, C, D)}``, the same
     block on all three axes."""

@@ -33,8 +33,10 @@ import os
 import sys
 import tempfile
 import threading
+from collections.abc import Mapping
 from functools import cache
 from pathlib import Path
+from types import MappingProxyType
 from typing import TYPE_CHECKING, Any
 
 import numpy as np
@@ -116,16 +118,22 @@ def _write_doc(path: Path, doc: dict[str, Any]) -> None:
         pass  # a read-only cache folder costs the next run the computation, nothing else
 
 
-def design_set_parameters(airframe: Airframe) -> Parameters:
+def design_set_parameters(airframe: Airframe) -> Mapping[str, float | int]:
     """The controller's ``poly_*`` and ``fail_poly_*`` parameters from the design tool, for
     an airframe whose rotors are a shipped airframe's (its design-time sets, computed at a
     finer servo grid than the controller's own derivation); empty for any other airframe,
-    whose controller derives every set itself at initialization."""
-    found = shipped(airframe)
-    if found is None:
-        return {}
-    params = dict(s0_parameters(polytope_from_doc(found["s0"])))
-    params.update(found["failures"])
+    whose controller derives every set itself at initialization.  Read once per rotor set
+    within a process (a sweep builds every case's start values), handed out read-only."""
+    path = _shipped_index().get(rotors_digest(airframe))
+    return MappingProxyType({} if path is None else _design_sets_of(path))
+
+
+@cache
+def _design_sets_of(path: Path) -> Parameters:
+    """The parameters of the shipped sets file at path (read once)."""
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    params = dict(s0_parameters(polytope_from_doc(doc["s0"])))
+    params.update(doc["failures"])
     return params
 
 

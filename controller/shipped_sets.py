@@ -30,7 +30,7 @@ from typing import Any
 import numpy as np
 
 from controller.failures import airframe_without, failure_polytopes
-from controller.fmu_parameters import FAIL_FACETS, failure_parameters
+from controller.fmu_parameters import failure_facets, failure_parameters
 from controller.force_sets import facet_problem
 from controller.polytope_cache import (
     POLYTOPE_KINDS,
@@ -55,18 +55,6 @@ def generate(af: Airframe) -> dict[str, Any]:
     return doc
 
 
-def _failure_sets(params: dict[str, Any], n_rotors: int) -> list[tuple[np.ndarray, np.ndarray]]:
-    """(A, b) of each rotor's failure set from the controller's parameters (no rows: empty)."""
-    out = []
-    for i in range(n_rotors):
-        n = int(params[f"fail_poly_n[{i + 1}]"])
-        rows = range(i * FAIL_FACETS + 1, i * FAIL_FACETS + n + 1)
-        A = np.array([[float(params[f"fail_poly_A[{r},{j}]"]) for j in (1, 2, 3)]
-                      for r in rows]).reshape(-1, 3)
-        out.append((A, np.array([float(params[f"fail_poly_b[{r}]"]) for r in rows])))
-    return out
-
-
 def check(af: Airframe) -> list[str]:
     """What is wrong with the shipped file of ``af`` (empty: nothing): the airframe numbers it
     was made for, then every set's facets against the offsets computed now for their normals
@@ -84,7 +72,8 @@ def check(af: Airframe) -> list[str]:
         problems.append(facet_problem(af, shipped.A, shipped.b,
                                       None if kind == "afs" else np.zeros(3), what=kind))
     try:
-        sets = _failure_sets(doc["failures"], af.n_rotors)
+        sets = [(np.array(A).reshape(-1, 3), np.array(b))
+                for A, b in failure_facets(doc["failures"], af.n_rotors)]
     except (KeyError, TypeError, ValueError) as e:
         sets = []
         problems.append(f"failures: unreadable parameters ({e})")

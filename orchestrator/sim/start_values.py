@@ -76,27 +76,10 @@ def controller_start_values(airframe: Airframe, *,
     variables = fmu_variables(controller_fmu())
     params: dict[str, Value] = {k: v for k, v in airframe.fmu_parameters().items()
                                 if k in variables and variables[k].causality == "parameter"}
-    params.update(_design_sets(airframe))
+    params.update(design_set_parameters(airframe))
     params.update(design or {})
     params.update(overrides or {})
     return params
-
-
-_DESIGN_SETS: dict[str, dict[str, Value]] = {}
-
-
-def _design_sets(airframe: Airframe) -> dict[str, Value]:
-    """design_set_parameters, read once per rotor set within a process (a sweep builds
-    every case's start values)."""
-    from controller.polytope_cache import rotors_digest
-
-    digest = rotors_digest(airframe)
-    found = _DESIGN_SETS.get(digest)
-    if found is None:
-        if len(_DESIGN_SETS) >= 8:
-            _DESIGN_SETS.clear()
-        found = _DESIGN_SETS[digest] = dict(design_set_parameters(airframe))
-    return found
 
 
 def start_values(airframe: Airframe, pose: Pose = Pose(), *,
