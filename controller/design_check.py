@@ -27,6 +27,7 @@ import json
 import math
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -53,10 +54,16 @@ def actuator_lag(airframe: Airframe) -> float:
         else airframe.tau_motor
 
 
+@cache
+def design_lag() -> float:
+    """The actuator lag (s) of the shipped gains' design airframe."""
+    return actuator_lag(load_airframe(DESIGN_AIRFRAME))
+
+
 def certified_lags(nominal: float | None = None) -> tuple[float, float]:
     """The lag range (s) gains synthesized at ``nominal`` (default: the shipped gains'
     design airframe) are certified for."""
-    tau = actuator_lag(load_airframe(DESIGN_AIRFRAME)) if nominal is None else nominal
+    tau = design_lag() if nominal is None else nominal
     return LAG_SCALE[0] * tau, LAG_SCALE[1] * tau
 
 
@@ -155,7 +162,7 @@ def synthesis_specs(lag: float) -> dict[str, Any]:
     1 / r (a slower vehicle is asked for proportionally slower tracking; the robustness
     weight at the actuator input stays).  With the shipped weights a 40 ms lag reaches gamma
     1.09 / 1.11 (not certified), with the scaled ones 0.71 / 0.61."""
-    r = min(1.0, actuator_lag(load_airframe(DESIGN_AIRFRAME)) / lag)
+    r = min(1.0, design_lag() / lag)
     return {name: dataclasses.replace(s, w1=s.w1 * r, w2=s.w2 * r, wd=s.wd * r,
                                       d_max=s.d_max / r, start=s.start if r == 1.0 else ())
             for name, s in _specs(lag).items()}
@@ -183,9 +190,9 @@ def check(airframe: Airframe, gains: GainsFile | None = None) -> DesignCheck:
 
     blocks = shipped_blocks() if gains is None else gains.blocks
     lag = actuator_lag(airframe)
-    design_lag = actuator_lag(load_airframe(DESIGN_AIRFRAME)) if gains is None else gains.lag
+    weights_lag = design_lag() if gains is None else gains.lag
     out = []
-    for name, asked in synthesis_specs(design_lag).items():
+    for name, asked in synthesis_specs(weights_lag).items():
         spec = dataclasses.replace(asked, tau=lag)
         outer = next(loop for loop, c, w in LOOPS if c == name and w == "outer")
         inner = next(loop for loop, c, w in LOOPS if c == name and w == "inner")
