@@ -252,13 +252,11 @@ static CtrlAllocationParams allocation_params(const ControllerModel *m) {
  * before it is set up). */
 static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     FpCheck c;
-    FpRotorSet rs;
     CtrlGivenSet s0, fail[FP_MAX_ROTORS];
     double hover_fz = -m->af.mass * m->af.g;
     char lost[48] = "";
     int i, n_lost = 0;
     fp_check_init(&c, logger, controller_vars, N_CTRL_VARS);
-    fp_rotor_set_of(&m->af, &rs);
     s0.n = m->poly_n, s0.A = (const double(*)[3])m->poly_A, s0.b = m->poly_b;
     for (i = 0; i < FP_MAX_ROTORS; i++) {
         int base = i * FP_FAIL_POLYTOPE_FACETS;
@@ -266,7 +264,8 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
         fail[i].A = (const double(*)[3])&m->fail_poly_A[base];
         fail[i].b = &m->fail_poly_b[base];
     }
-    if (ctrl_force_sets_resolve(&c, &rs, &s0, fail, &m->guid, &m->set_n, m->set_A, m->set_b,
+    if (ctrl_force_sets_resolve(&c, &m->rotors, &s0, fail, &m->guid, &m->set_n, m->set_A,
+                                m->set_b,
                                 m->set_fail_n, m->set_fail_A, m->set_fail_b,
                                 &m->sets_derived) != FP_OK)
         return FP_ERROR;
@@ -642,8 +641,9 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     CtrlFilterInputs fin;
     int i, n;
     char why[160];
-    if (ctrl_check_parameters(m, logger) != 0 || prepare_force_sets(m, logger) != FP_OK)
-        return FP_ERROR;
+    if (ctrl_check_parameters(m, logger) != 0) return FP_ERROR;
+    fp_rotor_set_of(&m->af, &m->rotors); /* (validated: the force sets and samples use it) */
+    if (prepare_force_sets(m, logger) != FP_OK) return FP_ERROR;
     derive_acc_limits(m);
     memcpy(m->ref_acc_limit, m->acc_limit, sizeof m->ref_acc_limit);
     derive_input_bounds(m);
@@ -657,7 +657,6 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->samples_run = 0;
     m->warned_coarse = 0;
     n = m->af.n_rotors;
-    fp_rotor_set_of(&m->af, &m->rotors);
     /* what the samples need of the geometry alone, once */
     memset(&m->rotor_trig, 0, sizeof m->rotor_trig);
     fp_rotor_trig_mounts(&m->rotors, &m->rotor_trig);
