@@ -78,6 +78,63 @@ def test_no_module_imports_another_modules_private_names(package):
     assert not bad, "\n".join(bad)
 
 
+def _module_graph() -> dict[str, set[str]]:
+    """Module -> the modules of the four packages it imports (at any depth).  ``from pkg
+    import sub`` is an import of the submodule ``pkg.sub`` (as import-linter and pydeps
+    count it), ``from mod import name`` of ``mod``."""
+    paths = {_module_name(p): p for package in PACKAGES for p in _modules(package)}
+    graph: dict[str, set[str]] = {m: set() for m in paths}
+    for me, path in paths.items():
+        for _, module, names in _imports(path):
+            targets = [f"{module}.{n}" for n in names if f"{module}.{n}" in paths]
+            if len(targets) < len(names) or not names:
+                targets.append(module)
+            graph[me] |= {t for t in targets if t in paths and t != me}
+    return graph
+
+
+def _cycles(graph: dict[str, set[str]]) -> list[list[str]]:
+    """The strongly connected components of more than one node (Tarjan), each sorted."""
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    found: list[list[str]] = []
+
+    def visit(v: str) -> None:
+        index[v] = low[v] = len(index)
+        stack.append(v)
+        for w in sorted(graph[v]):
+            if w not in index:
+                visit(w)
+                low[v] = min(low[v], low[w])
+            elif w in stack:
+                low[v] = min(low[v], index[w])
+        if low[v] == index[v]:
+            component = []
+            while True:
+                w = stack.pop()
+                component.append(w)
+                if w == v:
+                    break
+            if len(component) > 1:
+                found.append(sorted(component))
+
+    for v in sorted(graph):
+        if v not in index:
+            visit(v)
+    return found
+
+
+def test_no_import_circles():
+    """No two modules import each other, directly or around a circle (lazy imports count)."""
+    assert _cycles(_module_graph()) == []
+
+
+def test_the_circle_check_sees_a_circle():
+    assert _cycles({"a": {"b"}, "b": {"c"}, "c": {"a"}, "d": {"a"}}) == [["a", "b", "c"]]
+    assert _cycles({"a": {"b"}, "b": set()}) == []
+
+
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 SRC = ROOT / "fmu_src"
 MODEL_DIRS = ("plant", "controller", "common")

@@ -1,0 +1,323 @@
+"""What every part of the bridge shares: its configuration, the co-simulation, the endpoints,
+the vehicle as the ground stations see it (mode, arming, reference, setpoints, limits,
+parameters) and the ways to tell them (STATUSTEXT, HEARTBEAT, replies).
+
+The router (:mod:`mavlink_bridge.bridge`) steps the loop and hands each message to a handler
+(:mod:`mavlink_bridge.handlers`); both work on a :class:`Context`, so a handler never imports
+the router.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from mavlink_bridge import px4, stability, telemetry
+from mavlink_bridge.geodesy import Origin
+from mavlink_bridge.links import Endpoint, Signing
+from mavlink_bridge.params import ParameterTable, Range, fmu_range
+from mavlink_bridge.setpoints import (
+    AttitudeSetpoint,
+    Limits,
+    PositionSetpoint,
+    Reference,
+    VehicleState,
+)
+from mavlink_bridge.telemetry import Snapshot, mav
+from orchestrator.sim.live import LiveSession
+from plant import Airframe
+
+DEFAULT_URLS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
+SYSTEM_ID = 1
+COMPONENT_ID = 1
+STATUSTEXT_PER_S = 5  # rejection/refusal messages per wall second, the rest are counted
+EVENTS_KEPT = 1000  # STATUSTEXTs kept in Context.events (the older half dropped beyond)
+
+Source = tuple[int, int]
+"""(system id, component id) of a message's sender."""
+
+
+@dataclass
+class PacingStats:
+    """How the loop kept up with the wall clock."""
+
+    speed: float
+    sim_time: float = 0.0
+    wall_time: float = 0.0
+    chunks: int = 0
+    max_lag: float = 0.0  # s of wall time the published state was ever late
+    late_chunks: int = 0  # chunks finished more than one chunk period late
+    datagrams: int = 0
+    messages: int = 0
+    malformed: int = 0
+    ignored: int = 0
+    refused_unsigned: int = 0
+    sent: int = 0
+    max_rx_rate: float = 0.0  # datagrams per wall second, best 1 s window
+
+    @property
+    def achieved_speed(self) -> float:
+        """Simulated seconds per wall second over the run."""
+        return self.sim_time / self.wall_time if self.wall_time > 0 else 0.0
+
+    def lines(self) -> list[str]:
+        """The run's pacing summary, a line each, for a terminal."""
+        target = "max" if math.isinf(self.speed) else f"{self.speed:g}x"
+        return [
+            f"simulated           {self.sim_time:.3f} s in {self.wall_time:.3f} s wall "
+            f"(speed {target}, achieved {self.achieved_speed:.2f}x)",
+            f"max lag             {1e3 * self.max_lag:.2f} ms behind wall time "
+            f"({self.late_chunks} of {self.chunks} chunks late by more than a chunk)",
+            f"received            {self.datagrams} datagrams, {self.messages} messages "
+            f"({self.malformed} malformed, {self.ignored} ignored, "
+            f"{self.refused_unsigned} refused by signing); peak {self.max_rx_rate:.0f}/s",
+            f"sent                {self.sent} messages",
+        ]
+
+
+@dataclass
+class BridgeConfig:
+    """What a bridge flies and how: the airframe, start pose, FMU parameter overrides and coupling;
+    its MAVLink endpoints, speed (simulated seconds per wall second; math.inf: as fast as
+    possible), signing, duration, chunk size, safety limits and geodetic origin."""
+    airframe: str | Airframe = "paper_hexacopter"
+    pos0: Sequence[float] = (0.0, 0.0, -3.0)
+    euler0: Sequence[float] = (0.0, 0.0, 0.0)
+    plant_parameters: Mapping[str, Any] | None = None
+    controller_parameters: Mapping[str, Any] | None = None
+    coupling: str = "gauss-seidel"
+    urls: Sequence[str] = DEFAULT_URLS
+    speed: float = 1.0  # math.inf: as fast as possible
+    signing_key: bytes | None = None
+    # endpoints (their URLs, as in ``urls``) SETUP_SIGNING is accepted from (while disarmed
+    # and without ``signing_key``); empty: SETUP_SIGNING is always refused
+    signing_setup_from: Sequence[str] = ()
+    duration: float | None = None  # simulated s; None: until stop()
+    chunk: int = 5
+    limits: Limits = field(default_factory=Limits)
+    origin: Origin = field(default_factory=Origin)  # WGS84 point of local NED (0, 0, 0)
+
+
+class Context:
+    """The bridge's shared state and its voice: opens the co-simulation and the endpoints of a
+    :class:`BridgeConfig`; holds the mode, arming, reference and setpoints the handlers change;
+    tells the ground stations (:meth:`statustext`, :meth:`heartbeat_now`, :meth:`ack`)."""
+
+    def __init__(self, config: BridgeConfig) -> None:
+        if not config.speed > 0:
+            raise ValueError("speed must be positive (math.inf: as fast as possible)")
+        if not config.urls:
+            raise ValueError("at least one endpoint is needed")
+        self.config = config
+        self.session = LiveSession(config.airframe, pos0=config.pos0, euler0=config.euler0,
+                                   chunk=config.chunk,
+                                   plant_parameters=config.plant_parameters,
+                                   controller_parameters_=config.controller_parameters,
+                                   coupling=config.coupling)
+        self.endpoints: list[Endpoint] = []
+        try:
+            for i, url in enumerate(config.urls):
+                self.endpoints.append(Endpoint(url, link_id=i, system=SYSTEM_ID,
+                                               component=COMPONENT_ID))
+        except Exception:
+            self.close()
+            raise
+        for ep in self.endpoints:
+            ep.intervals = {k: 1.0 / v for k, v in telemetry.DEFAULT_RATES.items()}
+        self.signing = Signing()
+        if config.signing_key is not None:
+            self.set_signing(config.signing_key)
+        self.airframe = self.session.airframe
+        self.params = ParameterTable(self._tunables(), self.session.set_controller_parameter,
+                                     guard=stability.guard)
+        self.limits = config.limits
+        self.sync_limits()
+        self.stats = PacingStats(speed=config.speed)
+        self.origin = config.origin
+        self.battery = telemetry.Battery()
+        self.mode = "HOLD"
+        self.armed = False
+        self.ref = Reference.hold(np.array(config.pos0, float), np.array(config.euler0, float))
+        self.pos_sp: PositionSetpoint | None = None
+        self.att_sp: AttitudeSetpoint | None = None
+        self.last_setpoint: float = -math.inf  # simulated time of the last accepted one
+        self.frozen = False  # OFFBOARD with stale setpoints: holding the pose
+        self.busy = 0.0  # wall s spent computing chunks
+        self.events: list[str] = []  # STATUSTEXTs sent, for logs and tests
+        self.told_unsupported: dict[tuple[str, int, int], float] = {}  # -> wall time
+        self._state = self.session.state()
+        self._snapshot: Snapshot | None = None
+        self._text_budget: tuple[int, int] = (0, 0)  # (wall second, sent in it)
+        self._text_dropped = 0
+
+    @property
+    def state(self) -> dict[str, dict[str, np.ndarray]]:
+        """The session's latest outputs (``LiveSession.state()``), as of the last chunk."""
+        return self._state
+
+    def refresh(self) -> None:
+        """Read the session's outputs after a chunk; the next snapshot is made anew."""
+        self._state = self.session.state()
+        self._snapshot = None
+
+    # -- setup -----------------------------------------------------------------
+
+    def _tunables(self) -> list[tuple[str, float, Range]]:
+        """(name, value in force, range the FMU's modelDescription declares)."""
+        inst = self.session.ctrl_inst
+        out = []
+        for name, var in inst.variables.items():
+            if var.causality == "parameter" and var.variability == "tunable":
+                out.append((name, float(inst.get(name)), fmu_range(var)))
+        return out
+
+    def sync_limits(self) -> None:
+        """Take the setpoint timeouts and limits from the FPB_ parameters in force."""
+        g = self.params.get
+        self.timeout = g("FPB_SP_TIMEOUT")
+        self.stale = g("FPB_SP_STALE")
+        self.limits.xy, self.limits.z = g("FPB_SP_XY_MAX"), g("FPB_SP_Z_MAX")
+        self.limits.vel, self.limits.acc = g("FPB_SP_VEL_MAX"), g("FPB_SP_ACC_MAX")
+        self.limits.rate, self.limits.tilt = g("FPB_SP_RATE_MAX"), g("FPB_SP_TILT_MAX")
+
+    def set_signing(self, key: bytes | None, initial_timestamp: int = 0) -> None:
+        """Sign outgoing and require signed incoming messages with key on every endpoint (None:
+        signing off)."""
+        self.signing.enable(key, initial_timestamp)
+        for ep in self.endpoints:
+            ep.set_signing(self.signing)
+
+    # -- vehicle state -------------------------------------------------------------
+
+    @property
+    def control_active(self) -> bool:
+        """Whether offboard setpoints steer the vehicle (armed and in OFFBOARD)."""
+        return self.armed and self.mode == "OFFBOARD"
+
+    def vehicle(self) -> VehicleState:
+        """The vehicle's position and attitude now (copies)."""
+        p = self._state["plant"]
+        return VehicleState(p["pos"].copy(), p["euler"].copy())
+
+    def freeze(self) -> None:
+        """Setpoints stale (older than FPB_SP_STALE): hold the pose reached, never fly the
+        last velocity, acceleration or rate on.  An absolute position or attitude target is
+        a place, not a motion: it is kept (clients streaming slowly still get there)."""
+        self.frozen = True
+        v = self.vehicle()
+        ref = Reference.hold(v.pos, v.euler)
+        if self.pos_sp is not None:
+            have = ~np.isnan(self.pos_sp.pos)
+            ref.pos[have] = self.pos_sp.pos[have]
+            if not math.isnan(self.pos_sp.yaw):
+                ref.euler[2] = self.pos_sp.yaw
+        if self.att_sp is not None and self.att_sp.euler is not None:
+            ref.euler = self.att_sp.euler.copy()
+        self.ref = ref
+
+    def hold(self) -> None:
+        """Hold the pose reached and forget the setpoints."""
+        self.frozen = False
+        v = self.vehicle()
+        self.ref = Reference.hold(v.pos, v.euler)
+        self.pos_sp = None
+        self.att_sp = None
+
+    def set_mode(self, mode: str) -> None:
+        """Switch to mode; a change is told at once by a HEARTBEAT."""
+        if mode != self.mode:
+            self.mode = mode
+            self.heartbeat_now()
+
+    def enter_offboard(self) -> None:
+        """Enter OFFBOARD from the pose reached, flying the setpoints received so far."""
+        self.frozen = False
+        v = self.vehicle()
+        self.ref = Reference.hold(v.pos, v.euler)
+        if self.pos_sp is not None:
+            self.ref.apply_position(self.pos_sp)
+        if self.att_sp is not None:
+            self.ref.apply_attitude(self.att_sp)
+        self.set_mode("OFFBOARD")
+
+    def thrust_fraction(self) -> float:
+        """The commanded force's share of the airframe's total thrust (the battery's load)."""
+        af = self.airframe
+        f_max = af.n_rotors * af.k_t * af.omega_max ** 2
+        return float(np.linalg.norm(self._state["ctrl"]["f_b_c"])) / f_max if f_max > 0 else 0.0
+
+    # -- output ----------------------------------------------------------------------
+
+    def snapshot(self) -> Snapshot:
+        """Everything the telemetry of this chunk is built from (made once per chunk)."""
+        if self._snapshot is None:
+            af = self.airframe
+            n = af.n_rotors
+            wall = max(self.stats.wall_time, 1e-9)
+            self._snapshot = Snapshot(
+                time=self.session.time, plant=self._state["plant"], ctrl=self._state["ctrl"],
+                reference=self.ref.as_inputs(), mode_custom=px4.custom_mode(self.mode),
+                armed=self.armed, n_rotors=n, omega_max=af.omega_max,
+                tilt_limits=np.abs(np.column_stack([af.alpha_limits[:, 1],
+                                                    af.beta_limits[:, 1]])),
+                thrust_max=n * af.k_t * af.omega_max ** 2, load=self.busy / wall,
+                origin=self.origin, battery=self.battery, unix_us=int(time.time() * 1e6))
+        return self._snapshot
+
+    def fresh_snapshot(self) -> Snapshot:
+        """A snapshot made now (after a change of mode or arming within the chunk)."""
+        self._snapshot = None
+        return self.snapshot()
+
+    def heartbeat_now(self) -> None:
+        """A HEARTBEAT to every endpoint now (a change of mode or arming)."""
+        hb = telemetry.heartbeat(self.fresh_snapshot())
+        for ep in self.endpoints:
+            ep.send(hb)
+
+    def statustext(self, severity: int, text: str, limited: bool = False) -> None:
+        """Tell every ground station; ``limited`` texts are rate-limited (bad input)."""
+        if limited:
+            sec = int(time.monotonic())
+            window, count = self._text_budget
+            if sec != window:
+                window, count = sec, 0
+                if self._text_dropped:
+                    dropped, self._text_dropped = self._text_dropped, 0
+                    self._send_text(mav.MAV_SEVERITY_WARNING,
+                                    f"{dropped} more rejections not shown")
+            if count >= STATUSTEXT_PER_S:
+                self._text_dropped += 1
+                self._text_budget = (window, count)
+                return
+            self._text_budget = (window, count + 1)
+        self._send_text(severity, text)
+
+    def _send_text(self, severity: int, text: str) -> None:
+        self.events.append(text)
+        if len(self.events) > EVENTS_KEPT:
+            del self.events[:EVENTS_KEPT // 2]
+        m = mav.MAVLink_statustext_message(severity, text[:50].encode("ascii", "replace"))
+        for ep in self.endpoints:
+            ep.send(m)
+
+    def ack(self, ep: Endpoint, command: int, result: int, src: Source) -> None:
+        """COMMAND_ACK of command with result to its sender."""
+        ep.send(mav.MAVLink_command_ack_message(command, result, 0, 0, src[0], src[1]))
+
+    @staticmethod
+    def reply(ep: Endpoint, messages: list[Any]) -> None:
+        """Send messages, in order, to one endpoint."""
+        for m in messages:
+            ep.send(m)
+
+    def close(self) -> None:
+        """Close the endpoints and the co-simulation."""
+        for ep in self.endpoints:
+            ep.close()
+        self.session.close()
