@@ -641,7 +641,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     CtrlFilterInputs fin;
     int i, n;
     char why[160];
-    if (ctrl_check_parameters(m, logger) != 0) return FP_ERROR;
+    if (ctrl_check_parameters(m, controller_vars, N_CTRL_VARS, logger) != 0) return FP_ERROR;
     fp_rotor_set_of(&m->af, &m->rotors); /* (validated: the force sets and samples use it) */
     if (prepare_force_sets(m, logger) != FP_OK) return FP_ERROR;
     derive_acc_limits(m);
@@ -730,7 +730,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
 
 static FpStatus controller_tunables_changed(void *model, const FpLogger *logger) {
     ControllerModel *m = (ControllerModel *)model;
-    if (ctrl_check_tunables(m, logger)) return FP_ERROR;
+    if (ctrl_check_tunables(m, controller_vars, N_CTRL_VARS, logger)) return FP_ERROR;
     derive_input_bounds(m); /* (limits that bound the inputs may be among them) */
     return FP_OK;
 }
@@ -810,7 +810,7 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         return FP_ERROR;
     }
     if (!initialized) return FP_OK; /* parameters are checked when initialization ends */
-    if (ctrl_check_parameters(m, logger) != 0) {
+    if (ctrl_check_parameters(m, controller_vars, N_CTRL_VARS, logger) != 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
         return FP_ERROR;
     }

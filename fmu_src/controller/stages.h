@@ -316,10 +316,13 @@ void ctrl_allocation(const CtrlAllocationParams *p, const CtrlFiltered *s, const
 /* validate.c                                                               */
 
 /* Every parameter but the polytopes' facets (ctrl_force_set_prepare checks those); the
- * number of errors, each logged. */
-int ctrl_check_parameters(const ControllerModel *m, const FpLogger *logger);
+ * number of errors, each logged.  vars, n_vars: the model's variable table (controller.c
+ * passes it), where the messages find each parameter's name and range. */
+int ctrl_check_parameters(const ControllerModel *m, const FpVar *vars, size_t n_vars,
+                          const FpLogger *logger);
 
-/* The tunable parameters only (after a change while stepping). */
-int ctrl_check_tunables(const ControllerModel *m, const FpLogger *logger);
+/* The tunable parameters only (after a change while stepping); vars, n_vars as above. */
+int ctrl_check_tunables(const ControllerModel *m, const FpVar *vars, size_t n_vars,
+                        const FpLogger *logger);
 
 #endif

@@ -75,14 +75,10 @@ static void check_polytope_sizes(const ControllerModel *m, FpCheck *c) {
             fp_check_bad_int(c, "fail_poly_n", i + 1, (long)m->fail_poly_n[i], why);
 }
 
-static void check_init(FpCheck *c, const FpLogger *logger) {
-    const FpModelInfo *info = controller_model_info();
-    fp_check_init(c, logger, info->vars, info->n_vars);
-}
-
-int ctrl_check_parameters(const ControllerModel *m, const FpLogger *logger) {
+int ctrl_check_parameters(const ControllerModel *m, const FpVar *vars, size_t n_vars,
+                          const FpLogger *logger) {
     FpCheck c;
-    check_init(&c, logger);
+    fp_check_init(&c, logger, vars, n_vars);
     fp_need_param(&c, "Ts", &m->Ts, 1, NULL);
     if (fp_check_airframe(&c, &m->af) != FP_OK) return c.errors;
     fp_need_param(&c, "filt_wn", &m->filt_wn, 1, NULL);
@@ -94,9 +90,10 @@ int ctrl_check_parameters(const ControllerModel *m, const FpLogger *logger) {
     return c.errors;
 }
 
-int ctrl_check_tunables(const ControllerModel *m, const FpLogger *logger) {
+int ctrl_check_tunables(const ControllerModel *m, const FpVar *vars, size_t n_vars,
+                        const FpLogger *logger) {
     FpCheck c;
-    check_init(&c, logger);
+    fp_check_init(&c, logger, vars, n_vars);
     check_tunables(m, &c);
     return c.errors;
 }
