@@ -1,7 +1,8 @@
 /*
- * Internal to the solver (wls.c, wls_qr.c, wls_phase1.c): the iteration context, the
- * working-set states, the tolerances and the accessors shared by the three files.  Not part
- * of the API (wls.h).
+ * Internal to the solver (wls.c, wls_active_set.c, wls_qr.c, wls_phase1.c): the iteration
+ * context, the working-set states, the tolerances and the accessors shared by the four
+ * files.  Not part of the API (wls.h).  The files call each other in layers only:
+ * wls_qr.c <- wls_active_set.c <- wls_phase1.c <- wls.c.
  */
 #ifndef FP_WLS_INTERNAL_H
 #define FP_WLS_INTERNAL_H
@@ -236,11 +237,21 @@ void wls_decompose(Ctx *c, const double *v, double *z, double *rr, double *rb);
 void wls_project_to_face(Ctx *c);
 
 /* ------------------------------------------------------------------------ */
-/* wls.c: the active-set loop.                                              */
+/* wls_active_set.c: the active-set loop.                                   */
 
 /* The active-set loop from a feasible point with a consistent working set: RUN_OPTIMAL,
  * RUN_CAP, RUN_NUMERIC, or in phase 1 RUN_FEASIBLE. */
 int wls_run(Ctx *c, int max_iter, int *iter);
+
+/* Clamp the free variables into their bounds (removes rounding overshoot). */
+void wls_clamp_free(Ctx *c);
+
+/* Multipliers at the face minimiser (needs wls_factor_ws for the current set): the global
+ * index of the constraint to drop (j < nv a bound, nv + i row i of C), or -1 if none. */
+int wls_pick_drop(Ctx *c);
+
+/* Drop constraint idx (a global index as wls_pick_drop returns) from the working set. */
+void wls_drop_constraint(Ctx *c, int idx);
 
 /* ------------------------------------------------------------------------ */
 /* wls_phase1.c: a feasible start.                                          */
