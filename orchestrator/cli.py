@@ -129,7 +129,7 @@ def _cmd_view(args: argparse.Namespace) -> int:
 
 
 def _cmd_scenarios(args: argparse.Namespace) -> int:
-    from orchestrator.scenario.definition import list_scenarios
+    from orchestrator.scenario.catalogue import list_scenarios
 
     for sc in list_scenarios():
         print(f"{sc.name:30s} {sc.duration:6g} s  {sc.airframe.name:22s} {sc.description}")

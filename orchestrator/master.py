@@ -51,7 +51,7 @@ from orchestrator.sim.start_values import Pose, StartValues, start_values
 from plant import plant_fmu
 
 if TYPE_CHECKING:
-    from orchestrator.scenario.definition import Scenario
+    from orchestrator.scenario.model import Scenario
 
 __all__ = ["COUPLINGS", "ENGINES", "CoSimulation", "RecordingTooLarge", "RunError", "run"]
 

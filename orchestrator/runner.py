@@ -36,7 +36,9 @@ from typing import TYPE_CHECKING, Any
 from orchestrator.master import SPILL_BYTES, run
 from orchestrator.output.metrics import compare_with_paper, compute_metrics
 from orchestrator.output.run_result import CSV_FILE, RESULTS_FILE, RunResult
-from orchestrator.scenario.definition import Scenario, load_scenario, scenario_names
+from orchestrator.scenario.catalogue import load_scenario, scenario_names
+from orchestrator.scenario.model import Scenario
+from orchestrator.scenario.parser import with_overrides
 
 if TYPE_CHECKING:
     from orchestrator.output.figure_pool import FigurePool
@@ -76,13 +78,13 @@ def prepare(name_or_path: str | Path, duration: float | None = None,
     scenario = load_scenario(name_or_path)
     settings = list(settings)
     if airframe is not None:
-        scenario = scenario.with_overrides(airframe=airframe)
+        scenario = with_overrides(scenario, airframe=airframe)
     gains_file = read_gains(gains) if gains is not None else None
     if gains_file is not None:
         scenario = dataclasses.replace(scenario, controller_parameters={
             **scenario.controller_parameters, **gains_file.controller_parameters()})
     if duration is not None or settings:
-        scenario = scenario.with_overrides(duration=duration, settings=settings)
+        scenario = with_overrides(scenario, duration=duration, settings=settings)
     lag = lag_warning(scenario.airframe, gains_file)
     if lag is not None:
         scenario = dataclasses.replace(scenario, warnings=(*scenario.warnings, lag))

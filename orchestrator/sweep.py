@@ -46,7 +46,7 @@ from typing import TYPE_CHECKING, Any
 import numpy as np
 
 if TYPE_CHECKING:
-    from orchestrator.scenario.definition import Scenario
+    from orchestrator.scenario.model import Scenario
     from orchestrator.sim.fmu import FmuInstance
 
 NOISE = {"noise_pos": 0.002, "noise_vel": 0.005, "noise_acc": 0.05, "noise_att": 0.002,

@@ -27,7 +27,8 @@ import pytest
 
 from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare, run_scenario
-from orchestrator.scenario.definition import parse_scenario, scenario_names
+from orchestrator.scenario.catalogue import scenario_names
+from orchestrator.scenario.parser import parse_scenario
 from orchestrator.sweep import NOISE
 
 T_FAULT = 3.0

@@ -18,7 +18,7 @@ from orchestrator import sweep
 from orchestrator.master import CoSimulation
 from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare
-from orchestrator.scenario.definition import Scenario
+from orchestrator.scenario.model import Scenario
 from orchestrator.sim.fmu import FmuError, FmuInstance
 from plant import plant_fmu
 

@@ -19,13 +19,14 @@ from orchestrator import master
 from orchestrator.master import RecordingTooLarge, check_memory
 from orchestrator.output.run_result import RESULTS_FILE, RunResult
 from orchestrator.runner import run_scenario
-from orchestrator.scenario.definition import load_scenario
+from orchestrator.scenario.catalogue import load_scenario
+from orchestrator.scenario.parser import with_overrides
 
 FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "nt" else "fullpose")
 
 
 def _scenario(duration: float):
-    return load_scenario("hover_varying_orientation").with_overrides(duration=duration)
+    return with_overrides(load_scenario("hover_varying_orientation"), duration=duration)
 
 
 def _leftovers(folder: Path) -> list[str]:
@@ -97,7 +98,8 @@ _MEMORY_PROBE = textwrap.dedent("""
     import json, sys
     from pathlib import Path
     from orchestrator import master
-    from orchestrator.scenario.definition import load_scenario
+    from orchestrator.scenario.catalogue import load_scenario
+    from orchestrator.scenario.parser import with_overrides
 
     def anon_kib():
         with open("/proc/self/status") as f:
@@ -106,7 +108,7 @@ _MEMORY_PROBE = textwrap.dedent("""
                     return int(line.split()[1])
         raise RuntimeError("no RssAnon")
 
-    sc = load_scenario("hover_varying_orientation").with_overrides(duration=float(sys.argv[1]))
+    sc = with_overrides(load_scenario("hover_varying_orientation"), duration=float(sys.argv[1]))
     spill = Path(sys.argv[2]) if sys.argv[2] != "-" else None
     base = anon_kib()
     peak = [base]

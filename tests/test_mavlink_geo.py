@@ -73,7 +73,8 @@ def test_origin_option_and_scenario_field_reject_bad_values(tmp_path):
                      ("nan,8,400", "latitude")):
         with pytest.raises(ValueError, match=why):
             parse_origin(bad)
-    from orchestrator.scenario.definition import ScenarioError, parse_scenario
+    from orchestrator.scenario.parser import parse_scenario
+    from orchestrator.scenario.reader import ScenarioError
 
     sc = parse_scenario({**BASE, "origin": [46.5, 7.5, 1500.0]})
     assert sc.origin == (46.5, 7.5, 1500.0)

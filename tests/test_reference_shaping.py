@@ -18,7 +18,7 @@ import numpy as np
 import pytest
 
 from orchestrator.runner import run_scenario
-from orchestrator.scenario.definition import parse_scenario
+from orchestrator.scenario.parser import parse_scenario
 
 TS = 0.002
 TILT_MAX = 15.0  # deg, the controller's default ref_tilt_max

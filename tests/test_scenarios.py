@@ -15,14 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from orchestrator.scenario.definition import (
-    Scenario,
-    ScenarioError,
+from orchestrator.scenario.catalogue import (
     check_scenario,
     list_scenarios,
     load_scenario,
     scenario_names,
 )
+from orchestrator.scenario.model import Scenario
+from orchestrator.scenario.parser import with_overrides
+from orchestrator.scenario.reader import ScenarioError
 from orchestrator.scenario.signals import (
     Chirp,
     Constant,
@@ -409,7 +410,7 @@ K_pos_D = [3.0, 3.0, 2.0]
 
 def test_with_overrides(tmp_path):
     sc = load_scenario("hover")
-    new = sc.with_overrides(duration=4.0, settings=[
+    new = with_overrides(sc, duration=4.0, settings=[
         "controller.K_pos_D[1]=3.0", "plant.noise_pos=0.01", "plant.init_trim=false",
         "controller.W_v=[10, 10, 5]", "plant.noise_seed = 3"])
     assert isinstance(new, Scenario) and new.duration == 4.0 and new.n_steps == 2000
@@ -417,7 +418,7 @@ def test_with_overrides(tmp_path):
                                          "W_v[3]": 5.0}
     assert new.plant_parameters == {"noise_pos": 0.01, "init_trim": False, "noise_seed": 3}
     assert sc.duration == 10.0 and sc.plant_parameters == {} and sc.controller_parameters == {}
-    assert sc.with_overrides().duration == 10.0
+    assert with_overrides(sc).duration == 10.0
 
 
 @pytest.mark.parametrize(("setting", "field", "expect"), [
@@ -435,7 +436,7 @@ def test_with_overrides(tmp_path):
 def test_with_overrides_rejects_bad_settings(setting, field, expect):
     sc = load_scenario("hover")
     with pytest.raises(ScenarioError) as info:
-        sc.with_overrides(settings=[setting])
+        with_overrides(sc, settings=[setting])
     msg = str(info.value)
     assert sc.source in msg and f"'{field}'" in msg and expect in msg, msg
     assert setting in msg or field == "controller.Ts"
@@ -445,7 +446,7 @@ def test_with_overrides_rejects_bad_settings(setting, field, expect):
                                                   (1.001, "multiple of the communication")])
 def test_with_overrides_rejects_bad_durations(duration, expect):
     with pytest.raises(ScenarioError, match=expect):
-        load_scenario("hover").with_overrides(duration=duration)
+        with_overrides(load_scenario("hover"), duration=duration)
 
 
 def _sine(extra: str = "") -> str:
@@ -724,7 +725,7 @@ def test_controller_override_of_the_bounds_is_honoured(tmp_path):
     # a narrower bound given on top of a valid scenario is checked too
     paper = load_scenario("hover_varying_orientation")  # roll amplitude 0.7 rad
     with pytest.raises(ScenarioError) as info:
-        paper.with_overrides(settings=["controller.euler_max[1]=0.5"])
+        with_overrides(paper, settings=["controller.euler_max[1]=0.5"])
     assert info.value.field == "reference.attitude.roll.amplitude"
     assert "euler_min[1], euler_max[1] as overridden" in str(info.value)
     err = _rejected(tmp_path, "[controller]\n\"euler_max[2]\" = 2.0\n")
@@ -755,8 +756,8 @@ def test_far_position_step_is_a_warning_naming_the_field(tmp_path):
         f"{path}: field 'reference.position.x': a step of 1000 m (from 0 to 1000 m at t = 5 s) "
         "while the rest of the trajectory stays within 3 m of the origin; is this the "
         "intended unit (m)?",)
-    assert sc.with_overrides(settings=["plant.noise_pos=0.01"]).warnings == sc.warnings
-    assert sc.with_overrides(duration=4.0).warnings == ()  # the step is after the run
+    assert with_overrides(sc, settings=["plant.noise_pos=0.01"]).warnings == sc.warnings
+    assert with_overrides(sc, duration=4.0).warnings == ()  # the step is after the run
     near = load_scenario(write(tmp_path, BASE.replace("z = -3.0", "z = -3.0\nx = { type = "
                                                       "\"steps\", times = [5.0], values = "
                                                       "[2.0] }")))

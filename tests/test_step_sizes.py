@@ -5,7 +5,7 @@ steps"): the plant integrates h in ceil(h / h_internal) equal RK4 steps, the con
 samples its own grid k Ts with the inputs held since the last communication point.  Each case
 runs a shipped scenario through the orchestrator's master (fmpy-loaded FMU archives, the C
 step kernel) at step h and compares it with the same scenario at 2 ms, at the instants both
-share.  The scenario files only take multiples of Ts (orchestrator.scenario.definition), so
+share.  The scenario files only take multiples of Ts (orchestrator.scenario.checks), so
 the step is replaced on the loaded scenario.
 
 Bounds, from requirements and a delay argument rather than from the measurements:
@@ -43,7 +43,8 @@ import pytest
 
 from orchestrator.master import run
 from orchestrator.output.run_result import RunResult
-from orchestrator.scenario.definition import Scenario, load_scenario
+from orchestrator.scenario.catalogue import load_scenario
+from orchestrator.scenario.model import Scenario
 
 TS = 0.002
 ACCURACY = 0.02  # m: the paper's position accuracy

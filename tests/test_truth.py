@@ -9,7 +9,8 @@ import pytest
 from orchestrator import master
 from orchestrator.output.metrics import compute_metrics
 from orchestrator.output.plots import tracking_figure
-from orchestrator.scenario.definition import load_scenario
+from orchestrator.scenario.catalogue import load_scenario
+from orchestrator.scenario.parser import with_overrides
 
 NOISE = ["plant.noise_pos=0.005", "plant.noise_vel=0.01", "plant.noise_att=0.003",
          "plant.noise_seed=4"]
@@ -18,8 +19,8 @@ TRUE = ("pos_true", "vel_true", "euler_true", "quat_true", "rate_true")
 
 @pytest.fixture(scope="module")
 def runs():
-    sc = load_scenario("hover_varying_orientation").with_overrides(duration=12.0)
-    return master.run(sc), master.run(sc.with_overrides(settings=NOISE))
+    sc = with_overrides(load_scenario("hover_varying_orientation"), duration=12.0)
+    return master.run(sc), master.run(with_overrides(sc, settings=NOISE))
 
 
 def _max_norm(a: np.ndarray) -> float:
@@ -65,8 +66,8 @@ def test_latency_alone_records_the_truth_and_the_lag_shows_in_it():
     """No noise, a 10 ms pose latency: the measured pose lags the true one by the speed
     times the latency (S2's reference moves at ~0.1 m/s at first: ~1 mm), and the truth is
     what the metrics judge."""
-    sc = load_scenario("translation_frequency_sweep").with_overrides(
-        duration=20.0, settings=["plant.mocap_delay=0.01"])
+    sc = with_overrides(load_scenario("translation_frequency_sweep"),
+                        duration=20.0, settings=["plant.mocap_delay=0.01"])
     r = master.run(sc)
     m = compute_metrics(r)
     assert m["judged_on"] == "true state"
@@ -84,9 +85,9 @@ def test_the_controller_predicts_a_late_pose_to_now():
     pose as current would trail the reference by the speed times the pose's age (5 to
     13.3 ms); predicting with pose_age keeps the true error at the ideal sensors' level
     (1.0 mm here; the paper's bound is 2 cm)."""
-    sc = load_scenario("translation_frequency_sweep").with_overrides(duration=40.0)
+    sc = with_overrides(load_scenario("translation_frequency_sweep"), duration=40.0)
     ideal = compute_metrics(master.run(sc))
-    r = master.run(sc.with_overrides(settings=MOCAP_120))
+    r = master.run(with_overrides(sc, settings=MOCAP_120))
     m = compute_metrics(r)
     age = r.get("plant.pose_age")
     # 5 ms, plus up to one 8.3 ms sample period as seen at 2 ms communication points

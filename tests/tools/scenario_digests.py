@@ -13,7 +13,7 @@ import hashlib
 import numpy as np
 
 from orchestrator.master import run
-from orchestrator.scenario.definition import load_scenario, scenario_names
+from orchestrator.scenario.catalogue import load_scenario, scenario_names
 
 
 def digest(name: str, engine: str) -> tuple[str, int, int]:
