@@ -3,7 +3,8 @@
     python -m controller.gains_defaults          # runs the synthesis, (re)writes the header
     python -m controller.gains_defaults --check  # exit 1 if the committed header is stale
 
-The header is fmu_src/controller/default_gains.h: static const double arrays
+The header is fmu_src/controller/default_gains.h: the design constants hinf.py defines (the
+controller's default Ts and measurement filter, FP_DESIGN_*), and static const double arrays
 fp_default_K_{pos,vel,att,rate}_{A,B,C,D}[3] (same block on the three axes: after INDI the
 axes have the same design model), printed with "%.17g", plus the achieved gammas and margins in
 the header comment.  The synthesis (controller/hinf.py) is deterministic: fixed starts and a
@@ -119,7 +120,8 @@ def run_synthesis() -> dict:
                         for k, m in d.margins.items()},
             "summary": hinf.summary(d),
         }
-    return {"hash": inputs_hash(), "blocks": blocks, "report": report}
+    design = {"TS": hinf.TS, "FILT_WN": hinf.FILT_WN, "FILT_ZETA": hinf.FILT_ZETA}
+    return {"hash": inputs_hash(), "design": design, "blocks": blocks, "report": report}
 
 
 def _f(x: float) -> str:
@@ -153,7 +155,12 @@ def render(result: dict) -> str:
                          f"{_db(m['gain_margin'])}, PM {m['phase_margin']:.1f} deg, disk "
                          f"margin {m['disk_alpha']:.3f} (gain {m['disk_gain'][0]:.2f}.."
                          f"{m['disk_gain'][1]:.2f}, phase +-{m['disk_phase']:.1f} deg)")
-    lines += [" */", "#ifndef FP_DEFAULT_GAINS_H", "#define FP_DEFAULT_GAINS_H", ""]
+    lines += [" */", "#ifndef FP_DEFAULT_GAINS_H", "#define FP_DEFAULT_GAINS_H", "",
+              "/* The design constants the gains are made for (controller/hinf.py): the",
+              " * controller's defaults of Ts, filt_wn and filt_zeta. */"]
+    for name, value in sorted(result["design"].items()):
+        lines.append(f"#define FP_DESIGN_{name} {float(value)!r}")  # shortest exact
+    lines.append("")
     for loop, _, _ in LOOPS:
         for name, v in zip("ABCD", result["blocks"][loop], strict=True):
             lines.append(f"static const double fp_default_K_{loop}_{name}[3] = "

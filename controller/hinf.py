@@ -83,19 +83,19 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy import optimize, signal
 
-from controller import controller_fmu
 from controller.lti import SS, Diagram, Margins, hinf_norm, loop_margins
 from plant import load_airframe
-from plant.common.model_description import start_value
 
-# The design constants, from the one place each is defined: the controller FMU's defaults
-# (sample time, measurement filter) and the shipped airframe (the actuator time constant), so
-# the synthesis can never design for another loop than the one the FMU runs.
+# The design constants.  The sample time and the measurement filter are defined here, once:
+# ``python -m controller.gains_defaults`` writes them into the controller FMU's generated header
+# (fmu_src/controller/default_gains.h: FP_DESIGN_TS, FP_DESIGN_FILT_WN, FP_DESIGN_FILT_ZETA),
+# whose values are the FMU's defaults, so the synthesis designs for the loop the FMU runs and
+# nothing here reads a built FMU.  The actuator time constant is the shipped design airframe's.
 DESIGN_AIRFRAME = "paper_hexacopter"
-TS = start_value(controller_fmu(), "Ts")
+TS = 0.002  # s, the controller's sample time
+FILT_WN = 80.0  # rad/s, natural frequency of the measurement filter H(s)
+FILT_ZETA = 0.55  # damping ratio of H(s)
 TAU_ACT = load_airframe(DESIGN_AIRFRAME).tau_motor
-FILT_WN = start_value(controller_fmu(), "filt_wn")
-FILT_ZETA = start_value(controller_fmu(), "filt_zeta")
 
 CHANNELS = ("S_outer", "S_inner", "T_input", "KS_noise", "disturbance", "KS_outer")
 # the closed-loop input of each channel in :func:`interconnection` ([do1, do2, di, n2, d])

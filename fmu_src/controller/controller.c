@@ -81,12 +81,12 @@ static void controller_set_defaults(void *model) {
     memset(m, 0, sizeof *m);
     fp_paper_hexacopter(&m->af);
     fp_rotor_set_of(&m->af, &rs);
-    m->Ts = 0.002;
+    m->Ts = FP_DESIGN_TS;
     /* H(s) at 80 rad/s, a design variable of the robust synthesis: INDI rejects a torque
      * disturbance (a lost rotor) at the filter's bandwidth, and at 50 rad/s no certified
      * first-order attitude design reached the hand-tuned bandwidth (docs/robust_design.md) */
-    m->filt_wn = 80.0;
-    m->filt_zeta = 0.55;
+    m->filt_wn = FP_DESIGN_FILT_WN;
+    m->filt_zeta = FP_DESIGN_FILT_ZETA;
     /* The structured H-infinity design (python -m controller.gains_defaults) */
     FP_COPY_BLOCK(m, pos);
     FP_COPY_BLOCK(m, vel);

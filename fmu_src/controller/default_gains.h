@@ -1,7 +1,7 @@
 /*
  * GENERATED FILE - do not edit.  Regenerate with:   python -m controller.gains_defaults
  * Freshness: python -m controller.gains_defaults --check (tests/test_hinf.py runs the check).
- * Synthesis inputs hash: 0c62e6496411f295
+ * Synthesis inputs hash: 0e42700898352da4
  *
  * Default first-order blocks x+ = A x + B e, y = C x + D e (Ts = 2 ms, same on the
  * three axes) of the FullPoseController from the structured H-infinity synthesis
@@ -19,6 +19,12 @@
  */
 #ifndef FP_DEFAULT_GAINS_H
 #define FP_DEFAULT_GAINS_H
+
+/* The design constants the gains are made for (controller/hinf.py): the
+ * controller's defaults of Ts, filt_wn and filt_zeta. */
+#define FP_DESIGN_FILT_WN 80.0
+#define FP_DESIGN_FILT_ZETA 0.55
+#define FP_DESIGN_TS 0.002
 
 static const double fp_default_K_pos_A[3] = {0.99285142777548363, 0.99285142777548363, 0.99285142777548363};
 static const double fp_default_K_pos_B[3] = {1, 1, 1};
