@@ -1,6 +1,6 @@
 """``fullpose fly``: the bridge's command, joined to the ``fullpose`` CLI through the
 ``fullpose.commands`` entry point (``orchestrator.cli`` loads it; neither imports the other's
-internals, and the orchestrator never imports the bridge)."""
+internals beyond its option helpers, and the orchestrator never imports the bridge)."""
 
 from __future__ import annotations
 
@@ -10,18 +10,16 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from orchestrator.cli import add_vehicle_options
+
 
 def register(sub: Any) -> None:
     """Adds ``fly`` to the ``fullpose`` subparsers."""
     fly = sub.add_parser("fly", help="fly the vehicle in real time from MAVLink ground tools")
     fly.add_argument("scenario", nargs="?", default=None,
                      help="start from this scenario's airframe, pose and parameters")
-    fly.add_argument("--airframe", default=None,
-                     help="shipped airframe name or TOML file (default: the scenario's, else "
-                          "paper_hexacopter)")
-    fly.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
-                     help="fly with the gains of this file (fullpose design) instead of the "
-                          "shipped ones")
+    add_vehicle_options(fly, "shipped airframe name or TOML file (default: the scenario's, "
+                             "else paper_hexacopter)")
     fly.add_argument("--gcs", action="append", default=[], metavar="URL",
                      help="MAVLink endpoint, udpout:HOST:PORT or udpin:HOST:PORT (repeatable; "
                           "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540)")

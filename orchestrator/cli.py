@@ -282,6 +282,17 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+GAINS_HELP = "fly with the gains of this file (fullpose design) instead of the shipped ones"
+
+
+def add_vehicle_options(parser: argparse.ArgumentParser, airframe_help: str,
+                        gains_help: str = GAINS_HELP) -> None:
+    """``--airframe NAME_OR_FILE`` and ``--gains FILE.json``, as ``run``, ``check`` and
+    ``fly`` take them."""
+    parser.add_argument("--airframe", default=None, metavar="NAME_OR_FILE", help=airframe_help)
+    parser.add_argument("--gains", type=Path, default=None, metavar="FILE.json", help=gains_help)
+
+
 def build_parser() -> argparse.ArgumentParser:
     """The fullpose command line: every subcommand and its options."""
     parser = argparse.ArgumentParser(
@@ -295,12 +306,8 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--out", type=Path, default=None,
                      help="output directory (default: results/NAME)")
     run.add_argument("--duration", type=float, default=None, help="override the duration (s)")
-    run.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
-                     help="fly the scenario on this airframe (shipped name or TOML file) "
-                          "instead of the one it names")
-    run.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
-                     help="fly with the gains of this file (fullpose design) instead of the "
-                          "shipped ones")
+    add_vehicle_options(run, "fly the scenario on this airframe (shipped name or TOML file) "
+                             "instead of the one it names")
     run.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
                      help="override a parameter, e.g. controller.K_pos_D[1]=3 (repeatable)")
     run.add_argument("--no-timing", action="store_true",
@@ -335,10 +342,8 @@ def build_parser() -> argparse.ArgumentParser:
                                          "with its values (steps nothing)")
     check.add_argument("file", help="scenario TOML file or shipped name")
     check.add_argument("--duration", type=float, default=None, help="override the duration (s)")
-    check.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
-                       help="check it on this airframe instead of the one it names")
-    check.add_argument("--gains", type=Path, default=None, metavar="FILE.json",
-                       help="with the gains of this file, as for run")
+    add_vehicle_options(check, "check it on this airframe instead of the one it names",
+                        "with the gains of this file, as for run")
     check.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
                        help="override a parameter, as for run (repeatable)")
     check.set_defaults(func=_cmd_check)
