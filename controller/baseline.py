@@ -8,7 +8,8 @@ Tuning "to the same bandwidths as the H-infinity design": each P gain is chosen 
 loop's crossover frequency on the same design model (controller/hinf.py) equals the H-infinity
 design's crossover - the inner loop (velocity / rate, outer loop open) first, then the outer
 loop (position / attitude, inner loop closed).  :func:`tune` does that by root finding;
-:data:`GAINS` caches the result for the shipped design (tests/test_hinf.py checks it).
+:data:`GAINS` caches the result for the shipped design (tests/test_controller/test_hinf.py
+checks it).
 """
 
 from __future__ import annotations

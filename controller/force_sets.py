@@ -27,7 +27,8 @@ Method (deterministic; no randomness anywhere)
   maximised over the *continuous* servo box (bounded L-BFGS-B on the C thrust direction,
   started from every grid local maximum close to the best grid value).  So
   {f : c_j . f <= b_j} contains every force of real actuator states, not only of the sampled
-  ones (tests/test_force_sets.py checks this against nonlinear maximisation).  For the AFS
+  ones (tests/test_controller/test_force_sets.py checks this against nonlinear maximisation).
+  For the AFS
   (no equality) the bound is the exact support function and its maximisers are real
   actuator states.
 * Directions: a sandwich (Kamenev-style) refinement, seeded with the 6 axes and the 8 cube

@@ -137,7 +137,7 @@ def render(result: dict) -> str:
     lines = [
         "/*",
         f" * GENERATED FILE - do not edit.  Regenerate with:   {COMMAND}",
-        f" * Freshness: {COMMAND} --check (tests/test_hinf.py runs the check).",
+        f" * Freshness: {COMMAND} --check (tests/test_controller/test_hinf.py runs the check).",
         f" * Synthesis inputs hash: {result['hash']}",
         " *",
         " * Default first-order blocks x+ = A x + B e, y = C x + D e (Ts = 2 ms, same on the",

@@ -7,7 +7,8 @@
   Boyd-Balakrishnan / Bruinsma-Steinbuch bisection on the Hamiltonian of the bilinear-
   transformed system (the bilinear map z = (alpha + s) / (alpha - s) maps the unit circle onto
   the imaginary axis one-to-one, so the peak gain is unchanged) - quadratically convergent.
-  (tests/test_hinf.py checks it against a dense log-frequency grid of |G(e^{jwTs})| refined
+  (tests/test_controller/test_hinf.py checks it against a dense log-frequency grid of
+  |G(e^{jwTs})| refined
   near the peak with scipy.optimize.minimize_scalar).
 * :func:`loop_margins` - gain, phase and (symmetric) disk margins of a SISO loop.
 """

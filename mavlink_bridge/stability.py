@@ -8,7 +8,8 @@ shipped actuator time constant, the design's computational delay; ``hinf.interco
 unweighted) and the inner loop alone with the outer loop open (``hinf.inner_loop``), and
 refuses the change when either has a spectral radius of 1 or more.  The margin told is
 ``1 - rho`` (negative: unstable).  One evaluation is a few small eigenvalue problems (~1 ms,
-measured in tests/test_mavlink_safety.py); it runs on a PARAM_SET, never per step.
+measured in tests/test_mavlink_bridge/test_mavlink_safety.py); it runs on a PARAM_SET, never per
+step.
 """
 
 from __future__ import annotations

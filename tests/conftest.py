@@ -6,6 +6,7 @@ import shutil
 import sys
 import tempfile
 from collections.abc import Callable, Iterable, Iterator, Mapping
+from contextlib import contextmanager
 from pathlib import Path
 
 import numpy as np
@@ -13,6 +14,7 @@ import pytest
 from fmpy import extract
 
 import plant
+from controller import controller_fmu
 from orchestrator.sim.fmu import FmuInstance
 
 # helper modules of the tests (mavlink_harness.py) import by name: pytest's importlib mode
@@ -58,29 +60,50 @@ def dist(tmp_path_factory: pytest.TempPathFactory) -> Path:
 MakePlant = Callable[..., FmuInstance]
 
 
-@pytest.fixture
-def make_plant(plant_fmu: Path, plant_unzip_dir: str) -> Iterator[MakePlant]:
-    """Factory: ``make_plant(parameters=None, *, initialize=True, name=None, logging_on=False)``.
-
-    Returns an FmuInstance of the plant, initialized at t = 0 with the given start-value
-    overrides (variable name -> value) unless ``initialize`` is False.  Every instance made
-    is closed after the test, even when initialization failed.
-    """
+@contextmanager
+def instances(fmu: Path, prefix: str, unzip_dir: str | None = None) -> Iterator[MakePlant]:
+    """Factory of instances of one FMU: ``make(parameters=None, *, initialize=True, name=None,
+    logging_on=False)`` returns an FmuInstance, initialized at t = 0 with the given start-value
+    overrides (variable name -> value) unless ``initialize`` is False.  Every instance made is
+    closed on leaving, even when initialization failed."""
     made: list[FmuInstance] = []
 
     def make(parameters: Mapping[str, float | int | bool] | None = None, *,
              initialize: bool = True, name: str | None = None,
              logging_on: bool = False) -> FmuInstance:
-        inst = FmuInstance(plant_fmu, name or f"plant{len(made) + 1}",
-                           logging_on=logging_on, unzip_dir=plant_unzip_dir)
+        inst = FmuInstance(fmu, name or f"{prefix}{len(made) + 1}", logging_on=logging_on,
+                           unzip_dir=unzip_dir)
         made.append(inst)
         if initialize:
             inst.initialize(parameters=parameters)
         return inst
 
-    yield make
-    for inst in made:
-        inst.close()
+    try:
+        yield make
+    finally:
+        for inst in made:
+            inst.close()
+
+
+@pytest.fixture
+def make_plant(plant_fmu: Path, plant_unzip_dir: str) -> Iterator[MakePlant]:
+    """Factory of plant instances (:func:`instances`), all from one extracted copy."""
+    with instances(plant_fmu, "plant", plant_unzip_dir) as make:
+        yield make
+
+
+@pytest.fixture
+def make_fmu(plant_fmu: Path) -> Iterator[Callable[..., FmuInstance]]:
+    """Factory of either FMU: ``make_fmu(which="plant" | "controller", *, initialize=True,
+    parameters=None)``, each instance closed after the test."""
+    with instances(plant_fmu, "plant") as plant, \
+            instances(controller_fmu(), "controller") as ctrl:
+
+        def make(which: str = "plant", *, initialize: bool = True,
+                 parameters: Mapping[str, float | int | bool] | None = None) -> FmuInstance:
+            return (plant if which == "plant" else ctrl)(parameters, initialize=initialize)
+
+        yield make
 
 
 def record(inst: FmuInstance, n: int, outputs: Iterable[str], h: float = H,

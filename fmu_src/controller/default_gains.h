@@ -1,7 +1,7 @@
 /*
  * GENERATED FILE - do not edit.  Regenerate with:   python -m controller.gains_defaults
- * Freshness: python -m controller.gains_defaults --check (tests/test_hinf.py runs the check).
- * Synthesis inputs hash: 0e42700898352da4
+ * Freshness: python -m controller.gains_defaults --check (tests/test_controller/test_hinf.py runs the check).
+ * Synthesis inputs hash: cc99080978745865
  *
  * Default first-order blocks x+ = A x + B e, y = C x + D e (Ts = 2 ms, same on the
  * three axes) of the FullPoseController from the structured H-infinity synthesis

@@ -30,7 +30,7 @@ next to start and stop time: as the Open Simulation Platform's annotation
 which libcosim's SSP loader applies, and as our own ``org.fullpose.fixedStepMaster``.
 libcosim also applies the ParameterBindings (to parameters and inputs), so it plays the
 archive as written: ``CosimExecution.from_ssp_file(path)`` hovers to ~1e-15 m
-(tests/test_ssp.py).
+(tests/test_orchestrator/test_ssp.py).
 
 What fmpy's SSP runner (``fmpy.ssp.simulation.simulate_ssp``, fmpy 0.3.x) does, read from its
 source, and how this module deals with it:
@@ -65,7 +65,8 @@ source, and how this module deals with it:
   which corrects the lateral jump through its attitude, still has 0.5 mm left at t = 2 s.
   (With the prototype's hand-tuned P blocks: 1.24 mm near t = 0.37 s at [0, 0, -3], 4 um
   left at t = 2 s.)  When the t = 0 inputs are the SSV start values instead (what the
-  archive describes), the same archive holds the hover to ~1e-15 m (tests/test_ssp.py
+  archive describes), the same archive holds the hover to ~1e-15 m
+  (tests/test_orchestrator/test_ssp.py
   shows both).
 * Unconnected inputs must not be declared as connectors: they would be forced to 0.0 every
   step (pos_ref = 0 would fly the vehicle to the origin), and its connection resolution fails

@@ -1,6 +1,6 @@
 """Benchmark of the controller's own force-set derivation (prints figures, asserts nothing).
 
-Per airframe (the shipped ones and the other kinds of tests/airframe_kinds.py):
+Per airframe (the shipped ones and the other kinds of tests/helpers/airframe_kinds.py):
 - derive: S(0) and every single-rotor failure set derived by the controller's C code
   (fmu_src/controller/derive_sets.c through libfp_controller), timed inside C, median of
   ``--repeats``;
@@ -29,7 +29,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
-from airframe_kinds import KINDS, load_kind
+from helpers.airframe_kinds import KINDS, load_kind
 
 import plant
 from controller import controller_fmu

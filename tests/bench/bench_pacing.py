@@ -4,12 +4,12 @@ Four cases, each a bridge at speed 1 flying a position setpoint in OFFBOARD for
 ``--duration`` simulated seconds, with the host busy (``--busy`` Python busy loops in other
 processes, default 2: both cores of the CI machine) and with or without a fuzzer process
 sending ``--rate`` datagrams/s (default 2,500: random bytes, mutated and truncated
-setpoints, NaN setpoints and valid setpoints, as tests/test_mavlink_bridge.py's fuzz
-test).  Each case runs with the input time budget (the default) and without it (the
-pre-budget behaviour: RX_TIME_LATE = RX_TIME_SHARE = inf, a count-only bound).  Reported:
-the worst lag behind wall time, chunks late by more than a chunk period, datagrams
-handled, and whether
-OFFBOARD survived (the ground station's 20 Hz setpoints compete with the flood).
+setpoints, NaN setpoints and valid setpoints, as the fuzz test of
+tests/test_mavlink_bridge/test_mavlink_bridge.py).  Each case runs with the input time
+budget (the default) and without it (the pre-budget behaviour: RX_TIME_LATE = RX_TIME_SHARE
+= inf, a count-only bound).  Reported: the worst lag behind wall time, chunks late by more
+than a chunk period, datagrams handled, and whether OFFBOARD survived (the ground station's
+20 Hz setpoints compete with the flood).
 
 Usage: python tests/bench/bench_pacing.py [--duration 10] [--busy 2] [--rate 2500]
 """
@@ -20,11 +20,12 @@ import argparse
 import math
 import multiprocessing as mp
 import os
-import random
 import socket
 import statistics
+import sys
 import threading
 import time
+from pathlib import Path
 from typing import Any
 
 os.environ["MAVLINK20"] = "1"
@@ -34,7 +35,8 @@ from pymavlink import mavutil
 from mavlink_bridge import bridge as bridge_mod
 from mavlink_bridge.bridge import Bridge, BridgeConfig
 
-POS_ONLY = 0b0000_1101_1111_1000
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))  # tests/: the shared helpers
+from helpers.mavlink_harness import POS_ONLY, fuzz_datagrams
 
 
 def _busy(stop: mp.synchronize.Event) -> None:
@@ -45,32 +47,14 @@ def _busy(stop: mp.synchronize.Event) -> None:
 
 
 def _fuzz(port: int, rate: float, stop: mp.synchronize.Event) -> None:
-    mav = mavutil.mavlink.MAVLink(None, 255, 190)
-    good = mav.set_position_target_local_ned_encode(
-        0, 1, 1, 1, POS_ONLY, 0.3, 0.0, -3.0, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)
-    nan = mav.set_position_target_local_ned_encode(
-        0, 1, 1, 1, POS_ONLY, math.nan, 0.0, -3.0, 0, 0, 0, 0, 0, 0, 0, 0).pack(mav)
-    rng = random.Random(1234)
+    datagrams = fuzz_datagrams(mavutil.mavlink.MAVLink(None, 255, 190))
     sock = socket.socket(socket.AF_INET, socket.SOCK_DGRAM)
     t0, sent = time.perf_counter(), 0
     while not stop.is_set():
         if sent > (time.perf_counter() - t0) * rate:
             time.sleep(0.0005)
             continue
-        kind = rng.random()
-        if kind < 0.3:
-            data = rng.randbytes(rng.randint(0, 300))
-        elif kind < 0.6:
-            b = bytearray(good)
-            for _ in range(rng.randint(1, 4)):
-                b[rng.randrange(len(b))] = rng.randrange(256)
-            data = bytes(b[: rng.randint(1, len(b))]) if rng.random() < 0.3 else bytes(b)
-        elif kind < 0.7:
-            data = nan
-        elif kind < 0.8:
-            data = bytes([0xFD]) + rng.randbytes(rng.randint(0, 280))
-        else:
-            data = good
+        data = next(datagrams)
         try:
             sock.sendto(data, ("127.0.0.1", port))
         except OSError:

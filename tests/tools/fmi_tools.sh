@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# The two native FMI tools the tests check our FMUs with (tests/test_fmi_tools.py): the
+# The two native FMI tools the tests check our FMUs with (tests/test_fmus/test_fmi_tools.py): the
 # Modelica FMU Compliance Checker and fmusim.  Neither is on a package registry; they are
 # built offline from snapshots of their public repositories by the workplace's
 # build_fmi_tools.sh (about 10 minutes on 2 cores, once: later runs reuse the folder).

@@ -1,5 +1,5 @@
 #!/usr/bin/env bash
-# Installs what the cross-platform FMU checks (tests/test_platforms.py) run the binaries on:
+# Installs what the cross-platform FMU checks (tests/test_orchestrator/test_platforms.py) run the binaries on:
 # Wine (win64 DLLs), qemu-user with the arm64 C library (aarch64-linux .so files) and LLVM's
 # object-file tools (llvm-objdump, llvm-nm, llvm-readelf: ELF, PE and Mach-O alike).
 # Debian 12 packages; idempotent (nothing is downloaded when all are present); quiet.

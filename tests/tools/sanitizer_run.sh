@@ -45,13 +45,13 @@ export MPLBACKEND=Agg
 
 status=0
 echo "+ pytest (FMU tests on the sanitizer build)"
-python -m pytest -q -p no:cacheprovider tests/test_plant_fmu.py tests/test_controller_fmu.py \
-  tests/test_wls_piqp.py tests/test_closed_loop.py tests/test_host_api.py \
-  tests/test_state_format.py tests/test_fmi_discipline.py tests/test_robustness.py || status=1
+python -m pytest -q -p no:cacheprovider tests/test_plant/test_plant_fmu.py tests/test_controller/test_controller_fmu.py \
+  tests/test_controller/test_wls_piqp.py tests/test_fmus/test_closed_loop.py tests/test_fmus/test_host_api.py \
+  tests/test_fmus/test_state_format.py tests/test_fmus/test_fmi_discipline.py tests/test_fmus/test_robustness.py || status=1
 fuzz_calls=${FUZZ_CALLS:-2000}
 if [[ "$fuzz_calls" != 0 ]]; then
   echo "+ fuzz batch ($fuzz_calls calls per FMU: its findings and any sanitizer report fail)"
-  python tests/fuzz_fmi.py --calls "$fuzz_calls" --seed 11 --fmu both --hang-timeout 20 \
+  python tests/helpers/fuzz_fmi.py --calls "$fuzz_calls" --seed 11 --fmu both --hang-timeout 20 \
     --max-lines 15 || status=1
 fi
 unset LD_PRELOAD

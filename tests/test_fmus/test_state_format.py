@@ -1,0 +1,250 @@
+"""The FMU state format (fmu_src/common/fmi2_glue.c): a checked, versioned header, then the
+model struct.  A state survives serialization into another process bit for bit; a state of
+another FMU, of another format version, damaged or truncated is refused with a message
+naming what is wrong, before anything of it is used.
+
+Header (80 bytes, the saving machine's byte order), then ``payload_size`` bytes of model:
+
+    offset size field
+    0      4    magic b"FPST"
+    4      2    format version (2)
+    6      2    byte-order marker 0x0102
+    8      4    header size (80)
+    12     4    payload size (sizeof the model struct)
+    16     40   GUID of the FMU, NUL-terminated
+    56     4    lifecycle state (one bit: 1 Instantiated, 2 InitializationMode, 4 StepComplete,
+                8 StepFailed, 16 Terminated, 32 Error)
+    60     4    flags (1: parameters changed since the last initialize, 2: tunables changed)
+    64     8    time (double)
+    72     8    checksum: 64-bit FNV-1a over the header (this field zero), then the payload
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import struct
+import subprocess
+import sys
+import textwrap
+from pathlib import Path
+
+import numpy as np
+import pytest
+from fmpy.fmi1 import FMICallException
+from helpers import logged
+
+from orchestrator.sim.fmu import FmuInstance
+
+ROOT = Path(__file__).resolve().parents[2]
+H = 0.002
+HEADER = struct.Struct("<4sHHII40siIdQ")
+HEADER_SIZE = 80
+STEP_COMPLETE, INSTANTIATED = 4, 1
+FMI2_ERROR = 3
+NOISY = {"noise_pos": 0.01, "noise_vel": 0.02, "noise_acc": 0.1, "noise_att": 0.01,
+         "noise_rate": 0.05, "noise_ang_acc": 0.5, "noise_seed": 42,
+         "rate0[1]": 0.3, "rate0[2]": -0.2, "rate0[3]": 0.1}
+
+
+def fnv1a64(data: bytes, h: int = 14695981039346656037) -> int:
+    for b in data:
+        h = ((h ^ b) * 1099511628211) & 0xFFFFFFFFFFFFFFFF
+    return h
+
+
+def header(blob: bytes) -> dict:
+    names = ("magic", "version", "endian", "header_size", "payload_size", "guid", "state",
+             "flags", "time", "checksum")
+    h = dict(zip(names, HEADER.unpack_from(blob), strict=True))
+    h["guid"] = h["guid"].split(b"\0")[0].decode()
+    return h
+
+
+def reseal(blob: bytes | bytearray) -> bytes:
+    """The blob with its checksum recomputed (a forged or edited state)."""
+    b = bytearray(blob)
+    b[72:80] = bytes(8)
+    b[72:80] = fnv1a64(bytes(b)).to_bytes(8, "little")
+    return bytes(b)
+
+
+@pytest.fixture
+def make(make_fmu):
+    """Instances of either FMU (conftest's make_fmu)."""
+    return make_fmu
+
+
+def serialize(inst: FmuInstance) -> bytes:
+    state = inst.slave.getFMUstate()
+    try:
+        return bytes(inst.slave.serializeFMUstate(state))
+    finally:
+        inst.slave.freeFMUstate(state)
+
+
+def refused(inst: FmuInstance, blob: bytes, fragment: str) -> None:
+    inst.messages.clear()
+    with pytest.raises(FMICallException) as e:
+        state = inst.slave.deSerializeFMUstate(blob)
+        inst.slave.setFMUstate(state)  # reached only if deserialization let it through
+    assert e.value.status == FMI2_ERROR
+    assert fragment in " | ".join(logged(inst, "ERROR")), inst.messages
+
+
+@pytest.mark.parametrize("which", ["plant", "controller"])
+def test_the_header_is_the_documented_format(make, which):
+    inst = make(which)
+    for _ in range(3):
+        inst.step(H)
+    blob = serialize(inst)
+    h = header(blob)
+    assert h["magic"] == b"FPST" and h["version"] == 2 and h["endian"] == 0x0102
+    assert h["header_size"] == HEADER_SIZE == HEADER.size
+    assert h["payload_size"] == len(blob) - HEADER_SIZE
+    assert h["guid"] == inst.md.guid
+    assert h["state"] == STEP_COMPLETE and h["flags"] == 0
+    assert h["time"] == pytest.approx(3 * H, abs=1e-15)
+    zeroed = blob[:72] + bytes(8) + blob[80:]
+    assert h["checksum"] == fnv1a64(zeroed)
+
+
+CHILD = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    from controller import controller_fmu
+    from orchestrator.sim.fmu import FmuInstance
+    from plant import plant_fmu
+    which, blob_path, n = sys.argv[1], sys.argv[2], int(sys.argv[3])
+    inst = FmuInstance(plant_fmu() if which == "plant" else controller_fmu(), "restored")
+    # a fresh instance, never initialized: the state brings everything
+    state = inst.slave.deSerializeFMUstate(open(blob_path, "rb").read())
+    inst.slave.setFMUstate(state)
+    inst.slave.freeFMUstate(state)
+    inst.time = inst.slave.getRealStatus(2)  # fmi2LastSuccessfulTime
+    out = [v.name for v in inst.md.modelVariables if v.causality == "output" and v.type == "Real"
+           and not v.name.startswith("t_")]
+    sig = inst.signal(out)
+    rows = []
+    for k in range(n):
+        if which == "plant":
+            t = inst.time
+            inst.write(inst.signal("omega_cmd"), 97.7 + 3 * np.sin(5 * t + np.arange(8)))
+        inst.step(0.002)
+        rows.append(inst.read(sig).tobytes().hex())
+    print(json.dumps({"time": inst.time, "rows": rows}))
+    inst.close()
+""")
+
+
+@pytest.mark.parametrize("which", ["plant", "controller"])
+def test_a_state_continues_bit_identically_in_another_process(make, which, tmp_path):
+    if which == "plant":
+        inst = make("plant", parameters=NOISY)  # the noise generator's state travels too
+    else:
+        inst = make("controller", initialize=False)
+        inst.slave.setupExperiment(startTime=0.0)
+        inst.write(inst.signal("pos_ref"), [0.4, -0.3, 0.2])  # both QPs non-trivial
+        inst.slave.enterInitializationMode()
+        inst.slave.exitInitializationMode()
+    cmd = inst.signal("omega_cmd") if which == "plant" else None
+
+    def drive() -> None:
+        if cmd is not None:
+            inst.write(cmd, 97.7 + 3 * np.sin(5 * inst.time + np.arange(8)))
+
+    for _ in range(25):
+        drive()
+        inst.step(H)
+    blob_path = tmp_path / "state.bin"
+    blob_path.write_bytes(serialize(inst))
+    out = [v.name for v in inst.md.modelVariables if v.causality == "output" and v.type == "Real"
+           and not v.name.startswith("t_")]  # the opt-in self-timing outputs differ anyway
+    sig = inst.signal(out)
+    n = 40
+    here = []
+    for _ in range(n):
+        drive()
+        inst.step(H)
+        here.append(inst.read(sig).tobytes().hex())
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH",
+                                                                                  "")])}
+    run = subprocess.run([sys.executable, "-c", CHILD, which, str(blob_path), str(n)],
+                         capture_output=True, text=True, env=env, cwd=ROOT, timeout=120)
+    assert run.returncode == 0, run.stderr
+    there = json.loads(run.stdout.strip().splitlines()[-1])
+    assert there["time"] == inst.time
+    assert there["rows"] == here  # every output bit at every step
+
+
+def test_a_state_of_another_fmu_is_refused(make):
+    plant, ctrl = make("plant"), make("controller")
+    refused(ctrl, serialize(plant), "belongs to another FMU")
+    said = " | ".join(logged(ctrl, "ERROR"))
+    assert plant.md.guid in said and ctrl.md.guid in said
+    refused(plant, serialize(ctrl), "belongs to another FMU")
+
+
+def test_a_state_of_another_format_version_is_refused(make):
+    inst = make("plant")
+    blob = bytearray(serialize(inst))
+    blob[4:6] = (3).to_bytes(2, "little")
+    refused(inst, reseal(blob), "state format version 3; this FMU reads version 2 only")
+    old = b"FPS1" + bytes(serialize(inst)[4:])  # the unchecked layout before format 2
+    refused(inst, old, "state format 1")
+
+
+def test_a_state_of_the_other_byte_order_is_refused(make):
+    inst = make("plant")
+    blob = bytearray(serialize(inst))
+    blob[6:8] = (0x0201).to_bytes(2, "little")
+    refused(inst, reseal(blob), "other byte order")
+
+
+@pytest.mark.parametrize("where", ["payload", "header time", "last byte"])
+def test_a_flipped_byte_is_caught_by_the_checksum(make, where):
+    inst = make("plant")
+    for _ in range(5):
+        inst.step(H)
+    blob = bytearray(serialize(inst))
+    at = {"payload": HEADER_SIZE + 100, "header time": 64 + 3, "last byte": len(blob) - 1}[where]
+    blob[at] ^= 0x10
+    refused(inst, bytes(blob), "damaged: checksum mismatch")
+
+
+def test_a_truncated_or_padded_state_is_refused(make):
+    inst = make("controller")
+    blob = serialize(inst)
+    refused(inst, blob[:-1], f"truncated: {len(blob) - 1} bytes, its header says {len(blob)}")
+    refused(inst, blob[:40], "shorter than the 80-byte header")
+    refused(inst, blob[:3], f"truncated: 3 bytes, a state of FullPoseController has {len(blob)}")
+    refused(inst, blob + b"\0", "too long")
+
+
+def test_a_relabelled_lifecycle_state_is_refused(make):
+    """A state saved before initialization, relabelled as StepComplete: the checksum catches
+    the edit; resealed, the model's own checks catch the uninitialized model."""
+    fresh = make("plant", initialize=False)
+    blob = bytearray(serialize(fresh))
+    assert header(bytes(blob))["state"] == INSTANTIATED
+    blob[56:60] = STEP_COMPLETE.to_bytes(4, "little")
+    refused(fresh, bytes(blob), "checksum mismatch")
+    refused(fresh, reseal(blob), "flags 0x1 do not fit its lifecycle state StepComplete")
+    blob[60:64] = bytes(4)  # and the parameters-changed flag cleared as well
+    refused(fresh, reseal(blob), "the state is refused")  # by the model: "rotor count"
+    blob[56:60] = (STEP_COMPLETE | 8).to_bytes(4, "little")  # two states at once
+    refused(fresh, reseal(blob), "is not one FMI state")
+
+
+def test_a_resealed_corrupt_model_is_refused_by_the_model_on_an_aligned_copy(make):
+    """The checksum is no proof of sense: the model's check_restored still runs, on the
+    glue's aligned scratch copy, and the live model stays as it was."""
+    inst = make("plant")
+    inst.step(H)
+    good = serialize(inst)
+    assert int.from_bytes(good[HEADER_SIZE:HEADER_SIZE + 4], "little") == 6  # n_rotors
+    bad = bytearray(good)
+    bad[HEADER_SIZE:HEADER_SIZE + 4] = (40).to_bytes(4, "little")
+    refused(inst, reseal(bad), "rotor count 40")
+    assert serialize(inst) == good  # nothing of it reached the live model
+    inst.step(H)  # and the instance is still usable
