@@ -110,7 +110,7 @@ def _warm() -> None:
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from orchestrator.output.plots import png_bytes
+    from orchestrator.output.plot_style import png_bytes
 
     fig = Figure(figsize=(1.0, 1.0))
     FigureCanvasAgg(fig)

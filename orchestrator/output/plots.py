@@ -44,7 +44,6 @@ Each figure has a builder returning the :class:`~matplotlib.figure.Figure`
 
 from __future__ import annotations
 
-import io
 import math
 import warnings
 from collections.abc import Callable
@@ -53,201 +52,42 @@ from typing import TYPE_CHECKING, Any
 
 import numpy as np
 from matplotlib.axes import Axes
-from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.figure import Figure
-from matplotlib.ticker import LogLocator, NullFormatter
 
-from orchestrator.output.events import Event, events
+from orchestrator.output.events import events
 from orchestrator.output.figure_names import RUN_FIGURES
 from orchestrator.output.metrics import wrap_deg
+from orchestrator.output.plot_style import (
+    AXIS_COLORS,
+    CMD_COLOR,
+    INFEASIBLE_COLOR,
+    MEAS_COLOR,
+    REF_COLOR,
+    RPM_PER_RAD_S,
+    columns,
+    draw_line,
+    false_intervals,
+    figure_title,
+    finish_time_axis,
+    legend_below,
+    legend_right,
+    mark_events,
+    new_figure,
+    png_bytes,
+    save_png,
+    shade_intervals,
+    y_floor,
+)
 from orchestrator.output.run_result import RunResult
+from orchestrator.output.timing_figure import disturbance_timing_figure
 
 if TYPE_CHECKING:
     from controller.polytope import Polytope
     from plant.airframe import Airframe
 
-MAX_POINTS = 4000
-"""At most this many points per drawn line (a min/max pair per bucket) when the axes' width
-is not known."""
-
-DPI = 100
-PNG_OPTIONS = {"compress_level": 1}
-"""Pillow's fastest zlib level: ~10 % larger files than the default 6, written 3x faster."""
-RPM_PER_RAD_S = 60.0 / (2.0 * math.pi)
-AXIS_COLORS = ("#1f77b4", "#d62728", "#2ca02c")
-REF_COLOR, CMD_COLOR, MEAS_COLOR = "k", "#ff7f0e", "#1f77b4"
-INFEASIBLE_COLOR = "#d62728"
-
-
-# ---------------------------------------------------------------------------
-# Decimation
-
-
-def envelope_indices(y: np.ndarray, max_points: int = MAX_POINTS) -> np.ndarray:
-    """Sorted row indices that keep the min and max of every bucket of ``y`` (1-D).
-
-    With n <= max_points all indices are returned.  Otherwise the rows are cut into
-    max_points // 2 buckets and each contributes its minimum and maximum sample (in time
-    order), plus the first and last rows; the global extrema are always kept.  Non-finite
-    values are kept where they fall (argmin/argmax pick the first NaN of a bucket).
-    """
-    v = np.asarray(y, dtype=float).reshape(-1)
-    n = v.size
-    if n <= max(max_points, 2):
-        return np.arange(n)
-    size = math.ceil(n / max(max_points // 2, 1))
-    n_buckets = math.ceil(n / size)
-    padded = np.concatenate([v, np.full(n_buckets * size - n, v[-1])]).reshape(n_buckets, size)
-    base = np.arange(n_buckets) * size
-    lo = np.minimum(base + np.argmin(padded, axis=1), n - 1)
-    hi = np.minimum(base + np.argmax(padded, axis=1), n - 1)
-    return np.unique(np.concatenate([[0], lo, hi, [n - 1]]))
-
-
-def envelope(t: np.ndarray, y: np.ndarray,
-             max_points: int = MAX_POINTS) -> tuple[np.ndarray, np.ndarray]:
-    """(t, y) decimated for drawing, keeping each bucket's extrema (:func:`envelope_indices`)."""
-    idx = envelope_indices(y, max_points)
-    return np.asarray(t)[idx], np.asarray(y).reshape(-1)[idx]
-
-
-def pixel_columns(ax: Axes) -> int:
-    """The axes' width in pixels at the figure's resolution."""
-    fig = ax.get_figure()
-    width = fig.get_figwidth() if isinstance(fig, Figure) else 10.0
-    return max(math.ceil(ax.get_position().width * width * DPI), 1)
-
-
-def _line(ax: Axes, t: np.ndarray, y: np.ndarray, **kw: Any) -> None:
-    td, yd = envelope(t, y, 2 * pixel_columns(ax))
-    ax.plot(td, yd, **kw)
-
-
-def false_intervals(t: np.ndarray, ok: np.ndarray,
-                    min_gap: float = 0.0) -> list[tuple[float, float]]:
-    """[start, end) time intervals where ``ok`` is 0 (a sample covers [t_k, t_k+1)).
-
-    Intervals separated by less than ``min_gap`` are merged (keeps chattering flags cheap to
-    draw).
-    """
-    bad = np.asarray(ok, dtype=float) == 0.0
-    if t.size == 0 or not np.any(bad):
-        return []
-    dt = float(t[-1] - t[-2]) if t.size > 1 else 0.0
-    edges = np.diff(np.concatenate([[0], bad.astype(np.int8), [0]]))
-    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
-    t_end = np.append(t, t[-1] + dt)
-    out: list[tuple[float, float]] = []
-    for s, e in zip(starts, ends, strict=True):
-        a, b = float(t_end[s]), float(t_end[e])
-        if out and a - out[-1][1] < min_gap:
-            out[-1] = (out[-1][0], b)
-        else:
-            out.append((a, b))
-    return out
-
-
-def _shade(ax: Axes, intervals: list[tuple[float, float]], label: str | None) -> None:
-    """One filled polygon (axes-height bands) for all intervals."""
-    if not intervals:
-        return
-    xs, ys = [], []
-    for a, b in intervals:
-        xs += [a, a, b, b]
-        ys += [0.0, 1.0, 1.0, 0.0]
-    ax.fill(xs, ys, color=INFEASIBLE_COLOR, alpha=0.12, lw=0,
-            transform=ax.get_xaxis_transform(), label=label)
-
-
-# ---------------------------------------------------------------------------
-# Helpers
-
-
-def _cols(a: np.ndarray) -> np.ndarray:
-    """A signal as (n, k) (scalar signals become one column)."""
-    return a.reshape(a.shape[0], -1)
-
-
-def _new_figure(width: float, height: float, left: float = 0.07, right: float = 0.98,
-                bottom: float = 0.06, top: float = 0.92, hspace: float = 0.2,
-                wspace: float = 0.2) -> Figure:
-    fig = Figure(figsize=(width, height), dpi=DPI)
-    FigureCanvasAgg(fig)
-    fig.subplots_adjust(left=left, right=right, bottom=bottom, top=top, hspace=hspace,
-                        wspace=wspace)
-    return fig
-
-
-def _title(result: RunResult, what: str) -> str:
-    scenario = result.meta.get("scenario")
-    airframe = result.meta.get("airframe")
-    parts = [what] + [str(p) for p in (scenario, airframe) if p]
-    return " - ".join(parts)
-
-
-def _save(fig: Figure, path: Path) -> Path:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(png_bytes(fig))
-    return path
-
-
-def png_bytes(fig: Figure, dpi: float = DPI) -> bytes:
-    """The figure as PNG file contents."""
-    buf = io.BytesIO()
-    # mplot3d's projection of legend-proxy lines can overflow harmlessly while drawing
-    with np.errstate(over="ignore", invalid="ignore"):
-        fig.savefig(buf, format="png", dpi=dpi, pil_kwargs=PNG_OPTIONS)
-    return buf.getvalue()
-
-
-def _finish_time_axis(ax: Axes, t: np.ndarray) -> None:
-    if t.size > 1:
-        ax.set_xlim(float(t[0]), float(t[-1]))
-    ax.grid(True, alpha=0.3)
-    ax.ticklabel_format(axis="y", useOffset=False)  # -3.000, never -2.999 + 2e-4 ticks
-
-
-def _floor(ax: Axes, min_span: float) -> None:
-    """At least ``min_span`` of y: a signal that is (nearly) zero shows its floor, not
-    round-off autoscaled to 1e-14."""
-    lo, hi = ax.get_ylim()
-    if hi - lo < min_span:
-        mid = 0.5 * (lo + hi)
-        ax.set_ylim(mid - 0.5 * min_span, mid + 0.5 * min_span)
-
-
-EVENT_STYLE = {"fault": ("#d62728", "-"), "detection": ("#9467bd", "--"),
-               "disturbance": ("#8c564b", ":"), "reference": ("#7f7f7f", "-.")}
-"""Colour and line style of each kind of event marked on the time axes."""
-
-
-def _mark_events(ax: Axes, found: list[Event], label: bool = False) -> None:
-    """Vertical lines at the events (faults, detections, disturbance steps, reference
-    jumps); ``label``: one legend entry per kind."""
-    seen: set[str] = set()
-    for e in found:
-        color, ls = EVENT_STYLE[e.kind]
-        ax.axvline(e.time, color=color, ls=ls, lw=0.9, alpha=0.8,
-                   label=e.kind if label and e.kind not in seen else None)
-        seen.add(e.kind)
-
-
-def _legend_below(fig: Figure, axes: list[Axes], ncols: int = 6) -> None:
-    """One legend for ``axes`` under the plots: it never covers data."""
-    handles: dict[str, Any] = {}
-    for ax in axes:
-        for h, lab in zip(*ax.get_legend_handles_labels(), strict=True):
-            if not lab.startswith("_"):
-                handles.setdefault(lab, h)
-    if handles:
-        fig.legend(list(handles.values()), list(handles), loc="lower center", ncols=ncols,
-                   fontsize=8, frameon=False)
-
-
-def _legend_right(ax: Axes) -> None:
-    """The axes' legend outside it, on the right: it never covers data."""
-    if ax.get_legend_handles_labels()[0]:
-        ax.legend(loc="upper left", bbox_to_anchor=(1.005, 1.0), fontsize=7)
+__all__ = ["RUN_FIGURES", "actuators_figure", "figure_inputs", "force_sets", "forces_figure",
+           "plot_actuators", "plot_forces", "plot_run", "plot_tracking", "render_png",
+           "resolve_airframe", "tracking_figure"]
 
 
 # ---------------------------------------------------------------------------
@@ -256,13 +96,13 @@ def _legend_right(ax: Axes) -> None:
 
 def plot_tracking(result: RunResult, path: Path) -> Path:
     """Figs. 4/7/9: position and attitude tracking, with the errors in a bottom row."""
-    return _save(tracking_figure(result), path)
+    return save_png(tracking_figure(result), path)
 
 
 def tracking_figure(result: RunResult) -> Figure:
     """The figure of :func:`plot_tracking`."""
     t = result.time
-    fig = _new_figure(13.0, 10.5, top=0.93, bottom=0.11, hspace=0.12, wspace=0.17)
+    fig = new_figure(13.0, 10.5, top=0.93, bottom=0.11, hspace=0.12, wspace=0.17)
     axs = fig.subplots(4, 2, sharex=True)
     marks = events(result, ("fault", "detection", "disturbance", "reference"))
     # with imperfect sensors the true state is recorded too: it is what is judged, the
@@ -274,19 +114,19 @@ def tracking_figure(result: RunResult) -> Figure:
     for i, name in enumerate(("x", "y", "z")):
         ax = axs[i, 0]
         if sensed is not None:
-            _line(ax, t, sensed[:, i], color=MEAS_COLOR, lw=0.6, alpha=0.3,
+            draw_line(ax, t, sensed[:, i], color=MEAS_COLOR, lw=0.6, alpha=0.3,
                   label="measured (sensors)")
         if pos_ref is not None:
-            _line(ax, t, pos_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="reference")
+            draw_line(ax, t, pos_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="reference")
         if shaped is not None and pos_ref is not None and np.any(shaped != pos_ref):
-            _line(ax, t, shaped[:, i], color=CMD_COLOR, lw=1.0, label="shaped reference")
+            draw_line(ax, t, shaped[:, i], color=CMD_COLOR, lw=1.0, label="shaped reference")
         if pos is not None:
-            _line(ax, t, pos[:, i], color=MEAS_COLOR, lw=1.0,
+            draw_line(ax, t, pos[:, i], color=MEAS_COLOR, lw=1.0,
                   label="true" if truth else "measured")
         ax.set_ylabel(f"{name} [m]" + (" (NED, down)" if name == "z" else ""))
-        _finish_time_axis(ax, t)
-        _floor(ax, 0.002)
-        _mark_events(ax, marks, label=i == 0)
+        finish_time_axis(ax, t)
+        y_floor(ax, 0.002)
+        mark_events(ax, marks, label=i == 0)
     axs[0, 0].set_title("position (world NED)")
 
     feasible = result.optional("ctrl.feasible")
@@ -297,22 +137,22 @@ def tracking_figure(result: RunResult) -> Figure:
     mu_sensed = result.optional("plant.euler") if truth else None
     for i, name in enumerate(("phi", "theta", "psi")):
         ax = axs[i, 1]
-        _shade(ax, bands, "mu_ref infeasible" if i == 0 else None)
+        shade_intervals(ax, bands, "mu_ref infeasible" if i == 0 else None)
         if mu_sensed is not None:
-            _line(ax, t, np.degrees(mu_sensed[:, i]), color=MEAS_COLOR, lw=0.6, alpha=0.3,
+            draw_line(ax, t, np.degrees(mu_sensed[:, i]), color=MEAS_COLOR, lw=0.6, alpha=0.3,
                   label="mu_m measured")
         if mu_ref is not None:
-            _line(ax, t, np.degrees(mu_ref[:, i]), color=REF_COLOR, ls="--", lw=1.0,
+            draw_line(ax, t, np.degrees(mu_ref[:, i]), color=REF_COLOR, ls="--", lw=1.0,
                   label="mu_ref")
         if mu_c is not None:
-            _line(ax, t, np.degrees(mu_c[:, i]), color=CMD_COLOR, lw=1.2, label="mu_c")
+            draw_line(ax, t, np.degrees(mu_c[:, i]), color=CMD_COLOR, lw=1.2, label="mu_c")
         if mu_m is not None:
-            _line(ax, t, np.degrees(mu_m[:, i]), color=MEAS_COLOR, lw=0.9, ls=":",
+            draw_line(ax, t, np.degrees(mu_m[:, i]), color=MEAS_COLOR, lw=0.9, ls=":",
                   label="mu_m true" if truth else "mu_m")
         ax.set_ylabel(f"{name} [deg]")
-        _finish_time_axis(ax, t)
-        _floor(ax, 0.1)
-        _mark_events(ax, marks)
+        finish_time_axis(ax, t)
+        y_floor(ax, 0.1)
+        mark_events(ax, marks)
     axs[0, 1].set_title("attitude")
 
     ax = axs[3, 0]
@@ -320,7 +160,7 @@ def tracking_figure(result: RunResult) -> Figure:
         # against the reference the controller flies (its shaped one: a 10 m step is not a
         # 10 m error), in millimetres
         err = 1e3 * np.linalg.norm(pos - (shaped if shaped is not None else pos_ref), axis=1)
-        _line(ax, t, err, color=MEAS_COLOR, lw=1.0)
+        draw_line(ax, t, err, color=MEAS_COLOR, lw=1.0)
         if err.size and np.all(np.isfinite(err)):
             k = int(np.argmax(err))
             ax.plot(t[k], err[k], "v", color=INFEASIBLE_COLOR, ms=5,
@@ -328,21 +168,21 @@ def tracking_figure(result: RunResult) -> Figure:
     what = result.judged("plant.pos").removeprefix("plant.")
     ax.set_ylabel(f"|{what} - pos_ref{'_s' if shaped is not None else ''}| [mm]")
     ax.set_xlabel("time [s]")
-    _finish_time_axis(ax, t)
-    _floor(ax, 0.1)
-    _mark_events(ax, marks)
+    finish_time_axis(ax, t)
+    y_floor(ax, 0.1)
+    mark_events(ax, marks)
     ax = axs[3, 1]
     if mu_m is not None and mu_c is not None:
         err_att = wrap_deg(np.degrees(mu_m - mu_c))
         for i, name in enumerate(("phi", "theta", "psi")):
-            _line(ax, t, err_att[:, i], color=AXIS_COLORS[i], lw=0.9, label=f"{name} error")
+            draw_line(ax, t, err_att[:, i], color=AXIS_COLORS[i], lw=0.9, label=f"{name} error")
     ax.set_ylabel(f"mu_m{' true' if truth else ''} - mu_c [deg]")
     ax.set_xlabel("time [s]")
-    _finish_time_axis(ax, t)
-    _floor(ax, 0.1)
-    _mark_events(ax, marks)
-    _legend_below(fig, [axs[0, 0], axs[0, 1], axs[3, 0], axs[3, 1]], ncols=7)
-    fig.suptitle(_title(result, "full-pose tracking"))
+    finish_time_axis(ax, t)
+    y_floor(ax, 0.1)
+    mark_events(ax, marks)
+    legend_below(fig, [axs[0, 0], axs[0, 1], axs[3, 0], axs[3, 1]], ncols=7)
+    fig.suptitle(figure_title(result, "full-pose tracking"))
     return fig
 
 
@@ -367,7 +207,7 @@ def _limits(result: RunResult, airframe: Airframe | None) -> dict[str, tuple[flo
 
 def plot_actuators(result: RunResult, path: Path, airframe: Airframe | None = None) -> Path:
     """Figs. 5/10: commanded servo angles and rotor speeds with their limits."""
-    return _save(actuators_figure(result, airframe), path)
+    return save_png(actuators_figure(result, airframe), path)
 
 
 def actuators_figure(result: RunResult, airframe: Airframe | None = None) -> Figure:
@@ -377,7 +217,7 @@ def actuators_figure(result: RunResult, airframe: Airframe | None = None) -> Fig
     t = result.time
     n = result.n_rotors
     lims = _limits(result, airframe)
-    fig = _new_figure(13.0, 9.0, right=0.86, top=0.94, hspace=0.12)
+    fig = new_figure(13.0, 9.0, right=0.86, top=0.94, hspace=0.12)
     axs = fig.subplots(3, 1, sharex=True)
     marks = events(result, ("fault", "detection"))
     groups = (("alpha", "alpha", np.degrees(1.0), "deg", 1.0),
@@ -389,10 +229,10 @@ def actuators_figure(result: RunResult, airframe: Airframe | None = None) -> Fig
         for sig, ls, what in ((cmd, "-", "command"), (meas, ":", "measured")):
             if sig is None:
                 continue
-            sig = scale * _cols(sig)[:, :n]
+            sig = scale * columns(sig)[:, :n]
             drawn.append(sig)
             for i in range(sig.shape[1]):
-                _line(ax, t, sig[:, i], lw=0.9, ls=ls, color=f"C{i}",
+                draw_line(ax, t, sig[:, i], lw=0.9, ls=ls, color=f"C{i}",
                       label=f"{sym}_{i + 1}" if what == "command" else None)
         if drawn:
             both = np.concatenate(drawn, axis=1)
@@ -411,11 +251,11 @@ def actuators_figure(result: RunResult, airframe: Airframe | None = None) -> Fig
         ax.plot([], [], color="0.3", ls="-", lw=0.9, label="solid: command")
         ax.plot([], [], color="0.3", ls=":", lw=0.9, label="dotted: measured")
         ax.set_ylabel(f"{sym} [{unit}]")
-        _finish_time_axis(ax, t)
-        _mark_events(ax, marks, label=key == "alpha")
-        _legend_right(ax)
+        finish_time_axis(ax, t)
+        mark_events(ax, marks, label=key == "alpha")
+        legend_right(ax)
     axs[-1].set_xlabel("time [s]")
-    fig.suptitle(_title(result, "actuators: commands and measured states"))
+    fig.suptitle(figure_title(result, "actuators: commands and measured states"))
     return fig
 
 
@@ -433,7 +273,7 @@ def plot_forces(result: RunResult, path: Path, afs: Polytope | None = None,
                 s0: Polytope | None = None) -> Path:
     """Fig. 6: f_b_ref vs f_b_c over time, in 3-D against the AFS and S(0), and in the
     lateral plane against the slices P_xy of S(0) at the run's f_bz range."""
-    return _save(forces_figure(result, afs, s0), path)
+    return save_png(forces_figure(result, afs, s0), path)
 
 
 def forces_figure(result: RunResult, afs: Polytope | None = None,
@@ -441,18 +281,18 @@ def forces_figure(result: RunResult, afs: Polytope | None = None,
     """The figure of :func:`plot_forces`."""
     t = result.time
     f_ref, f_c = result.optional("ctrl.f_b_ref"), result.optional("ctrl.f_b_c")
-    fig = _new_figure(15.0, 10.0, left=0.06, right=0.8, top=0.93, hspace=0.5, wspace=0.15)
+    fig = new_figure(15.0, 10.0, left=0.06, right=0.8, top=0.93, hspace=0.5, wspace=0.15)
     grid = fig.add_gridspec(6, 2, width_ratios=[1.25, 1.0])
     axes_t = [fig.add_subplot(grid[2 * i:2 * i + 2, 0]) for i in range(3)]
     for i, (ax, name) in enumerate(zip(axes_t, ("f_bx", "f_by", "f_bz"), strict=True)):
         if i:
             ax.sharex(axes_t[0])
         if f_ref is not None:
-            _line(ax, t, f_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="f_b_ref")
+            draw_line(ax, t, f_ref[:, i], color=REF_COLOR, ls="--", lw=1.0, label="f_b_ref")
         if f_c is not None:
-            _line(ax, t, f_c[:, i], color=CMD_COLOR, lw=1.0, label="f_b_c")
+            draw_line(ax, t, f_c[:, i], color=CMD_COLOR, lw=1.0, label="f_b_c")
         ax.set_ylabel(f"{name} [N]")
-        _finish_time_axis(ax, t)
+        finish_time_axis(ax, t)
     axes_t[0].set_title("body force (FRD) over time")
     axes_t[0].legend(loc="upper right", fontsize=8)
     axes_t[-1].set_xlabel("time [s]")
@@ -468,7 +308,7 @@ def forces_figure(result: RunResult, afs: Polytope | None = None,
     with np.errstate(over="ignore", invalid="ignore"):
         _forces_3d(fig.add_subplot(grid[0:3, 1], projection="3d"), trajectories, afs, s0)
         _forces_lateral(fig.add_subplot(grid[3:6, 1]), trajectories, afs, s0)
-        fig.suptitle(_title(result, "reference vs commanded body force"))
+        fig.suptitle(figure_title(result, "reference vs commanded body force"))
     return fig
 
 
@@ -532,146 +372,6 @@ def _forces_lateral(ax: Axes, trajectories: list[tuple[np.ndarray, str, str]],
     ax.set_ylabel("f_by [N]")
     ax.set_title("lateral forces vs the lateral force limits P_xy", fontsize=10)
     ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=7, markerscale=4)
-
-
-def _nonzero(sig: np.ndarray | None, default: float = 0.0) -> bool:
-    return sig is not None and bool(np.any(sig != default))
-
-
-def plot_disturbance_timing(result: RunResult, path: Path) -> Path:
-    """Fig. 8: disturbances on top, QP computation times (or iterations) below."""
-    return _save(disturbance_timing_figure(result), path)
-
-
-PREEMPTION_FACTOR = 5.0
-"""A solve that took this many times the median of the solves with its iteration count did no
-more work than they did: the host took the CPU away (preemption), not the solver."""
-
-
-def preempted(times: np.ndarray, iterations: np.ndarray | None) -> np.ndarray:
-    """Which solve times are host preemption: above PREEMPTION_FACTOR x the median time of
-    the solves with the same iteration count (all solves when the counts are unknown)."""
-    out = np.zeros(times.shape, dtype=bool)
-    groups = np.zeros(times.shape) if iterations is None else np.asarray(iterations)
-    for it in np.unique(groups):
-        sel = groups == it
-        out[sel] = times[sel] > PREEMPTION_FACTOR * np.median(times[sel])
-    return out
-
-
-HIST_BASELINE = 0.5
-"""Where a log-count histogram's bars start (below one sample, so an empty bin shows none)."""
-
-
-def _log_histogram(ax: Axes, values: np.ndarray, bins: np.ndarray, color: str,
-                   label: str) -> None:
-    counts, _ = np.histogram(values, bins=bins)
-    heights = np.where(counts > 0, counts, HIST_BASELINE).astype(float)
-    ax.stairs(heights, bins, fill=True, baseline=HIST_BASELINE, color=color, label=label)
-
-
-def disturbance_timing_figure(result: RunResult) -> Figure:
-    """The figure of :func:`plot_disturbance_timing`: the disturbances that act (a panel per
-    kind that is not zero throughout, none when nothing acts) over time, and the QP solve
-    times as the distribution they are (or the iteration counts when timing was off)."""
-    t = result.time
-    n = result.n_rotors
-    panels: list[tuple[str, np.ndarray, str]] = []
-    for name, unit in (("a_d", "m/s^2"), ("f_d", "N"), ("tau_d", "N m")):
-        sig = result.optional(f"dist.{name}")
-        if sig is not None and _nonzero(sig):
-            panels.append((name, sig, unit))
-    eff = result.optional("dist.efficiency")
-    eff = None if eff is None else _cols(eff)[:, :n]
-    show_eff = eff is not None and eff.size > 0 and _nonzero(eff, 1.0)
-    timing = {k: result.optional(f"ctrl.{k}") for k in ("t_guid", "t_alloc")}
-    measured = any(_nonzero(v) for v in timing.values())
-    time_rows = len(panels) + int(show_eff) + int(not measured)
-    height = 2.4 * time_rows + (3.0 if measured else 0.0) + 1.0
-    fig = _new_figure(12.0, height, left=0.09, right=0.86, bottom=0.55 / height,
-                      top=1 - 0.85 / height, hspace=0.45)
-    grid = fig.add_gridspec(time_rows + int(measured), 2 if measured else 1)
-    axs: list[Axes] = []
-    for row in range(time_rows):
-        ax = fig.add_subplot(grid[row, :], sharex=axs[0] if axs else None)
-        axs.append(ax)
-    marks = events(result, ("fault", "detection"))
-    for ax, (name, sig, unit) in zip(axs, panels, strict=False):
-        for i, axis in enumerate(("x", "y", "z")):
-            _line(ax, t, sig[:, i], color=AXIS_COLORS[i], lw=1.0, label=f"{name} {axis}")
-        frame = "body FRD" if name == "tau_d" else "world NED"
-        ax.set_ylabel(f"{name} [{unit}]\n({frame})")
-        _finish_time_axis(ax, t)
-        _legend_right(ax)
-    if panels:
-        axs[0].set_title("disturbances")
-    k = len(panels)
-    if show_eff and eff is not None:
-        ax = axs[k]
-        for i in range(eff.shape[1]):
-            _line(ax, t, eff[:, i], lw=1.0, label=f"rotor {i + 1}")
-        ax.set_ylabel("rotor efficiency [-]")
-        ax.set_ylim(-0.05, 1.05)
-        _finish_time_axis(ax, t)
-        _mark_events(ax, marks, label=True)
-        _legend_right(ax)
-        if not panels:
-            ax.set_title("rotor faults")
-        k += 1
-    if not measured:
-        ax = axs[k]
-        for name, color, label in (("guid_iter", CMD_COLOR, "guidance QP"),
-                                   ("alloc_iter", MEAS_COLOR, "allocation QP")):
-            sig = result.optional(f"ctrl.{name}")
-            if sig is not None:
-                _line(ax, t, sig, color=color, lw=0.8, label=label)
-        ax.set_ylabel("iterations [-]")
-        ax.set_title("QP iterations (computation times not measured: controller timing off)")
-        _finish_time_axis(ax, t)
-        _legend_right(ax)
-    if axs:
-        axs[-1].set_xlabel("time [s]")
-        for ax in axs[:-1]:
-            ax.tick_params(labelbottom=False)
-    if measured:
-        for col, (key, label, iters) in enumerate((("t_guid", "guidance QP", "guid_iter"),
-                                                   ("t_alloc", "allocation QP", "alloc_iter"))):
-            ax = fig.add_subplot(grid[time_rows, col])
-            sig = timing[key]
-            if sig is None or not np.any(sig > 0):
-                ax.set_title(f"{label}: no solve timed")
-                continue
-            timed = sig > 0
-            solved = sig[timed]
-            it = result.optional(f"ctrl.{iters}")
-            spike = preempted(solved, None if it is None else it[timed])
-            us = 1e6 * solved
-            bins = np.geomspace(max(us.min(), 1e-3), us.max() * 1.01, 60)
-            # one filled outline per series (a bar per bin is 60 patches to lay out and
-            # draw); empty bins sit on the baseline below the axis
-            _log_histogram(ax, us[~spike], bins, MEAS_COLOR, "solves")
-            if np.any(spike):
-                _log_histogram(ax, us[spike], bins, INFEASIBLE_COLOR,
-                               f"host preemption ({int(spike.sum())}, "
-                               f"{100 * spike.mean():.2f} %)")
-            for q, ls in ((50, "-"), (99, "--")):
-                v = float(np.percentile(us, q))
-                ax.axvline(v, color="k", ls=ls, lw=1.0, label=f"p{q} {v:.2f} us")
-            ax.set_xscale("log")
-            ax.set_yscale("log")
-            ax.set_ylim(bottom=HIST_BASELINE)
-            # minor ticks at 2 and 5 of each decade, unlabelled: 8 per decade, each labelled
-            # on an axis spanning one decade, cost half of the figure's drawing time
-            for log_axis in (ax.xaxis, ax.yaxis):
-                log_axis.set_minor_locator(LogLocator(base=10.0, subs=(2.0, 5.0)))
-                log_axis.set_minor_formatter(NullFormatter())
-            ax.set_xlabel(f"{label} solve time [us]")
-            ax.set_ylabel("samples")
-            ax.set_title(f"{label}: {us.size} solves")
-            ax.legend(loc="upper right", fontsize=7)
-            ax.grid(True, alpha=0.3)
-    fig.suptitle(_title(result, "disturbances and guidance computation"))
-    return fig
 
 
 # ---------------------------------------------------------------------------

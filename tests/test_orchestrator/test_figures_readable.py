@@ -11,15 +11,14 @@ import pytest
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
 from orchestrator.master import run
-from orchestrator.output.plots import (
+from orchestrator.output.plots import actuators_figure, tracking_figure
+from orchestrator.output.run_result import RunResult
+from orchestrator.output.timing_figure import (
     HIST_BASELINE,
     PREEMPTION_FACTOR,
-    actuators_figure,
     disturbance_timing_figure,
     preempted,
-    tracking_figure,
 )
-from orchestrator.output.run_result import RunResult
 from orchestrator.runner import prepare
 from plant.airframe import load_airframe
 

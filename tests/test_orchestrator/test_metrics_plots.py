@@ -18,14 +18,8 @@ from orchestrator.output.metrics import (
     saturation_fractions,
     wrap_deg,
 )
-from orchestrator.output.plots import (
-    envelope,
-    envelope_indices,
-    false_intervals,
-    force_sets,
-    plot_run,
-    resolve_airframe,
-)
+from orchestrator.output.plot_style import envelope, envelope_indices, false_intervals
+from orchestrator.output.plots import force_sets, plot_run, resolve_airframe
 from orchestrator.output.run_result import RunResult
 
 STEP = 0.002
