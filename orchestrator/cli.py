@@ -246,7 +246,8 @@ def _cmd_build_fmus(args: argparse.Namespace) -> int:
 def _cmd_sweep(args: argparse.Namespace) -> int:
     import time
 
-    from orchestrator.sweep import run_sweep, summarize, write_outputs
+    from orchestrator.sweep import run_sweep
+    from orchestrator.sweep_report import summarize, write_outputs
 
     if args.cases < 1 or args.duration <= 1.0:
         raise ValueError("sweep needs --cases >= 1 and --duration > 1 s")

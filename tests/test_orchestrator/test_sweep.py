@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 import plant
-from orchestrator import sweep
+from orchestrator import sweep, sweep_report
 from orchestrator.cli import main
 
 N, DURATION = 3, 3.0   # 3 cases x 2 designs = 6 runs of 3 s
@@ -67,7 +67,7 @@ def test_torque_steps_and_delay_keep_the_other_draws():
 
 def test_two_processes_give_the_same_table(serial):
     par = sweep.run_sweep(N, seed=7, duration=DURATION, workers=2, progress=False)
-    assert sweep.table_rows(par) == sweep.table_rows(serial)
+    assert sweep_report.table_rows(par) == sweep_report.table_rows(serial)
     assert exact(par) == exact(serial)
     assert len(serial) == 2 * N and all(r["stable"] for r in serial)
 
@@ -143,7 +143,7 @@ def test_dask_local_cluster_gives_the_same_table(serial, config):
                                      dashboard_address=None) as cluster, \
             distributed.Client(cluster) as client:
         rows = sweep.run_sweep(N, seed=7, duration=DURATION, dask=client, progress=False)
-    assert sweep.table_rows(rows) == sweep.table_rows(serial)
+    assert sweep_report.table_rows(rows) == sweep_report.table_rows(serial)
     assert exact(rows) == exact(serial)
 
 
@@ -172,12 +172,12 @@ def test_sensitivity_finds_the_parameter_that_drives_the_error():
     rows = [{**c, "design": "x", "stable": 1,
              "max_err": 0.01 * c["dist_amp"] * c["mass_scale"] ** 2, "rms_err": 0.0,
              "recovery_time": 0.0} for c in cases]
-    sens = sweep.sensitivity(rows)["x"]
+    sens = sweep_report.sensitivity(rows)["x"]
     assert sens["mass_scale"]["corr"] > 0.99
     assert sens["mass_scale"]["high"] / sens["mass_scale"]["low"] > 1.5
     for key in ("ixx_scale", "tau_motor_scale", "noise_scale"):
         assert abs(sens[key]["corr"]) < 0.25
-    text = sweep.report_markdown(sweep.summarize(rows), {"n": 200}, {"x": sens})
+    text = sweep_report.report_markdown(sweep_report.summarize(rows), {"n": 200}, {"x": sens})
     assert "| mass_scale | +" in text
 
 
