@@ -1,68 +1,27 @@
 /*
  * Generic FMI 2.0 co-simulation layer shared by every fullpose FMU.
  *
- * It owns the FMI call-sequence state machine, logging through the
- * importer's callback, value-reference dispatch into the model struct and
- * FMU state snapshots (their format: fmu_state.c).  The model behind it is reached only through
- * FpModelInfo (fp_model.h) and never sees an FMI type.
+ * It owns the FMI call-sequence state machine (instantiation, initialization, stepping,
+ * termination, reset, the status inquiries) and logging through the importer's callback.
+ * The value-reference dispatch into the model struct is fmi2_values.c, FMU state snapshots
+ * fmi2_fmustate.c (their format: fmu_state.c); what the three share is
+ * fmi2_glue_internal.h.  The model behind it is reached only through FpModelInfo
+ * (fp_model.h) and never sees an FMI type.
  */
 #include <math.h>
 #include <stdarg.h>
 #include <stdio.h>
 #include <string.h>
 
-#include "fmi2Functions.h"
-#include "fmu_state.h"
-#include "fp_model.h"
+#include "fmi2_glue_internal.h"
 
-/* fmi2Get{Real,Integer,Boolean,String}: from initialization on, and in Error for diagnosis */
-#define S_READABLE (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
 /* fmi2Get*Status (FMI 2.0.4 co-simulation state table): StepComplete, StepInProgress,
  * StepFailed, Terminated; this FMU has no asynchronous step, so no StepInProgress */
 #define S_STATUS (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)
 
-/* The distinct warnings one initialization reports once each (beyond them, repeats show). */
-#define MAX_WARNINGS_SEEN 32
-
-/* logCalls shows at most this many values of one get or set. */
-#define CALL_VALUES 8
-
 /* Marks a live instance; cleared to INSTANCE_FREED by fmi2FreeInstance. */
 #define INSTANCE_LIVE 0x4650494eu  /* "FPIN" */
 #define INSTANCE_FREED 0x46524545u /* "FREE" */
-
-typedef struct {
-    /* First: an allocator may reuse the first words of a freed block for its own lists,
-     * so the freed marker and the logger come after it. */
-    char guid[40];
-    uint32_t magic; /* INSTANCE_LIVE while the instance exists */
-    int state;
-    fmi2CallbackLogger logger;
-    fmi2CallbackAllocateMemory allocate;
-    fmi2CallbackFreeMemory release;
-    fmi2ComponentEnvironment env;
-    char *name;
-    const FpModelInfo *info;
-    int logging_on;
-    unsigned categories; /* bit per FpLogCategory enabled for debug logging */
-    double time;
-    int dirty;          /* parameters/inputs changed since the last initialize */
-    int tunables_dirty; /* tunable parameters changed while stepping */
-    uint32_t n_vr;      /* size of vr_map */
-    int32_t *vr_map;    /* value reference -> index into info->vars, or -1 */
-    void *model;
-    void *scratch;                /* model_size bytes: a restored state is checked here */
-    const FpVar *internal_step;   /* parameter of the internal step (NULL: none) */
-    FpLogger model_logger;
-    /* The model validates its parameters at every read in initialization mode, at its end
-     * and on a restored state: each distinct warning of those checks is reported once per
-     * initialization (from instantiation or reset on), not at every repeat. */
-    int checking;                            /* the model is validating parameters */
-    uint64_t warned[MAX_WARNINGS_SEEN];      /* FNV-1a of the warnings reported */
-    int n_warned;
-} Instance;
-
-
 
 static fmi2Status to_fmi(FpStatus s) {
     switch (s) {
@@ -109,13 +68,7 @@ static void model_log(void *env, FpStatus status, FpLogCategory category, const 
     emit(inst, to_fmi(status), fp_log_category_name(category), message);
 }
 
-static void logf_(Instance *inst, FpStatus status, FpLogCategory category, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 4, 5)))
-#endif
-    ;
-
-static void logf_(Instance *inst, FpStatus status, FpLogCategory category, const char *fmt, ...) {
+void glue_logf(Instance *inst, FpStatus status, FpLogCategory category, const char *fmt, ...) {
     char message[768];
     va_list args;
     if (!wants(inst, status, category)) return;
@@ -150,98 +103,22 @@ static Instance *instance(fmi2Component c, const char *fn) {
  * logged as errors, not as calls). */
 static int allowed(Instance *inst, const char *fn, int states) {
     if (inst->state & states) return 1;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s may not be called in state %s", fn,
-          fp_lifecycle_name(inst->state));
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s may not be called in state %s", fn,
+              fp_lifecycle_name(inst->state));
     return 0;
 }
 
 /* Entry of every function taking an instance: a live instance in one of `states`. */
-static Instance *enter(fmi2Component c, const char *fn, int states) {
+Instance *glue_enter(fmi2Component c, const char *fn, int states) {
     Instance *inst = instance(c, fn);
     if (inst == NULL || !allowed(inst, fn, states)) return NULL;
     return inst;
 }
 
-#define CHECK(fn, states)                                     \
-    Instance *inst = enter(c, fn, states);                    \
-    if (inst == NULL) return fmi2Error
-
-/* logCalls: every accepted call with its arguments, e.g. "fmi2DoStep(currentCommunication
- * Point = 0.5, communicationStepSize = 0.002, ...)"; formatted only when enabled. */
-static int calls_on(const Instance *inst) {
-    return inst->logging_on && (inst->categories & (1u << FP_LOG_CALLS));
-}
-
-#define LOG_CALL(inst, ...)                                             \
-    do {                                                                \
-        if (calls_on(inst)) logf_(inst, FP_OK, FP_LOG_CALLS, __VA_ARGS__); \
-    } while (0)
-
-/* A bounded message built piece by piece (what does not fit is cut). */
-typedef struct {
-    char text[640];
-    size_t used;
-} Text;
-
-static void text_add(Text *t, const char *fmt, ...)
-#if defined(__GNUC__)
-    __attribute__((format(printf, 2, 3)))
-#endif
-    ;
-
-static void text_add(Text *t, const char *fmt, ...) {
-    va_list args;
-    int n;
-    if (t->used >= sizeof t->text - 1) return;
-    va_start(args, fmt);
-    n = vsnprintf(t->text + t->used, sizeof t->text - t->used, fmt, args);
-    va_end(args);
-    if (n > 0) t->used += (size_t)n;
-    if (t->used > sizeof t->text - 1) t->used = sizeof t->text - 1;
-}
-
-/* The arguments of a get or set, "fmi2SetReal(nvr = 2: mass (vr 2) = 1.5, k_t (vr 13) =
- * 2e-05)", at most CALL_VALUES of them ("..., 12 more").  A get logs what it returned:
- * `shown` values are given (0 when the call failed: only the references are listed). */
-static void log_values(Instance *inst, const char *fn, const fmi2ValueReference vr[],
-                       size_t nvr, const void *values, FpVarType type, size_t shown) {
-    Text t;
-    size_t i, n = nvr < CALL_VALUES ? nvr : CALL_VALUES;
-    if (!calls_on(inst)) return;
-    t.used = 0;
-    t.text[0] = '\0';
-    text_add(&t, "%s(nvr = %lu%s", fn, (unsigned long)nvr, nvr > 0 && vr != NULL ? ":" : "");
-    for (i = 0; i < n && vr != NULL; i++) {
-        char name[96] = "?", value[FP_REAL_TEXT];
-        uint32_t r = vr[i];
-        if (r < inst->n_vr && inst->vr_map[r] >= 0) {
-            const FpVar *v = &inst->info->vars[inst->vr_map[r]];
-            fp_var_element_name(v, r - v->vr, name, sizeof name);
-        }
-        text_add(&t, "%s %s (vr %u)", i > 0 ? "," : "", name, (unsigned)r);
-        if (values == NULL || i >= shown) continue;
-        if (type == FP_REAL) text_add(&t, " = %s", fp_real_text(value, ((const fmi2Real *)values)[i]));
-        else if (type == FP_INTEGER) text_add(&t, " = %d", (int)((const fmi2Integer *)values)[i]);
-        else text_add(&t, " = %s", ((const fmi2Boolean *)values)[i] ? "true" : "false");
-    }
-    if (nvr > n && vr != NULL) text_add(&t, ", ... %lu more", (unsigned long)(nvr - n));
-    text_add(&t, ")");
-    logf_(inst, FP_OK, FP_LOG_CALLS, "%s", t.text);
-}
-
 /* A NULL array or pointer argument: refused with a message naming it. */
-static fmi2Status null_argument(Instance *inst, const char *fn, const char *what) {
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is NULL", fn, what);
+fmi2Status glue_null_argument(Instance *inst, const char *fn, const char *what) {
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s is NULL", fn, what);
     return fmi2Error;
-}
-
-static fmi2Status null_arrays(Instance *inst, const char *fn, const void *vr, size_t nvr,
-                              const void *value) {
-    char what[64];
-    if (nvr == 0 || (vr != NULL && value != NULL)) return fmi2OK;
-    snprintf(what, sizeof what, "%s (nvr = %lu)", vr == NULL ? "vr" : "value",
-             (unsigned long)nvr);
-    return null_argument(inst, fn, what);
 }
 
 /* A failure of the model's computation (initialization, a step): Error (or StepFailed). */
@@ -251,32 +128,9 @@ static fmi2Status fail(Instance *inst, fmi2Status status) {
     return status;
 }
 
-static const FpVar *lookup(Instance *inst, fmi2ValueReference vr, FpVarType type, uint32_t *k,
-                           const char *fn) {
-    static const char *const type_names[] = {"Real", "Integer", "Boolean"};
-    const FpVar *v;
-    if (vr >= inst->n_vr || inst->vr_map[vr] < 0) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: unknown value reference %u", fn, (unsigned)vr);
-        return NULL;
-    }
-    v = &inst->info->vars[inst->vr_map[vr]];
-    if (v->type != type) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: variable %s (vr %u) is of type %s", fn, v->name,
-              (unsigned)vr, type_names[v->type]);
-        return NULL;
-    }
-    *k = vr - v->vr;
-    return v;
-}
-
-static void *element(Instance *inst, const FpVar *v, uint32_t k) {
-    size_t size = v->type == FP_REAL ? sizeof(double) : sizeof(int32_t);
-    return (char *)inst->model + v->offset + (size_t)k * size;
-}
-
 /* Brings initial outputs up to date after parameter changes (FMI 2.0: values
  * read in initialization mode are computed from what was set). */
-static fmi2Status refresh(Instance *inst) {
+fmi2Status glue_refresh(Instance *inst) {
     FpStatus s;
     if (!(inst->state & (S_INIT | S_INSTANTIATED)) || !inst->dirty) return fmi2OK;
     inst->checking = 1;
@@ -285,32 +139,6 @@ static fmi2Status refresh(Instance *inst) {
     if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi2Error);
     inst->dirty = 0;
     return to_fmi(s);
-}
-
-static fmi2Status may_set(Instance *inst, const FpVar *v, uint32_t k, const char *fn) {
-    char name[96];
-    const char *why = NULL;
-    switch (v->kind) {
-    case FP_OUTPUT: why = "it is an output"; break;
-    case FP_PARAM_FIXED:
-        if (!(inst->state & (S_INSTANTIATED | S_INIT)))
-            why = "it is a fixed parameter and initialization has ended";
-        break;
-    case FP_PARAM_TUNABLE:
-    case FP_INPUT:
-        if (!(inst->state & (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE)))
-            why = "the FMU is not initialized or stepping";
-        break;
-    }
-    if (why == NULL) return fmi2OK;
-    fp_var_element_name(v, k, name, sizeof name);
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: cannot set %s: %s", fn, name, why);
-    return fmi2Error;
-}
-
-static void mark_changed(Instance *inst, const FpVar *v) {
-    if (inst->state & (S_INSTANTIATED | S_INIT)) inst->dirty = 1;
-    else if (v->kind == FP_PARAM_TUNABLE) inst->tunables_dirty = 1;
 }
 
 /* ------------------------------------------------------------------------ */
@@ -332,7 +160,7 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
              nCategories > 0 && categories != NULL && categories[0] ? categories[0] : "",
              nCategories > 1 ? ", ..." : "");
     if (nCategories > 0 && categories == NULL)
-        return null_argument(inst, "fmi2SetDebugLogging", "categories");
+        return glue_null_argument(inst, "fmi2SetDebugLogging", "categories");
     if (nCategories == 0) {
         mask = (1u << FP_LOG_N_CATEGORIES) - 1u;
     } else {
@@ -345,8 +173,8 @@ fmi2Status fmi2SetDebugLogging(fmi2Component c, fmi2Boolean loggingOn, size_t nC
                 }
             }
             if (!found) {
-                logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetDebugLogging: unknown category %s",
-                      categories[i] ? categories[i] : "(null)");
+                glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetDebugLogging: unknown category %s",
+                          categories[i] ? categories[i] : "(null)");
                 return fmi2Error;
             }
         }
@@ -427,7 +255,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->name = (char *)inst->allocate(strlen(instanceName ? instanceName : "") + 1, 1);
     if (inst->name == NULL) {
         inst->name = (char *)""; /* for the message only; never released */
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: out of memory");
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: out of memory");
         inst->name = NULL;
         release_instance(inst);
         return NULL;
@@ -436,21 +264,23 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     fp_model_guid(info, inst->guid);
 
     if (instanceName == NULL || instanceName[0] == '\0') {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: instanceName must not be empty");
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: instanceName must not be empty");
         release_instance(inst);
         return NULL;
     }
     if (fmuType != fmi2CoSimulation) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2Instantiate: %s supports co-simulation only (fmuType must be fmi2CoSimulation)",
-              info->model_name);
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2Instantiate: %s supports co-simulation only (fmuType must be "
+                  "fmi2CoSimulation)",
+                  info->model_name);
         release_instance(inst);
         return NULL;
     }
     if (fmuGUID == NULL || strcmp(fmuGUID, inst->guid) != 0) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2Instantiate: GUID %s does not match this binary (%s); the FMU is inconsistent",
-              fmuGUID ? fmuGUID : "(null)", inst->guid);
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2Instantiate: GUID %s does not match this binary (%s); the FMU is "
+                  "inconsistent",
+                  fmuGUID ? fmuGUID : "(null)", inst->guid);
         release_instance(inst);
         return NULL;
     }
@@ -463,7 +293,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     inst->model = inst->allocate(1, info->model_size);
     inst->scratch = inst->allocate(1, info->model_size);
     if (inst->vr_map == NULL || inst->model == NULL || inst->scratch == NULL) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: out of memory");
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: out of memory");
         release_instance(inst);
         return NULL;
     }
@@ -480,12 +310,12 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
              "fmuResourceLocation = \"%.200s\", visible = %d, loggingOn = %d)",
              instanceName, (int)fmuType, fmuGUID,
              fmuResourceLocation ? fmuResourceLocation : "(null)", (int)visible, (int)loggingOn);
-    logf_(inst, FP_OK, FP_LOG_EVENTS, "instantiated %s", info->model_name);
+    glue_logf(inst, FP_OK, FP_LOG_EVENTS, "instantiated %s", info->model_name);
     return inst;
 }
 
 void fmi2FreeInstance(fmi2Component c) {
-    Instance *inst = enter(c, "fmi2FreeInstance", S_ANY_BUT_FATAL | S_FATAL);
+    Instance *inst = glue_enter(c, "fmi2FreeInstance", S_ANY_BUT_FATAL | S_FATAL);
     if (inst == NULL) return;
     LOG_CALL(inst, "fmi2FreeInstance()");
     release_instance(inst);
@@ -500,9 +330,9 @@ fmi2Status fmi2SetupExperiment(fmi2Component c, fmi2Boolean toleranceDefined,
              "stopTimeDefined = %d, stopTime = %.17g)",
              (int)toleranceDefined, tolerance, startTime, (int)stopTimeDefined, stopTime);
     if (!isfinite(startTime) || (stopTimeDefined && !(stopTime >= startTime))) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2SetupExperiment: startTime %g / stopTime %g are not a valid interval",
-              startTime, stopTime);
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2SetupExperiment: startTime %g / stopTime %g are not a valid interval",
+                  startTime, stopTime);
         return fmi2Error;
     }
     inst->time = startTime;
@@ -522,11 +352,11 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     CHECK("fmi2ExitInitializationMode", S_INIT);
     LOG_CALL(inst, "fmi2ExitInitializationMode()");
     inst->dirty = 1; /* always validate the final parameter set */
-    s = refresh(inst);
+    s = glue_refresh(inst);
     if (s > fmi2Warning) return s;
     inst->state = S_STEP_COMPLETE;
     inst->tunables_dirty = 0;
-    logf_(inst, FP_OK, FP_LOG_EVENTS, "initialized at t = %g", inst->time);
+    glue_logf(inst, FP_OK, FP_LOG_EVENTS, "initialized at t = %g", inst->time);
     return s;
 }
 
@@ -547,290 +377,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
     inst->dirty = 1;
     inst->tunables_dirty = 0;
     inst->n_warned = 0; /* a new initialization: its warnings are news again */
-    logf_(inst, FP_OK, FP_LOG_EVENTS, "reset");
-    return fmi2OK;
-}
-
-/* ------------------------------------------------------------------------ */
-/* Getting and setting values                                               */
-
-fmi2Status fmi2GetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       fmi2Real value[]) {
-    fmi2Status s;
-    size_t i;
-    CHECK("fmi2GetReal", S_READABLE);
-    if (null_arrays(inst, "fmi2GetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
-    s = refresh(inst);
-    for (i = 0; i < nvr && s <= fmi2Warning; i++) {
-        uint32_t k;
-        const FpVar *v = lookup(inst, vr[i], FP_REAL, &k, "fmi2GetReal");
-        if (v == NULL) s = fmi2Error;
-        else value[i] = *(const double *)element(inst, v, k);
-    }
-    log_values(inst, "fmi2GetReal", vr, nvr, value, FP_REAL, s <= fmi2Warning ? nvr : 0);
-    return s;
-}
-
-static fmi2Status get_ints(fmi2Component c, const fmi2ValueReference vr[], size_t nvr, int *value,
-                           FpVarType type, const char *fn) {
-    fmi2Status s;
-    size_t i;
-    CHECK(fn, S_READABLE);
-    if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
-    s = refresh(inst);
-    for (i = 0; i < nvr && s <= fmi2Warning; i++) {
-        uint32_t k;
-        const FpVar *v = lookup(inst, vr[i], type, &k, fn);
-        if (v == NULL) s = fmi2Error;
-        else value[i] = (int)*(const int32_t *)element(inst, v, k);
-    }
-    log_values(inst, fn, vr, nvr, value, type, s <= fmi2Warning ? nvr : 0);
-    return s;
-}
-
-fmi2Status fmi2GetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Integer value[]) {
-    return get_ints(c, vr, nvr, value, FP_INTEGER, "fmi2GetInteger");
-}
-
-fmi2Status fmi2GetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          fmi2Boolean value[]) {
-    return get_ints(c, vr, nvr, value, FP_BOOLEAN, "fmi2GetBoolean");
-}
-
-fmi2Status fmi2GetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         fmi2String value[]) {
-    CHECK("fmi2GetString", S_READABLE);
-    log_values(inst, "fmi2GetString", vr, nvr, NULL, FP_REAL, 0);
-    if (null_arrays(inst, "fmi2GetString", vr, nvr, value) != fmi2OK) return fmi2Error;
-    if (nvr == 0) return fmi2OK;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2GetString: unknown value reference %u (no strings)",
-          (unsigned)vr[0]);
-    return fmi2Error;
-}
-
-/* Every element is checked before any is written: a refused set changes nothing. */
-static fmi2Status check_sets(Instance *inst, const fmi2ValueReference vr[], size_t nvr,
-                             FpVarType type, const char *fn) {
-    size_t i;
-    for (i = 0; i < nvr; i++) {
-        uint32_t k;
-        const FpVar *v = lookup(inst, vr[i], type, &k, fn);
-        if (v == NULL || may_set(inst, v, k, fn) != fmi2OK) return fmi2Error;
-    }
-    return fmi2OK;
-}
-
-fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                       const fmi2Real value[]) {
-    size_t i;
-    CHECK("fmi2SetReal", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
-    if (null_arrays(inst, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
-    log_values(inst, "fmi2SetReal", vr, nvr, value, FP_REAL, nvr);
-    if (check_sets(inst, vr, nvr, FP_REAL, "fmi2SetReal") != fmi2OK) return fmi2Error;
-    for (i = 0; i < nvr; i++) {
-        uint32_t k = 0;
-        const FpVar *v = lookup(inst, vr[i], FP_REAL, &k, "fmi2SetReal");
-        *(double *)element(inst, v, k) = value[i];
-        mark_changed(inst, v);
-    }
-    return fmi2OK;
-}
-
-static fmi2Status set_ints(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                           const int *value, FpVarType type, const char *fn) {
-    size_t i;
-    CHECK(fn, S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
-    if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
-    log_values(inst, fn, vr, nvr, value, type, nvr);
-    if (check_sets(inst, vr, nvr, type, fn) != fmi2OK) return fmi2Error;
-    for (i = 0; i < nvr; i++) {
-        uint32_t k = 0;
-        const FpVar *v = lookup(inst, vr[i], type, &k, fn);
-        *(int32_t *)element(inst, v, k) = type == FP_BOOLEAN ? (value[i] != 0) : value[i];
-        mark_changed(inst, v);
-    }
-    return fmi2OK;
-}
-
-fmi2Status fmi2SetInteger(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Integer value[]) {
-    return set_ints(c, vr, nvr, value, FP_INTEGER, "fmi2SetInteger");
-}
-
-fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                          const fmi2Boolean value[]) {
-    return set_ints(c, vr, nvr, value, FP_BOOLEAN, "fmi2SetBoolean");
-}
-
-fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
-                         const fmi2String value[]) {
-    CHECK("fmi2SetString", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
-    log_values(inst, "fmi2SetString", vr, nvr, NULL, FP_REAL, 0);
-    if (null_arrays(inst, "fmi2SetString", vr, nvr, value) != fmi2OK) return fmi2Error;
-    if (nvr == 0) return fmi2OK;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2SetString: unknown value reference %u (no strings)",
-          (unsigned)vr[0]);
-    return fmi2Error;
-}
-
-/* ------------------------------------------------------------------------ */
-/* FMU state                                                                */
-
-static size_t snapshot_size(const Instance *inst) { return fp_state_size(inst->info->model_size); }
-
-static void snapshot_write(const Instance *inst, unsigned char *buf) {
-    fp_state_write(buf, inst->guid, (int32_t)inst->state,
-                   (inst->dirty ? STATE_FLAG_DIRTY : 0u) |
-                       (inst->tunables_dirty ? STATE_FLAG_TUNABLES_DIRTY : 0u),
-                   inst->time, inst->model, inst->info->model_size);
-}
-
-/* fp_state_check (fmu_state.h) for this instance: what is wrong is logged as "FN: WHAT
- * REASON"; 1 and *out filled, or 0. */
-static int check_state(Instance *inst, const unsigned char *buf, size_t size, int level,
-                       const char *fn, const char *what, StateHeader *out) {
-    char why[320];
-    if (fp_state_check(buf, size, level, inst->guid, inst->info->model_name,
-                       inst->info->model_size, out, why, sizeof why) == FP_OK)
-        return 1;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s %s", fn, what, why);
-    return 0;
-}
-
-/* Restores a state: checked whole, its model checked on the aligned scratch copy by the
- * model, and only then copied into the live model. */
-static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, const char *fn) {
-    StateHeader h;
-    if (!check_state(inst, buf, 0, STATE_ALL, fn, "FMUstate", &h)) return fmi2Error;
-    memcpy(inst->scratch, buf + sizeof h, inst->info->model_size);
-    if (inst->info->check_restored != NULL) {
-        FpStatus s;
-        inst->checking = 1;
-        s = inst->info->check_restored(inst->scratch, (h.state & S_INITIALIZED) != 0,
-                                       &inst->model_logger);
-        inst->checking = 0;
-        if (s != FP_OK) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR, "%s: the state is refused", fn);
-            return fmi2Error;
-        }
-    }
-    memcpy(inst->model, inst->scratch, inst->info->model_size);
-    inst->state = h.state;
-    inst->dirty = (h.flags & STATE_FLAG_DIRTY) != 0;
-    inst->tunables_dirty = (h.flags & STATE_FLAG_TUNABLES_DIRTY) != 0;
-    inst->time = h.time;
-    return fmi2OK;
-}
-
-fmi2Status fmi2GetFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    unsigned char *buf;
-    CHECK("fmi2GetFMUstate", S_ANY_BUT_FATAL);
-    LOG_CALL(inst, "fmi2GetFMUstate(FMUstate = %p -> %p)", (void *)FMUstate,
-             FMUstate ? *FMUstate : NULL);
-    if (FMUstate == NULL) return null_argument(inst, "fmi2GetFMUstate", "FMUstate");
-    buf = (unsigned char *)*FMUstate;
-    if (buf != NULL) {
-        /* a state to reuse: only one of ours has room for this one */
-        if (!check_state(inst, buf, 0, STATE_HEADER, "fmi2GetFMUstate", "the FMUstate to reuse",
-                         NULL))
-            return fmi2Error;
-    } else {
-        buf = (unsigned char *)inst->allocate(1, snapshot_size(inst));
-        if (buf == NULL) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2GetFMUstate: out of memory");
-            return fmi2Error;
-        }
-    }
-    snapshot_write(inst, buf);
-    *FMUstate = buf;
-    return fmi2OK;
-}
-
-fmi2Status fmi2SetFMUstate(fmi2Component c, fmi2FMUstate FMUstate) {
-    CHECK("fmi2SetFMUstate", S_ANY_BUT_FATAL);
-    LOG_CALL(inst, "fmi2SetFMUstate(FMUstate = %p)", FMUstate);
-    return snapshot_read(inst, (const unsigned char *)FMUstate, "fmi2SetFMUstate");
-}
-
-fmi2Status fmi2FreeFMUstate(fmi2Component c, fmi2FMUstate *FMUstate) {
-    CHECK("fmi2FreeFMUstate", S_ANY_BUT_FATAL);
-    LOG_CALL(inst, "fmi2FreeFMUstate(FMUstate = %p -> %p)", (void *)FMUstate,
-             FMUstate ? *FMUstate : NULL);
-    if (FMUstate == NULL) return null_argument(inst, "fmi2FreeFMUstate", "FMUstate");
-    if (*FMUstate == NULL) return fmi2OK; /* FMI 2.0: a NULL state is ignored */
-    if (!check_state(inst, (const unsigned char *)*FMUstate, 0, STATE_HEADER, "fmi2FreeFMUstate",
-                     "FMUstate", NULL))
-        return fmi2Error; /* not ours: never handed to the allocator */
-    memset(*FMUstate, 0, sizeof(StateHeader)); /* a second free is refused (best effort) */
-    inst->release(*FMUstate);
-    *FMUstate = NULL;
-    return fmi2OK;
-}
-
-fmi2Status fmi2SerializedFMUstateSize(fmi2Component c, fmi2FMUstate FMUstate, size_t *size) {
-    CHECK("fmi2SerializedFMUstateSize", S_ANY_BUT_FATAL);
-    LOG_CALL(inst, "fmi2SerializedFMUstateSize(FMUstate = %p)", FMUstate);
-    if (size == NULL) return null_argument(inst, "fmi2SerializedFMUstateSize", "size");
-    if (!check_state(inst, (const unsigned char *)FMUstate, 0, STATE_HEADER,
-                     "fmi2SerializedFMUstateSize", "FMUstate", NULL))
-        return fmi2Error;
-    *size = snapshot_size(inst);
-    return fmi2OK;
-}
-
-fmi2Status fmi2SerializeFMUstate(fmi2Component c, fmi2FMUstate FMUstate, fmi2Byte serializedState[],
-                                 size_t size) {
-    CHECK("fmi2SerializeFMUstate", S_ANY_BUT_FATAL);
-    LOG_CALL(inst, "fmi2SerializeFMUstate(FMUstate = %p, serializedState = %p, size = %lu)",
-             FMUstate, (void *)serializedState, (unsigned long)size);
-    if (!check_state(inst, (const unsigned char *)FMUstate, 0, STATE_ALL,
-                     "fmi2SerializeFMUstate", "FMUstate", NULL))
-        return fmi2Error;
-    if (serializedState == NULL)
-        return null_argument(inst, "fmi2SerializeFMUstate", "serializedState");
-    if (size < snapshot_size(inst)) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2SerializeFMUstate: a buffer of %lu bytes is too small, the state has %lu",
-              (unsigned long)size, (unsigned long)snapshot_size(inst));
-        return fmi2Error;
-    }
-    memcpy(serializedState, FMUstate, snapshot_size(inst));
-    return fmi2OK;
-}
-
-fmi2Status fmi2DeSerializeFMUstate(fmi2Component c, const fmi2Byte serializedState[], size_t size,
-                                   fmi2FMUstate *FMUstate) {
-    unsigned char *buf;
-    CHECK("fmi2DeSerializeFMUstate", S_ANY_BUT_FATAL);
-    LOG_CALL(inst, "fmi2DeSerializeFMUstate(serializedState = %p, size = %lu, FMUstate = %p)",
-             (const void *)serializedState, (unsigned long)size, (void *)FMUstate);
-    if (FMUstate == NULL) return null_argument(inst, "fmi2DeSerializeFMUstate", "FMUstate");
-    if (serializedState == NULL)
-        return null_argument(inst, "fmi2DeSerializeFMUstate", "serializedState");
-    if (size == 0) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2DeSerializeFMUstate: the data is empty; a state of %s has %lu bytes",
-              inst->info->model_name, (unsigned long)snapshot_size(inst));
-        return fmi2Error;
-    }
-    if (!check_state(inst, (const unsigned char *)serializedState, size, STATE_ALL,
-                     "fmi2DeSerializeFMUstate", "the data", NULL))
-        return fmi2Error;
-    buf = (unsigned char *)*FMUstate;
-    if (buf != NULL) {
-        if (!check_state(inst, buf, 0, STATE_HEADER, "fmi2DeSerializeFMUstate",
-                         "the FMUstate to reuse", NULL))
-            return fmi2Error;
-    } else {
-        buf = (unsigned char *)inst->allocate(1, size);
-        if (buf == NULL) {
-            logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2DeSerializeFMUstate: out of memory");
-            return fmi2Error;
-        }
-    }
-    memcpy(buf, serializedState, size);
-    *FMUstate = buf;
+    glue_logf(inst, FP_OK, FP_LOG_EVENTS, "reset");
     return fmi2OK;
 }
 
@@ -846,8 +393,8 @@ fmi2Status fmi2GetDirectionalDerivative(fmi2Component c, const fmi2ValueReferenc
              (unsigned long)nUnknown, (unsigned long)nKnown);
     (void)vUnknown_ref, (void)nUnknown, (void)vKnown_ref, (void)nKnown, (void)dvKnown,
         (void)dvUnknown;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR,
-          "fmi2GetDirectionalDerivative: not provided (providesDirectionalDerivative=false)");
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+              "fmi2GetDirectionalDerivative: not provided (providesDirectionalDerivative=false)");
     return fmi2Error;
 }
 
@@ -856,8 +403,8 @@ fmi2Status fmi2SetRealInputDerivatives(fmi2Component c, const fmi2ValueReference
     CHECK("fmi2SetRealInputDerivatives", S_ANY_BUT_FATAL);
     LOG_CALL(inst, "fmi2SetRealInputDerivatives(nvr = %lu)", (unsigned long)nvr);
     (void)vr, (void)nvr, (void)order, (void)value;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR,
-          "fmi2SetRealInputDerivatives: inputs are held constant (canInterpolateInputs=false)");
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+              "fmi2SetRealInputDerivatives: inputs are held constant (canInterpolateInputs=false)");
     return fmi2Error;
 }
 
@@ -866,15 +413,16 @@ fmi2Status fmi2GetRealOutputDerivatives(fmi2Component c, const fmi2ValueReferenc
     CHECK("fmi2GetRealOutputDerivatives", S_ANY_BUT_FATAL);
     LOG_CALL(inst, "fmi2GetRealOutputDerivatives(nvr = %lu)", (unsigned long)nvr);
     (void)vr, (void)nvr, (void)order, (void)value;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR,
-          "fmi2GetRealOutputDerivatives: not provided (maxOutputDerivativeOrder=0)");
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+              "fmi2GetRealOutputDerivatives: not provided (maxOutputDerivativeOrder=0)");
     return fmi2Error;
 }
 
 fmi2Status fmi2CancelStep(fmi2Component c) {
     CHECK("fmi2CancelStep", S_ANY_BUT_FATAL);
     LOG_CALL(inst, "fmi2CancelStep()");
-    logf_(inst, FP_ERROR, FP_LOG_ERROR, "fmi2CancelStep: steps are synchronous, nothing to cancel");
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+              "fmi2CancelStep: steps are synchronous, nothing to cancel");
     return fmi2Error;
 }
 
@@ -889,11 +437,11 @@ static int within_work_cap(Instance *inst, double h) {
     if (!(hi > 0.0) || !isfinite(hi)) return 1; /* the model refuses it itself */
     n = fp_steps_to_cover(h, hi, FP_STEP_TOL * h);
     if (n <= FP_MAX_INTERNAL_STEPS) return 1;
-    logf_(inst, FP_ERROR, FP_LOG_ERROR,
-          "fmi2DoStep: communication step h = %.12g s would take %.0f internal steps of %s = "
-          "%.12g s; the cap is %.0f internal steps per fmi2DoStep (%.12g s); use shorter steps",
-          h, n, inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
-          FP_MAX_INTERNAL_STEPS * hi);
+    glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+              "fmi2DoStep: communication step h = %.12g s would take %.0f internal steps of %s = "
+              "%.12g s; the cap is %.0f internal steps per fmi2DoStep (%.12g s); use shorter steps",
+              h, n, inst->internal_step->name, hi, FP_MAX_INTERNAL_STEPS,
+              FP_MAX_INTERNAL_STEPS * hi);
     return 0;
 }
 
@@ -908,17 +456,17 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
              currentCommunicationPoint, communicationStepSize,
              (int)noSetFMUStatePriorToCurrentPoint);
     if (!(communicationStepSize > 0.0) || !isfinite(communicationStepSize)) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2DoStep: communicationStepSize %g must be positive and finite",
-              communicationStepSize);
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2DoStep: communicationStepSize %g must be positive and finite",
+                  communicationStepSize);
         return fail(inst, fmi2Error);
     }
     tol = 1e-9 * (1.0 + fabs(inst->time));
     if (!isfinite(currentCommunicationPoint) ||
         fabs(currentCommunicationPoint - inst->time) > tol) {
-        logf_(inst, FP_ERROR, FP_LOG_ERROR,
-              "fmi2DoStep: currentCommunicationPoint %.12g does not match the FMU time %.12g",
-              currentCommunicationPoint, inst->time);
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2DoStep: currentCommunicationPoint %.12g does not match the FMU time %.12g",
+                  currentCommunicationPoint, inst->time);
         return fail(inst, fmi2Error);
     }
     if (!within_work_cap(inst, communicationStepSize)) return fail(inst, fmi2Error);
@@ -937,10 +485,10 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
 /* fmi2Get*Status: only StepComplete, StepFailed and Terminated (S_STATUS). */
 static Instance *status_call(fmi2Component c, const char *fn, fmi2StatusKind s,
                              const void *value) {
-    Instance *inst = enter(c, fn, S_STATUS);
+    Instance *inst = glue_enter(c, fn, S_STATUS);
     if (inst != NULL) LOG_CALL(inst, "%s(s = %d, value = %p)", fn, (int)s, value);
     if (inst != NULL && value == NULL) {
-        null_argument(inst, fn, "value");
+        glue_null_argument(inst, fn, "value");
         return NULL;
     }
     return inst;
@@ -950,9 +498,9 @@ static fmi2Status unsupported_status(Instance *inst, const char *fn, fmi2StatusK
     static const char *const kinds[] = {"fmi2DoStepStatus", "fmi2PendingStatus",
                                         "fmi2LastSuccessfulTime", "fmi2Terminated"};
     const char *kind = ((int)s >= 0 && (int)s < 4) ? kinds[(int)s] : "unknown";
-    logf_(inst, FP_WARNING, FP_LOG_WARNING,
-          "%s: status kind %d (%s) is not provided: steps are synchronous (no fmi2Pending)", fn,
-          (int)s, kind);
+    glue_logf(inst, FP_WARNING, FP_LOG_WARNING,
+              "%s: status kind %d (%s) is not provided: steps are synchronous (no fmi2Pending)", fn,
+              (int)s, kind);
     return fmi2Discard;
 }
 

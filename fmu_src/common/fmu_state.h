@@ -5,7 +5,7 @@
  * byte order of the machine that saved it (the endianness marker tells).  The checksum is
  * 64-bit FNV-1a over the header with the checksum field zeroed, then the payload.
  *
- * No FMI type here: the FMI glue (fmi2_glue.c; an FMI 3.0 glue alike) writes and checks
+ * No FMI type here: the FMI glue (fmi2_fmustate.c; an FMI 3.0 glue alike) writes and checks
  * states through these functions and logs what they say.
  */
 #ifndef FP_FMU_STATE_H

@@ -1,6 +1,6 @@
 /*
  * MultirotorPlant: THE variable table.  modelDescription.xml (tools/mdgen.c),
- * the FMI get/set dispatch (common/fmi2_glue.c) and the model's own range
+ * the FMI get/set dispatch (common/fmi2_values.c) and the model's own range
  * checks are all generated from it; a row's name is also the PlantModel member
  * that holds the value.
  *

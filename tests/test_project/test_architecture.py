@@ -112,7 +112,8 @@ def test_the_circle_check_sees_a_circle():
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 SRC = ROOT / "fmu_src"
 MODEL_DIRS = ("plant", "controller", "common")
-GLUE = {SRC / "common" / "fmi2_glue.c"}
+GLUE = {SRC / "common" / name for name in ("fmi2_glue.c", "fmi2_values.c", "fmi2_fmustate.c",
+                                          "fmi2_glue_internal.h")}
 
 
 def _c_files(folder: str) -> list[Path]:
