@@ -50,7 +50,7 @@ typedef struct {
 } CtrlTwin;
 
 /* What one control sample advances, in one place: a sample that computed a non-finite
- * value is discarded by restoring a copy of this (controller.c, control_sample). */
+ * value is discarded by restoring a copy of this (controller_sample.c, ctrl_sample). */
 typedef struct {
     double filt[CTRL_N_FILTERS][2];        /* [value, derivative] per filtered signal */
     double psi_raw, psi_unwrapped;         /* heading unwrapping before filtering */

@@ -1,5 +1,5 @@
 /*
- * The stages of one FullPoseController sample, as controller.c sequences them:
+ * The stages of one FullPoseController sample, as controller_sample.c sequences them:
  *
  *   reference.c      reference shaping: jumps of the input flown within limits
  *   guidance.c       (first) the reference twin: the feed-forward attitude mu_ff
@@ -13,7 +13,7 @@
  *
  * Each stage is a function of explicit inputs, parameters and state: parameters and inputs
  * come in through const pointers (views of the ControllerModel members, built by
- * controller.c), what a stage carries from sample to sample through a small state struct
+ * controller_sample.c), what a stage carries from sample to sample through a small state struct
  * of pointers, and it writes its results only to its output struct or arrays.  Symbols are
  * the paper's: mu (Euler attitude), nu = [f_b; tau_b] (virtual control), B2 = B''(u_a).
  */
@@ -324,5 +324,20 @@ int ctrl_check_parameters(const ControllerModel *m, const FpVar *vars, size_t n_
 /* The tunable parameters only (after a change while stepping); vars, n_vars as above. */
 int ctrl_check_tunables(const ControllerModel *m, const FpVar *vars, size_t n_vars,
                         const FpLogger *logger);
+
+/* ------------------------------------------------------------------------ */
+/* controller_sample.c: the sequence of one sample (controller.c runs it)   */
+
+/* The filters' view of the model: the pose as predicted to now (pose_now), the references
+ * and the actuator feedback. */
+CtrlFilterInputs ctrl_filter_inputs(const ControllerModel *m);
+
+/* Rotors below half efficiency are lost: pick the feasible-force set that goes with
+ * the losses and say so once per change. */
+void ctrl_update_rotor_losses(ControllerModel *m, const FpLogger *logger);
+
+/* One sample from usable inputs (controller.c checks them first): FP_OK, or FP_WARNING when
+ * it computed a non-finite value and was discarded. */
+FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger);
 
 #endif
