@@ -1,402 +1,20 @@
 /*
- * Feasible-force sets from the airframe (derive_sets.h has the method).  Three parts: the
- * revised simplex of the support function with its dual bound, an incremental 3-D convex
- * hull (inner points, and the outer polytope's vertices through the dual hull), and the
- * sandwich refinement that picks the directions.
+ * Feasible-force sets from the airframe (derive_sets.h has the method): the rotors loaded
+ * into the inner model, the seed directions and the affine hull, and the sandwich
+ * refinement that picks the directions, in 3-D and within a plane.  The support function
+ * (revised simplex and its dual bound) is set_support.c, the incremental 3-D convex hull
+ * hull.c; both are called from here only.
  */
 #include "derive_sets.h"
 
 #include <math.h>
-#include <stdio.h>
 #include <string.h>
 
 #include "fp_math.h"
+#include "hull.h"
+#include "set_support.h"
 
-#define LP_MAX_ITER 4000   /* pivots per support solve */
-#define LP_REFACTOR 40     /* pivots between refactorisations of the basis inverse */
-#define LP_BLAND_AFTER 25  /* degenerate pivots in a row before Bland's rule */
-#define LP_PIVOT_TOL 1e-9
-#define SET_REL_TOL 1e-9   /* geometric tolerances, times the force scale */
 #define SET_FLOOR 0.05     /* floor of the relative excess measure, times the force scale */
-#define COLS_PER_ROTOR (2 * (CTRL_SET_DIRS + 1))
-#define ORIGIN_DIR CTRL_SET_DIRS
-
-static void set_why(char *why, int size, const char *text) {
-    if (why && size > 0) snprintf(why, (size_t)size, "%s", text);
-}
-
-/* ------------------------------------------------------------------------ */
-/* One rotor's forces                                                       */
-
-/* max over the servo box of g . t(alpha, beta, gamma), in closed form: with g' = Rz(gamma)^T g,
- * g . t = -g'1 sin(beta) + cos(beta) (g'2 sin(alpha) - g'3 cos(alpha)); cos(beta) >= 0 on the
- * box (|beta| <= pi/2), so the best alpha does not depend on beta, and each factor is a
- * cosine whose maximum over an interval is its peak or an end. */
-static double cosine_max(double a, double b, double lo, double hi) {
-    /* max of a sin(x) + b cos(x) over [lo, hi] within [-pi/2, pi/2] */
-    double peak = atan2(a, b);
-    double v_lo, v_hi;
-    if (peak >= lo && peak <= hi) return hypot(a, b);
-    v_lo = a * sin(lo) + b * cos(lo);
-    v_hi = a * sin(hi) + b * cos(hi);
-    return v_lo > v_hi ? v_lo : v_hi;
-}
-
-static double best_alignment(const double g[3], double gamma, const double box[4]) {
-    double cg = cos(gamma), sg = sin(gamma);
-    double g1 = cg * g[0] + sg * g[1], g2 = -sg * g[0] + cg * g[1], g3 = g[2];
-    double m = cosine_max(g2, -g3, box[0], box[1]);
-    return cosine_max(-g1, m, box[2], box[3]);
-}
-
-/* max over conv U_r of g . f */
-static double rotor_support(const CtrlSetWork *w, int r, const double g[3]) {
-    double s = best_alignment(g, w->gamma[r], w->box[r]);
-    return s >= 0.0 ? w->t_max * s : w->t_min * s;
-}
-
-/* g = c - M_r^T y */
-static void reduced_direction(const CtrlSetWork *w, int r, const double c[3], const double y[3],
-                              double g[3]) {
-    int j;
-    for (j = 0; j < 3; j++)
-        g[j] = c[j] - (w->M[r][0][j] * y[0] + w->M[r][1][j] * y[1] + w->M[r][2][j] * y[2]);
-}
-
-/* ------------------------------------------------------------------------ */
-/* The LP: maximise c . sum f over the inner model with zero torque          */
-
-/* Column ids: rotor r, thrust direction k (ORIGIN_DIR: the zero force), level 0 (T_max) or 1
- * (T_min); artificial of row i: -1 - i. */
-static int32_t col_id(int r, int k, int level) { return r * COLS_PER_ROTOR + 2 * k + level; }
-
-static void col_force(const CtrlSetWork *w, int32_t id, double f[3]) {
-    int r = id / COLS_PER_ROTOR, k = (id % COLS_PER_ROTOR) / 2, level = id % 2;
-    double t = level ? w->t_min : w->t_max;
-    if (k == ORIGIN_DIR) {
-        f[0] = f[1] = f[2] = 0.0;
-        return;
-    }
-    f[0] = t * w->dir[r][k][0], f[1] = t * w->dir[r][k][1], f[2] = t * w->dir[r][k][2];
-}
-
-static void col_vector(const CtrlSetWork *w, int32_t id, double a[CTRL_LP_MAX_ROWS]) {
-    double f[3];
-    int i, r;
-    for (i = 0; i < w->m; i++) a[i] = 0.0;
-    if (id < 0) {
-        a[-1 - id] = 1.0;
-        return;
-    }
-    r = id / COLS_PER_ROTOR;
-    col_force(w, id, f);
-    for (i = 0; i < 3; i++) a[i] = v3_dot(w->M[r][i], f);
-    a[3 + r] = 1.0;
-}
-
-static double rhs(int row) { return row < 3 ? 0.0 : 1.0; }
-
-/* binv = B^-1 from the basis columns, xb = B^-1 rhs (Gauss-Jordan, partial pivoting). */
-static int lp_refactor(CtrlSetWork *w) {
-    double t[CTRL_LP_MAX_ROWS][2 * CTRL_LP_MAX_ROWS], col[CTRL_LP_MAX_ROWS];
-    int m = w->m, i, j, k;
-    for (j = 0; j < m; j++) {
-        col_vector(w, w->basis[j], col);
-        for (i = 0; i < m; i++) t[i][j] = col[i];
-    }
-    for (i = 0; i < m; i++)
-        for (j = 0; j < m; j++) t[i][m + j] = i == j ? 1.0 : 0.0;
-    for (k = 0; k < m; k++) {
-        int p = k;
-        double piv;
-        for (i = k + 1; i < m; i++)
-            if (fabs(t[i][k]) > fabs(t[p][k])) p = i;
-        if (!(fabs(t[p][k]) > 1e-12)) return 0;
-        if (p != k)
-            for (j = 0; j < 2 * m; j++) {
-                double s = t[k][j];
-                t[k][j] = t[p][j], t[p][j] = s;
-            }
-        piv = t[k][k];
-        for (j = 0; j < 2 * m; j++) t[k][j] /= piv;
-        for (i = 0; i < m; i++)
-            if (i != k && t[i][k] != 0.0) {
-                double f = t[i][k];
-                for (j = 0; j < 2 * m; j++) t[i][j] -= f * t[k][j];
-            }
-    }
-    for (i = 0; i < m; i++) {
-        w->xb[i] = 0.0;
-        for (j = 0; j < m; j++) {
-            w->binv[i][j] = t[i][m + j];
-            w->xb[i] += t[i][m + j] * rhs(j);
-        }
-        if (w->xb[i] < 0.0 && w->xb[i] > -1e-9) w->xb[i] = 0.0;
-    }
-    w->pivots = 0;
-    return 1;
-}
-
-/* Cost of a basic column: phase 1 maximises minus the artificials' sum. */
-static double col_cost(const CtrlSetWork *w, int32_t id, const double *c) {
-    double f[3];
-    if (id < 0) return c ? 0.0 : -1.0;
-    if (!c) return 0.0;
-    col_force(w, id, f);
-    return v3_dot(c, f);
-}
-
-/* Simplex iterations from the current (feasible) basis; c NULL: phase 1.  On return pi
- * holds the duals [y; z].  0: optimal, 1: iteration limit or singular basis. */
-static int lp_iterate(CtrlSetWork *w, const double *c, double pi[CTRL_LP_MAX_ROWS]) {
-    const double tol = SET_REL_TOL * w->scale;
-    int iter, degenerate = 0, m = w->m;
-    for (iter = 0; iter < LP_MAX_ITER; iter++) {
-        double cb[CTRL_LP_MAX_ROWS], a[CTRL_LP_MAX_ROWS], dv[CTRL_LP_MAX_ROWS];
-        double best = tol, theta = INFINITY, zero[3] = {0.0, 0.0, 0.0};
-        int32_t enter = -1;
-        int i, j, r, leave = -1, bland = degenerate >= LP_BLAND_AFTER;
-        if (w->pivots >= LP_REFACTOR && !lp_refactor(w)) return 1;
-        for (i = 0; i < m; i++) cb[i] = col_cost(w, w->basis[i], c);
-        for (j = 0; j < m; j++) {
-            pi[j] = 0.0;
-            for (i = 0; i < m; i++) pi[j] += cb[i] * w->binv[i][j];
-        }
-        /* pricing: the reduced cost of column (r, k, level) is T (c - M_r^T y).t_k - z_r */
-        for (r = 0; r < w->n && !(bland && enter >= 0); r++) {
-            double g[3], z = pi[3 + r];
-            int k;
-            reduced_direction(w, r, c ? c : zero, pi, g);
-            for (k = 0; k < w->n_dirs[r]; k++) {
-                double s = v3_dot(g, w->dir[r][k]);
-                double d_max = w->t_max * s - z;
-                if (d_max > best) {
-                    best = bland ? tol : d_max, enter = col_id(r, k, 0);
-                    if (bland) break;
-                }
-                if (w->t_min > 0.0) {
-                    double d_min = w->t_min * s - z;
-                    if (d_min > best) {
-                        best = bland ? tol : d_min, enter = col_id(r, k, 1);
-                        if (bland) break;
-                    }
-                }
-            }
-            if (w->t_min == 0.0 && -z > best && !(bland && enter >= 0))
-                best = bland ? tol : -z, enter = col_id(r, ORIGIN_DIR, 0);
-        }
-        if (enter < 0) return 0;
-        col_vector(w, enter, a);
-        for (i = 0; i < m; i++) {
-            dv[i] = 0.0;
-            for (j = 0; j < m; j++) dv[i] += w->binv[i][j] * a[j];
-        }
-        /* ratio test; in phase 2 a basic artificial is fixed at zero */
-        for (i = 0; i < m; i++) {
-            double ratio;
-            if (c && w->basis[i] < 0) {
-                if (fabs(dv[i]) <= LP_PIVOT_TOL) continue;
-                ratio = 0.0;
-            } else {
-                if (dv[i] <= LP_PIVOT_TOL) continue;
-                ratio = w->xb[i] / dv[i];
-                if (ratio < 0.0) ratio = 0.0;
-            }
-            if (ratio < theta - 1e-15 ||
-                (ratio <= theta + 1e-15 && leave >= 0 &&
-                 (bland ? w->basis[i] < w->basis[leave] : fabs(dv[i]) > fabs(dv[leave])))) {
-                theta = ratio, leave = i;
-            }
-        }
-        if (leave < 0) return 1; /* unbounded: cannot happen for a bounded inner model */
-        degenerate = theta <= 0.0 ? degenerate + 1 : 0;
-        for (i = 0; i < m; i++) {
-            w->xb[i] -= theta * dv[i];
-            if (w->xb[i] < 0.0 && w->xb[i] > -1e-9) w->xb[i] = 0.0;
-        }
-        w->xb[leave] = theta;
-        {
-            double p = dv[leave];
-            for (j = 0; j < m; j++) w->binv[leave][j] /= p;
-            for (i = 0; i < m; i++)
-                if (i != leave && dv[i] != 0.0)
-                    for (j = 0; j < m; j++) w->binv[i][j] -= dv[i] * w->binv[leave][j];
-        }
-        w->basis[leave] = enter;
-        w->pivots++;
-        w->lp_pivots++;
-    }
-    return 1;
-}
-
-/* The LP of the rotors in w, started feasible: CTRL_SET_EMPTY when zero torque is out of
- * reach. */
-static CtrlSetStatus lp_start(CtrlSetWork *w, char *why, int why_size) {
-    double pi[CTRL_LP_MAX_ROWS];
-    int i, r;
-    w->m = 3 + w->n;
-    for (i = 0; i < 3; i++) w->basis[i] = -1 - i;
-    for (r = 0; r < w->n; r++)
-        w->basis[3 + r] = w->t_min == 0.0 ? col_id(r, ORIGIN_DIR, 0) : -1 - (3 + r);
-    if (!lp_refactor(w)) {
-        set_why(why, why_size, "singular starting basis");
-        return CTRL_SET_FAILED;
-    }
-    if (w->t_min > 0.0) {
-        double infeas = 0.0;
-        if (lp_iterate(w, NULL, pi) != 0) {
-            set_why(why, why_size, "the feasibility LP hit its iteration limit");
-            return CTRL_SET_FAILED;
-        }
-        for (i = 0; i < w->m; i++)
-            if (w->basis[i] < 0) infeas += w->xb[i];
-        if (infeas > 1e-7) return CTRL_SET_EMPTY;
-    }
-    return CTRL_SET_OK;
-}
-
-/* Support along unit c: the inner point p (an attainable force) and the outer offset h. */
-static CtrlSetStatus support(CtrlSetWork *w, const double c[3], double p[3], double *h,
-                             char *why, int why_size) {
-    double pi[CTRL_LP_MAX_ROWS], inner, outer = 0.0;
-    int i, r;
-    w->lp_solves++;
-    if (lp_iterate(w, c, pi) != 0) {
-        set_why(why, why_size, "a support LP hit its iteration limit");
-        return CTRL_SET_FAILED;
-    }
-    p[0] = p[1] = p[2] = 0.0;
-    for (i = 0; i < w->m; i++)
-        if (w->basis[i] >= 0) {
-            double f[3];
-            col_force(w, w->basis[i], f);
-            p[0] += w->xb[i] * f[0], p[1] += w->xb[i] * f[1], p[2] += w->xb[i] * f[2];
-        }
-    for (r = 0; r < w->n; r++) {
-        double g[3];
-        reduced_direction(w, r, c, pi, g);
-        outer += rotor_support(w, r, g);
-    }
-    inner = v3_dot(c, p);
-    *h = outer > inner ? outer : inner; /* weak duality: outer >= inner up to rounding */
-    return CTRL_SET_OK;
-}
-
-/* ------------------------------------------------------------------------ */
-/* Incremental 3-D convex hull                                              */
-
-static void face_plane(const double (*p)[3], CtrlHullFace *f) {
-    double e1[3], e2[3], n[3], len;
-    int j;
-    for (j = 0; j < 3; j++) {
-        e1[j] = p[f->v[1]][j] - p[f->v[0]][j];
-        e2[j] = p[f->v[2]][j] - p[f->v[0]][j];
-    }
-    v3_cross(e1, e2, n);
-    len = sqrt(v3_dot(n, n));
-    for (j = 0; j < 3; j++) f->n[j] = len > 0.0 ? n[j] / len : 0.0;
-    f->off = v3_dot(f->n, p[f->v[0]]);
-}
-
-static double dist_line(const double a[3], const double u[3], const double x[3]) {
-    double v[3], t;
-    int j;
-    for (j = 0; j < 3; j++) v[j] = x[j] - a[j];
-    t = v3_dot(v, u);
-    for (j = 0; j < 3; j++) v[j] -= t * u[j];
-    return sqrt(v3_dot(v, v));
-}
-
-/* 1 added, 0 inside (within eps), -1 face cap exceeded */
-static int hull_add(CtrlHull *h, const double (*p)[3], int k, double eps) {
-    int32_t visible[CTRL_SET_MAX_FACES];
-    int32_t horizon[3 * CTRL_SET_MAX_FACES][2];
-    int f, g, e, n_vis = 0, n_hz = 0, kept = 0;
-    for (f = 0; f < h->n_faces; f++) {
-        visible[f] = v3_dot(h->f[f].n, p[k]) - h->f[f].off > eps;
-        n_vis += visible[f];
-    }
-    if (n_vis == 0) return 0;
-    for (f = 0; f < h->n_faces; f++) {
-        if (!visible[f]) continue;
-        for (e = 0; e < 3; e++) {
-            int32_t a = h->f[f].v[e], b = h->f[f].v[(e + 1) % 3];
-            int other = -1;
-            for (g = 0; g < h->n_faces && other < 0; g++) {
-                int q;
-                if (g == f) continue;
-                for (q = 0; q < 3; q++)
-                    if (h->f[g].v[q] == b && h->f[g].v[(q + 1) % 3] == a) other = g;
-            }
-            if (other < 0 || !visible[other]) {
-                horizon[n_hz][0] = a, horizon[n_hz][1] = b;
-                n_hz++;
-            }
-        }
-    }
-    if (h->n_faces - n_vis + n_hz > CTRL_SET_MAX_FACES) return -1;
-    for (f = 0; f < h->n_faces; f++)
-        if (!visible[f]) h->f[kept++] = h->f[f];
-    for (e = 0; e < n_hz; e++) {
-        CtrlHullFace *nf = &h->f[kept++];
-        nf->v[0] = horizon[e][0], nf->v[1] = horizon[e][1], nf->v[2] = k;
-        face_plane(p, nf);
-    }
-    h->n_faces = kept;
-    return 1;
-}
-
-/* The hull of points 0..n-1: 1, or 0 when they span less than 3-D (within eps), -1 caps. */
-static int hull_build(CtrlHull *h, const double (*p)[3], int n, double eps) {
-    int i0 = 0, i1 = -1, i2 = -1, i3 = -1, i, j, f;
-    double best = eps, u[3], nrm[3], e2[3], d;
-    static const int faces[4][3] = {{0, 1, 2}, {0, 3, 1}, {0, 2, 3}, {1, 3, 2}};
-    int32_t pick[4];
-    h->n_faces = 0;
-    for (i = 0; i < n; i++) {
-        double v[3] = {p[i][0] - p[i0][0], p[i][1] - p[i0][1], p[i][2] - p[i0][2]};
-        d = sqrt(v3_dot(v, v));
-        if (d > best) best = d, i1 = i;
-    }
-    if (i1 < 0) return 0;
-    for (j = 0; j < 3; j++) u[j] = (p[i1][j] - p[i0][j]) / best;
-    best = eps;
-    for (i = 0; i < n; i++) {
-        d = dist_line(p[i0], u, p[i]);
-        if (d > best) best = d, i2 = i;
-    }
-    if (i2 < 0) return 0;
-    for (j = 0; j < 3; j++) e2[j] = p[i2][j] - p[i0][j];
-    v3_cross(u, e2, nrm);
-    d = sqrt(v3_dot(nrm, nrm));
-    for (j = 0; j < 3; j++) nrm[j] /= d;
-    best = eps;
-    for (i = 0; i < n; i++) {
-        double v[3] = {p[i][0] - p[i0][0], p[i][1] - p[i0][1], p[i][2] - p[i0][2]};
-        d = fabs(v3_dot(v, nrm));
-        if (d > best) best = d, i3 = i;
-    }
-    if (i3 < 0) return 0;
-    pick[0] = i0, pick[1] = i1, pick[2] = i2, pick[3] = i3;
-    for (j = 0; j < 3; j++)
-        h->interior[j] = 0.25 * (p[i0][j] + p[i1][j] + p[i2][j] + p[i3][j]);
-    for (f = 0; f < 4; f++) {
-        CtrlHullFace *hf = &h->f[f];
-        hf->v[0] = pick[faces[f][0]], hf->v[1] = pick[faces[f][1]], hf->v[2] = pick[faces[f][2]];
-        face_plane(p, hf);
-        if (v3_dot(hf->n, h->interior) - hf->off > 0.0) {
-            int32_t s = hf->v[1];
-            hf->v[1] = hf->v[2], hf->v[2] = s;
-            face_plane(p, hf);
-        }
-    }
-    h->n_faces = 4;
-    for (i = 0; i < n; i++) {
-        if (i == i0 || i == i1 || i == i2 || i == i3) continue;
-        if (hull_add(h, p, i, eps) < 0) return -1;
-    }
-    return 1;
-}
 
 /* ------------------------------------------------------------------------ */
 /* The set                                                                  */
@@ -448,7 +66,7 @@ static CtrlSetStatus add_direction(CtrlSetWork *w, const double c_in[3], int *ne
         return CTRL_SET_FAILED;
     }
     for (j = 0; j < 3; j++) c[j] = c_in[j] / len;
-    s = support(w, c, p, &h, why, why_size);
+    s = ctrl_set_support(w, c, p, &h, why, why_size);
     if (s != CTRL_SET_OK) return s;
     for (j = 0; j < 3; j++) w->c[w->n_c][j] = c[j];
     w->b[w->n_c] = h;
@@ -481,7 +99,7 @@ static int affine_frame(const CtrlSetWork *w, double u[3][3]) {
     for (j = 0; j < 3; j++) u[0][j] = (w->p[i1][j] - w->p[0][j]) / best;
     best = tol;
     for (i = 0; i < w->n_p; i++) {
-        d = dist_line(w->p[0], u[0], w->p[i]);
+        d = ctrl_dist_line(w->p[0], u[0], w->p[i]);
         if (d > best) best = d, i2 = i;
     }
     if (i2 < 0) {
@@ -529,7 +147,7 @@ static int outer_hull(CtrlSetWork *w, const double o[3], int n_c, int *count) {
         for (k = 0; k < 3; k++) w->q[j][k] = w->c[j][k] / s;
         qmax = fmax(qmax, sqrt(v3_dot(w->q[j], w->q[j])));
     }
-    r = hull_build(&w->outer, (const double(*)[3])w->q, n_c, SET_REL_TOL * qmax);
+    r = ctrl_hull_build(&w->outer, (const double(*)[3])w->q, n_c, SET_REL_TOL * qmax);
     if (r <= 0) return -1;
     memset(w->used, 0, sizeof w->used);
     for (f = 0; f < w->outer.n_faces; f++)
@@ -547,7 +165,7 @@ static CtrlSetStatus refine(CtrlSetWork *w, int cap, double A[][3], double b[], 
     int i, j, f, count = 0, n_out_i = 0;
     for (i = 0; i < w->n_p; i++)
         for (j = 0; j < 3; j++) o[j] += w->p[i][j] / w->n_p;
-    if (hull_build(&w->inner, (const double(*)[3])w->p, w->n_p, eps_in) <= 0 ||
+    if (ctrl_hull_build(&w->inner, (const double(*)[3])w->p, w->n_p, eps_in) <= 0 ||
         outer_hull(w, o, w->n_c, &count) != 0) {
         set_why(why, why_size, "degenerate hull of the seed directions");
         return CTRL_SET_FAILED;
@@ -577,13 +195,15 @@ static CtrlSetStatus refine(CtrlSetWork *w, int cap, double A[][3], double b[], 
         if (best_f < 0 || best_abs <= 1e-7 * w->scale) break; /* inner and outer agree */
         s = add_direction(w, w->inner.f[best_f].n, &newp, why, why_size);
         if (s != CTRL_SET_OK) return s;
-        if (newp >= 0 && hull_add(&w->inner, (const double(*)[3])w->p, newp, eps_in) < 0) break;
+        if (newp >= 0 &&
+            ctrl_hull_add(&w->inner, (const double(*)[3])w->p, newp, eps_in) < 0)
+            break;
         {
             int k = w->n_c - 1, added;
             double sl = w->b[k] - v3_dot(w->c[k], o);
             for (j = 0; j < 3; j++) w->q[k][j] = w->c[k][j] / sl;
             for (j = 0; j < w->n_c; j++) qmax = fmax(qmax, sqrt(v3_dot(w->q[j], w->q[j])));
-            added = hull_add(&w->outer, (const double(*)[3])w->q, k, SET_REL_TOL * qmax);
+            added = ctrl_hull_add(&w->outer, (const double(*)[3])w->q, k, SET_REL_TOL * qmax);
             if (added < 0) break;
             memset(w->used, 0, sizeof w->used);
             for (f = 0; f < w->outer.n_faces; f++)
@@ -791,7 +411,7 @@ CtrlSetStatus ctrl_derive_force_set(const FpRotorSet *rs, int32_t lost_mask, int
     load_rotors(w, rs, lost_mask);
     w->n_c = w->n_p = 0;
     if (w->n == 0) return CTRL_SET_EMPTY;
-    s = lp_start(w, why, why_size);
+    s = ctrl_set_lp_start(w, why, why_size);
     if (s != CTRL_SET_OK) return s;
     for (i = 0; i < 14; i++)
         if ((s = add_direction(w, seeds[i], &newp, why, why_size)) != CTRL_SET_OK) return s;
@@ -839,7 +459,7 @@ FpStatus ctrl_polytope_max(const double A[][3], const double b[], int n, const d
         for (k = 0; k < 3; k++) w->q[j][k] = A[j][k] / s;
         qmax = fmax(qmax, sqrt(v3_dot(w->q[j], w->q[j])));
     }
-    if (hull_build(&w->outer, (const double(*)[3])w->q, n, 1e-12 * qmax) <= 0) return FP_ERROR;
+    if (ctrl_hull_build(&w->outer, (const double(*)[3])w->q, n, 1e-12 * qmax) <= 0) return FP_ERROR;
     for (k = 0; k < n_c; k++) h[k] = -INFINITY;
     for (f = 0; f < w->outer.n_faces; f++) {
         const CtrlHullFace *G = &w->outer.f[f];
