@@ -1,7 +1,7 @@
-"""The FMU state format (fmu_src/common/fmi2_glue.c): a checked, versioned header, then the
-model struct.  A state survives serialization into another process bit for bit; a state of
-another FMU, of another format version, damaged or truncated is refused with a message
-naming what is wrong, before anything of it is used.
+"""The FMU state format (fmu_src/common/fmu_state.c, used by fmi2_fmustate.c): a checked,
+versioned header, then the model struct.  A state survives serialization into another
+process bit for bit; a state of another FMU, of another format version, damaged or
+truncated is refused with a message naming what is wrong, before anything of it is used.
 
 Header (80 bytes, the saving machine's byte order), then ``payload_size`` bytes of model:
 
