@@ -13,18 +13,19 @@ Files written into the output directory:
 The folder is whole or absent: everything is written into a hidden temporary folder beside
 it, which replaces the previous folder only once complete.  A run that fails or is
 interrupted leaves the previous results as they were; a folder that does not look like
-results (no ``metrics.json``, not empty) is never replaced.
+results (no ``metrics.json``, not empty) is never replaced.  A run killed outright (SIGKILL)
+may leave its temporary files, and, killed between the two moves that publish, the previous
+results moved aside: every run first puts that right (:func:`recover`).
 """
 
 from __future__ import annotations
 
 import contextlib
 import dataclasses
-import glob
 import json
 import os
+import re
 import shutil
-import tempfile
 import time
 import uuid
 import weakref
@@ -34,6 +35,7 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
 from orchestrator.master import SPILL_BYTES, run
+from orchestrator.output import figure_pool as owners  # (whose a temporary file is)
 from orchestrator.output.metrics import compare_with_paper, compute_metrics
 from orchestrator.output.run_result import CSV_FILE, RESULTS_FILE, RunResult
 from orchestrator.scenario.catalogue import load_scenario, scenario_names
@@ -109,16 +111,121 @@ def check_output_dir(out_dir: Path) -> None:
         raise OutputError(f"{out_dir}: cannot write into {probe} (permission denied)")
 
 
+_LEFTOVER = re.compile(r"\.(.+)\." + owners.TAG
+                       + r"\.[0-9a-f]+\.(partial|old|trash|recording\.npy)")
+"""What a run leaves beside its results folder ``NAME`` while it works, named
+``.NAME.PID-START.RANDOM.KIND`` (the owner tag: ``orchestrator.output.figure_pool.owner_tag``):
+``partial`` the results being written, ``old`` the previous results moved aside for the
+moment between the two moves that publish, ``trash`` the previous results being removed,
+``recording.npy`` a long run's recording (``master.SPILL_BYTES``)."""
+_LEGACY = re.compile(r"\.(.+)\.([0-9a-f]{12}\.partial|[a-z0-9_]{8}\.old)")
+"""The same of earlier versions, without an owner: ``.NAME.<12 hex>.partial`` and the
+``.NAME.<8 random>.old`` folder holding the previous results as ``NAME``."""
+LEGACY_PARTIAL_AGE = 3600.0
+"""s: an ownerless ``partial`` folder of an earlier version untouched for this long is a
+killed run's (no run writes its results for an hour without adding a file)."""
+
+
+def _temporary(out_dir: Path, kind: str) -> Path:
+    """A name for a temporary folder of ``kind`` beside ``out_dir``, tagged with this
+    process."""
+    return out_dir.absolute().parent / (f".{out_dir.name}.{owners.owner_tag()}."
+                                        f"{uuid.uuid4().hex[:12]}.{kind}")
+
+
+def recover(out_dir: Path) -> list[str]:
+    """Puts right what killed runs left beside ``out_dir``, in its parent folder: the
+    previous results of a run killed between the two moves that publish (``NAME`` missing,
+    ``.NAME.*.old`` there) go back into place; the temporary folders and recording files of
+    runs that no longer run are removed, whatever results folder they were for.  A live
+    run's files are never touched.  Returns what was done, one line each.  Safe at every
+    instant: each step is one rename or the removal of a folder no one needs."""
+    parent = Path(out_dir).absolute().parent
+    try:
+        entries = [p for p in parent.iterdir() if p.name.startswith(".")]
+    except OSError:
+        return []
+    done: list[str] = []
+    olds: dict[str, list[Path]] = {}
+    for path in entries:
+        m = _LEFTOVER.fullmatch(path.name)
+        if m is not None:
+            if owners.tag_alive(m, 2):
+                continue
+            if m.group(4) == "old":
+                olds.setdefault(m.group(1), []).append(path)
+            else:
+                _remove(path)
+                done.append(f"removed {path.name}, left by a run that no longer runs")
+            continue
+        m = _LEGACY.fullmatch(path.name)
+        if m is None:
+            continue
+        if m.group(2).endswith(".old"):
+            inner = path / m.group(1)
+            if inner.is_dir() and not (parent / m.group(1)).exists():
+                os.replace(inner, parent / m.group(1))
+                done.append(f"restored {m.group(1)} from {path.name}")
+            _remove(path)
+        else:
+            with contextlib.suppress(OSError):
+                if time.time() - path.stat().st_mtime > LEGACY_PARTIAL_AGE:
+                    _remove(path)
+                    done.append(f"removed {path.name}, left by a killed run")
+    for name, found in olds.items():
+        target = parent / name
+        if not target.exists() and not target.is_symlink():
+            newest = max(found, key=_changed)  # (several only from runs side by side)
+            os.replace(newest, target)
+            found.remove(newest)
+            done.append(f"restored {name} from {newest.name}: the run publishing it was "
+                        "killed between its two moves")
+        for path in found:
+            _discard(path)
+            done.append(f"removed {path.name}, left by a run that no longer runs")
+    return done
+
+
+def _remove(path: Path) -> None:
+    """Removes a file or a folder tree; what cannot be removed stays (errors ignored)."""
+    if path.is_dir() and not path.is_symlink():
+        shutil.rmtree(path, ignore_errors=True)
+    else:
+        with contextlib.suppress(OSError):
+            path.unlink()
+
+
+def _changed(path: Path) -> float:
+    with contextlib.suppress(OSError):
+        return path.stat().st_ctime
+    return 0.0
+
+
+def _discard(folder: Path) -> None:
+    """Removes a folder of results no one needs: renamed first (one atomic step), so a
+    removal cut short leaves a ``trash`` folder, never a half ``old`` one that could be
+    restored."""
+    trash = folder.with_name(f"{folder.name.rsplit('.', 1)[0]}.trash")
+    try:
+        os.replace(folder, trash)
+    except OSError:
+        trash = folder
+    _remove(trash)
+
+
 def publish(out_dir: Path, write: Callable[[Path], None]) -> None:
     """``write(tmp)`` fills a temporary folder beside ``out_dir``, which then replaces
     ``out_dir`` whole; on any failure (or Ctrl-C) the temporary folder is removed and
-    ``out_dir`` is left as it was."""
+    ``out_dir`` is left as it was.  Killed at any instant (SIGKILL, a power cut of the
+    process), it leaves ``out_dir`` either as it was or whole and new, or, between the two
+    moves, the previous results in a ``.NAME.*.old`` folder that the next run (its
+    :func:`recover`) moves back."""
     out_dir = Path(out_dir)
+    recover(out_dir)
     check_output_dir(out_dir)
-    parent = out_dir.absolute().parent
     try:
-        parent.mkdir(parents=True, exist_ok=True)
-        tmp = parent / f".{out_dir.name}.{uuid.uuid4().hex[:12]}.partial"
+        out_dir.absolute().parent.mkdir(parents=True, exist_ok=True)
+        tmp = _temporary(out_dir, "partial")
         tmp.mkdir()  # (not mkdtemp: the results get the user's usual permissions)
     except OSError as e:
         raise OutputError(f"{out_dir}: cannot create the results folder: "
@@ -127,18 +234,18 @@ def publish(out_dir: Path, write: Callable[[Path], None]) -> None:
     try:
         write(tmp)
         if out_dir.exists():
-            old = Path(tempfile.mkdtemp(prefix=f".{out_dir.name}.", suffix=".old", dir=parent))
-            os.replace(out_dir, old / out_dir.name)  # a folder cannot replace a folder on
-        os.replace(tmp, out_dir)                     # every OS: move the old one aside first
+            old = _temporary(out_dir, "old")
+            os.replace(out_dir, old)  # a folder cannot replace a folder on every OS:
+        os.replace(tmp, out_dir)      # move the old one aside first
     except BaseException:
-        if old is not None and not out_dir.exists() and (old / out_dir.name).exists():
-            os.replace(old / out_dir.name, out_dir)  # interrupted between the two moves
-        shutil.rmtree(tmp, ignore_errors=True)
-        if old is not None:
-            shutil.rmtree(old, ignore_errors=True)
+        if old is not None and not out_dir.exists() and old.exists():
+            os.replace(old, out_dir)  # interrupted between the two moves
+        _remove(tmp)
+        if old is not None and old.exists():
+            _discard(old)
         raise
     if old is not None:
-        shutil.rmtree(old, ignore_errors=True)
+        _discard(old)
 
 
 def paper_conditions(scenario: Scenario) -> str | None:
@@ -175,10 +282,15 @@ def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: boo
     :func:`orchestrator.output.figure_pool.available`)."""
     spill = None
     if out_dir is not None:
+        recover(out_dir)  # what killed runs left: the previous results back, the rest gone
         check_output_dir(out_dir)  # before the run, not after minutes of it
         here = _existing(Path(out_dir).absolute().parent)
         _remove_stale_spills(here, Path(out_dir).name)
-        spill = here / f".{Path(out_dir).name}.{uuid.uuid4().hex[:12]}.recording.npy"
+        spill = here / _temporary(Path(out_dir), "recording.npy").name
+        if plots:
+            from orchestrator.output.figure_pool import remove_stale_handoffs
+
+            remove_stale_handoffs()
     draw = plots and out_dir is not None
     pool = _start_pool(scenario) if draw and figure_workers is not False else None
     out = None
@@ -208,11 +320,19 @@ FORCE_SETS_FILE = "force_sets.json"
 
 
 def _remove_stale_spills(folder: Path, name: str) -> None:
-    """Removes what a killed run of the same results folder left (a long run's recording
-    file).  Safe even while another run maps one: POSIX keeps a removed file for the process
-    that maps it, and Windows refuses to remove a file in use (the error is ignored)."""
-    for stale in folder.glob(f".{glob.escape(name)}.*.recording.npy"):
-        _forget(stale)
+    """Removes the recording files killed runs left in ``folder`` (where the results
+    folder's parent does not exist yet, the nearest folder that does): those of runs that no
+    longer run, and the ownerless ones of earlier versions of the same results folder (safe
+    even while another run maps one: POSIX keeps a removed file for the process that maps
+    it, and Windows refuses to remove a file in use; the error is ignored)."""
+    with contextlib.suppress(OSError):
+        for stale in folder.glob(".*.recording.npy"):
+            m = _LEFTOVER.fullmatch(stale.name)
+            if m is not None and not owners.tag_alive(m, 2):
+                _forget(stale)
+            elif m is None and re.fullmatch(rf"\.{re.escape(name)}\.[0-9a-f]{{12}}"
+                                            r"\.recording\.npy", stale.name):
+                _forget(stale)
 
 
 def _remove_spill(path: Path, out: RunOutput | None) -> None:

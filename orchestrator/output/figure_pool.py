@@ -8,7 +8,9 @@ results.  The workers only return PNG bytes; the caller writes every file, so th
 folder stays whole or absent (``orchestrator.runner.publish``).
 
 The run's data reaches the workers as a temporary ``.npy`` file that they map read-only
-(no copy through a pipe).  Workers are forked, which is cheap and needs no re-import, where
+(no copy through a pipe), named with the run's owner tag (:func:`owner_tag`): the file of a
+run killed before it could remove it is removed when the next pool starts
+(:func:`remove_stale_handoffs`).  Workers are forked, which is cheap and needs no re-import, where
 the OS forks safely (Linux): the first worker imports matplotlib and forks the second from
 itself, so the import is paid once.  Elsewhere :func:`available` is False and the caller draws
 in its own process.  A worker that fails or dies costs only the parallelism: the caller draws
@@ -21,6 +23,7 @@ import contextlib
 import multiprocessing as mp
 import os
 import queue
+import re
 import signal
 import sys
 import tempfile
@@ -40,7 +43,11 @@ if TYPE_CHECKING:
 
 WORKERS = 2
 HANDOFF_PREFIX = "fullpose-run-"
-"""The hand-over files' name prefix, followed by the process id of the run."""
+"""The hand-over files' name prefix, followed by the owner tag of the run
+(:func:`owner_tag`: ``PID-START-``), then mkstemp's random part."""
+_HANDOFF = re.compile(re.escape(HANDOFF_PREFIX) + r"(\d+)-(?:(\d+)-)?[a-z0-9_]+\.npy")
+"""A hand-over file's name: the pid and start time of its run (files of earlier versions
+have only the pid)."""
 HANDOFF_BYTES = 512 * 2**20
 """Runs up to this size reach the workers as a copy in shared memory (~2 min of 500 Hz
 recording); larger ones through their written ``results.parquet``, so a long run never
@@ -54,6 +61,95 @@ worker has ~0.4 s of drawing (measured warm: forces 0.24 + actuators 0.18 agains
 0.26 + disturbance_timing 0.13 CPU s); the first worker, the zygote, also serves the
 main process's first messages."""
 POLL = 0.05  # s between checks that the workers are alive while waiting
+
+
+# ---------------------------------------------------------------------------
+# Whose a temporary file is (here, the hand-over files; ``orchestrator.runner``, the folders
+# beside a results folder)
+#
+# Every temporary file or folder a run makes carries its owner in its name: an *owner tag*
+# ``PID-START``, the process id and the process's start time (clock ticks since boot, field
+# 22 of ``/proc/PID/stat``; 0 where there is no ``/proc``).  A file whose owner no longer
+# runs is a leftover of a killed run and a later run removes it; a live run's files are
+# never touched.  The start time tells a dead owner from a new process that reuses its id.
+
+TAG = r"(\d+)-(\d+)"
+"""The owner tag in a name (a regular expression: groups pid, start)."""
+
+
+def process_start(pid: int) -> int | None:
+    """The start time of process ``pid`` (clock ticks since boot); 0 where the OS does not
+    say (no ``/proc``); None when no such process runs (a zombie counts as ended)."""
+    try:
+        fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+    except (OSError, IndexError):
+        if Path("/proc/self/stat").exists():
+            return None  # Linux, and no such process
+        return 0 if _pid_runs(pid) else None
+    if fields[0] in ("Z", "X"):
+        return None
+    return int(fields[19])
+
+
+def _pid_runs(pid: int) -> bool:
+    """Without /proc: POSIX's signal 0.  Elsewhere (Windows, where os.kill would end the
+    process) every process counts as running, so nothing of another run is removed."""
+    if os.name != "posix":
+        return True
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except OSError:  # (EPERM: it runs, as another user)
+        return True
+    return True
+
+
+def owner_tag() -> str:
+    """This process's tag, ``PID-START``, for the names of the temporary files it makes."""
+    pid = os.getpid()
+    return f"{pid}-{process_start(pid) or 0}"
+
+
+def owner_alive(pid: int, start: int) -> bool:
+    """Whether the process that made a file tagged ``pid-start`` still runs."""
+    now = process_start(pid)
+    return now is not None and (start == 0 or now == 0 or now == start)
+
+
+def tag_alive(match: re.Match[str], group: int = 1) -> bool:
+    """:func:`owner_alive` for a match of :data:`TAG` whose pid is group ``group``."""
+    return owner_alive(int(match.group(group)), int(match.group(group + 1)))
+
+
+def handoff_folder() -> Path | None:
+    """Where the hand-over files go: /dev/shm (memory, not disk) where the OS has it, else
+    the temporary folder (None)."""
+    shm = Path("/dev/shm")
+    return shm if shm.is_dir() else None
+
+
+def remove_stale_handoffs() -> list[Path]:
+    """Removes the hand-over files of runs that no longer run (killed before they could
+    remove them); returns them.  A file of an earlier version names only a pid: it is stale
+    when that pid runs no more, or is this process (which names its files otherwise)."""
+    folder = handoff_folder() or Path(tempfile.gettempdir())
+    removed = []
+    with contextlib.suppress(OSError):
+        for path in folder.glob(f"{HANDOFF_PREFIX}*.npy"):
+            m = _HANDOFF.fullmatch(path.name)
+            if m is None:
+                continue
+            pid = int(m.group(1))
+            if m.group(2) is not None:
+                stale = not owner_alive(pid, int(m.group(2)))
+            else:
+                stale = pid == os.getpid() or not owner_alive(pid, 0)
+            if stale:
+                with contextlib.suppress(OSError):
+                    path.unlink()
+                removed.append(path)
+    return removed
 
 
 def available() -> bool:
@@ -189,6 +285,7 @@ class FigurePool:
 
     def __init__(self, airframe: Airframe | None, workers: int = WORKERS,
                  force_set: bool = True) -> None:
+        remove_stale_handoffs()
         ctx = mp.get_context("fork")
         self._queues = [ctx.Queue() for _ in range(workers)]
         self._done = ctx.Queue()
@@ -228,10 +325,9 @@ class FigurePool:
             if result.data.nbytes > HANDOFF_BYTES:
                 raise ValueError(f"a {result.data.nbytes / 2**20:.0f} MiB run reaches the "
                                  "figure workers through its results file: pass written=")
-            shm = Path("/dev/shm")  # memory, not disk, where the OS has it
-            # the process in the name: whose hand-over a file is stays visible
-            fd, path = tempfile.mkstemp(prefix=f"{HANDOFF_PREFIX}{os.getpid()}-", suffix=".npy",
-                                        dir=shm if shm.is_dir() else None)
+            # the owner in the name: a killed run's file is told from a live one's
+            fd, path = tempfile.mkstemp(prefix=f"{HANDOFF_PREFIX}{owner_tag()}-",
+                                        suffix=".npy", dir=handoff_folder())
             os.close(fd)
             self._data = path  # from here close() removes it, whatever interrupts the copy
             try:

@@ -5,6 +5,9 @@ from __future__ import annotations
 
 import os
 import signal
+import subprocess
+import sys
+import tempfile
 from pathlib import Path
 
 import pytest
@@ -23,14 +26,53 @@ def short(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
     """The same 3 s run written with the workers and without them."""
     sc = prepare("hover_varying_orientation", duration=3.0)
     base = tmp_path_factory.mktemp("pool")
+    stale = Path("/dev/shm", f"{figure_pool.HANDOFF_PREFIX}{os.getpid()}-leftover.npy")
+    if stale.parent.is_dir():  # a killed run's file whose pid this process has reused
+        stale.write_bytes(b"")
     run_scenario(sc, base / "pool", timing=False, figure_workers=True)
     run_scenario(sc, base / "here", timing=False, figure_workers=False)
     return base / "pool", base / "here"
 
 
 def own_handoffs() -> list[Path]:
-    """This process's hand-over files left in /dev/shm (another run's are not ours)."""
-    return list(Path("/dev/shm").glob(f"{figure_pool.HANDOFF_PREFIX}{os.getpid()}-*.npy"))
+    """This process's hand-over files left in /dev/shm: named with its pid *and* start time,
+    so neither another run's files nor those of a killed run whose pid this process reused
+    count (the test depends on no state of the machine it did not make)."""
+    folder = figure_pool.handoff_folder() or Path(tempfile.gettempdir())
+    return list(folder.glob(f"{figure_pool.HANDOFF_PREFIX}{figure_pool.owner_tag()}-*.npy"))
+
+
+def ended_pid() -> int:
+    """The id of a process that has ended (and been reaped)."""
+    done = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                          capture_output=True, text=True, check=True)
+    return int(done.stdout)
+
+
+def test_killed_runs_hand_overs_are_removed_and_live_ones_kept(tmp_path: Path):
+    """What a run killed by SIGKILL leaves in /dev/shm (its hand-over file, which only its
+    own close() removes) is removed when the next figure pool starts; a file of this
+    process's pid from an earlier version's run (the pid reused) too; a live process's file
+    stays."""
+    folder = figure_pool.handoff_folder() or Path(tempfile.gettempdir())
+    dead = ended_pid()
+    start = figure_pool.process_start(os.getpid())
+    planted = {
+        "dead": folder / f"{figure_pool.HANDOFF_PREFIX}{dead}-{start}-zz{dead}.npy",
+        "dead_old_version": folder / f"{figure_pool.HANDOFF_PREFIX}{dead}-yy{dead}.npy",
+        "our_pid_old_version": folder / f"{figure_pool.HANDOFF_PREFIX}{os.getpid()}-xx.npy",
+        "our_pid_other_start": folder / f"{figure_pool.HANDOFF_PREFIX}{os.getpid()}-1-ww.npy",
+        "live": folder / f"{figure_pool.HANDOFF_PREFIX}{figure_pool.owner_tag()}-vv.npy",
+    }
+    try:
+        for path in planted.values():
+            path.write_bytes(b"\0" * 64)
+        pool = figure_pool.FigurePool(None, force_set=False)
+        pool.close()
+        assert {k for k, p in planted.items() if p.exists()} == {"live"}
+    finally:
+        for path in planted.values():
+            path.unlink(missing_ok=True)
 
 
 def test_workers_draw_the_figures_the_caller_draws(short: tuple[Path, Path]):
