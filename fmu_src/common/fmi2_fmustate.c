@@ -26,7 +26,8 @@ static int check_state(Instance *inst, const unsigned char *buf, size_t size, in
                        const char *fn, const char *what, StateHeader *out) {
     char why[320];
     if (fp_state_check(buf, size, level, inst->guid, inst->info->model_name,
-                       inst->info->model_size, out, why, sizeof why) == FP_OK)
+                       inst->info->model_size, inst->info->initialized_offset, out, why,
+                       sizeof why) == FP_OK)
         return 1;
     glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s %s", fn, what, why);
     return 0;

@@ -203,6 +203,12 @@ static void release_instance(Instance *inst) {
 }
 
 /* The fixed Real scalar parameter holding the model's internal step (fp_model.h). */
+/* The model's initialized marker (FpModelInfo.initialized_offset): kept here, carried by
+ * every FMU state, checked against a restored state's lifecycle (fmu_state.c). */
+static void set_initialized(Instance *inst, int32_t on) {
+    memcpy((char *)inst->model + inst->info->initialized_offset, &on, sizeof on);
+}
+
 static const FpVar *find_internal_step(const FpModelInfo *info) {
     static const char *const names[] = FP_INTERNAL_STEP_NAMES;
     size_t i, j;
@@ -289,6 +295,15 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         if (last > max_vr) max_vr = last;
     }
     inst->n_vr = max_vr + 1;
+    if (info->model_size < sizeof(int32_t) ||
+        info->initialized_offset > info->model_size - sizeof(int32_t)) {
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2Instantiate: the model's initialized marker (at %lu) lies beyond its "
+                  "%lu bytes; the FMU is inconsistent",
+                  (unsigned long)info->initialized_offset, (unsigned long)info->model_size);
+        release_instance(inst);
+        return NULL;
+    }
     inst->vr_map = (int32_t *)inst->allocate(inst->n_vr, sizeof(int32_t));
     inst->model = inst->allocate(1, info->model_size);
     inst->scratch = inst->allocate(1, info->model_size);
@@ -304,6 +319,7 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
     }
     inst->internal_step = find_internal_step(info);
     info->set_defaults(inst->model);
+    set_initialized(inst, 0);
     inst->dirty = 1;
     LOG_CALL(inst,
              "fmi2Instantiate(instanceName = \"%.64s\", fmuType = %d, fmuGUID = \"%s\", "
@@ -354,6 +370,7 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     inst->dirty = 1; /* always validate the final parameter set */
     s = glue_refresh(inst);
     if (s > fmi2Warning) return s;
+    set_initialized(inst, 1);
     inst->state = S_STEP_COMPLETE;
     inst->tunables_dirty = 0;
     glue_logf(inst, FP_OK, FP_LOG_EVENTS, "initialized at t = %g", inst->time);
@@ -372,6 +389,7 @@ fmi2Status fmi2Reset(fmi2Component c) {
     LOG_CALL(inst, "fmi2Reset()");
     memset(inst->model, 0, inst->info->model_size);
     inst->info->set_defaults(inst->model);
+    set_initialized(inst, 0);
     inst->state = S_INSTANTIATED;
     inst->time = 0.0;
     inst->dirty = 1;

@@ -62,8 +62,8 @@ static FpStatus refuse(char *why, size_t why_size, const char *fmt, ...) {
 }
 
 FpStatus fp_state_check(const unsigned char *buf, size_t size, int level, const char *guid,
-                        const char *model_name, size_t model_size, StateHeader *out, char *why,
-                        size_t why_size) {
+                        const char *model_name, size_t model_size, size_t initialized_offset,
+                        StateHeader *out, char *why, size_t why_size) {
     const char *model = model_name;
     const unsigned long expected = (unsigned long)fp_state_size(model_size);
     const int serialized = size > 0;
@@ -121,6 +121,7 @@ FpStatus fp_state_check(const unsigned char *buf, size_t size, int level, const 
     if (level == STATE_ALL) {
         uint64_t sum = state_checksum(&h, buf + sizeof h, h.payload_size);
         int initialized = (h.state & S_INITIALIZED) != 0;
+        int32_t marker;
         if (sum != h.checksum)
             return refuse(why, why_size,
                           "is damaged: checksum mismatch (stored %016llx, computed %016llx)",
@@ -135,6 +136,24 @@ FpStatus fp_state_check(const unsigned char *buf, size_t size, int level, const 
                           "is damaged: flags 0x%x do not fit its lifecycle state %s",
                           (unsigned)h.flags, fp_lifecycle_name(h.state));
         if (!isfinite(h.time)) return refuse(why, why_size, "is damaged: its time is not finite");
+        /* the lifecycle against the model it holds: relabelling a header (and resealing the
+         * checksum) cannot make a model never initialized pass for one that was, nor the
+         * reverse; Error follows either */
+        if (h.payload_size < sizeof marker || initialized_offset > h.payload_size - sizeof marker)
+            return refuse(why, why_size,
+                          "cannot be checked: the initialized marker at %lu lies beyond the "
+                          "%lu-byte model",
+                          (unsigned long)initialized_offset, (unsigned long)h.payload_size);
+        memcpy(&marker, buf + sizeof h + initialized_offset, sizeof marker);
+        if (marker != 0 && marker != 1)
+            return refuse(why, why_size,
+                          "is damaged: its model's initialized marker is %ld, neither 0 nor 1",
+                          (long)marker);
+        if ((h.state & S_ERROR) == 0 && marker != initialized)
+            return refuse(why, why_size,
+                          "is damaged: its model was saved %s the end of initialization, its "
+                          "lifecycle state %s is not",
+                          marker ? "after" : "before", fp_lifecycle_name(h.state));
     }
     if (out != NULL) *out = h;
     return FP_OK;

@@ -1,7 +1,10 @@
 /*
  * The FMU state format of every fullpose FMU, in memory and serialized alike: this header,
  * then the model struct (the payload, so a state's last model_size bytes are the model:
- * host/fp_controller_api.c reads it there).  Every field is naturally aligned and in the
+ * host/fp_controller_api.c reads it there).  The payload holds the model's `initialized`
+ * marker (an int32_t at FpModelInfo.initialized_offset, kept by the glue), which the
+ * header's lifecycle state must agree with: a model saved before the end of initialization
+ * never passes for one after it, nor the reverse.  Every field is naturally aligned and in the
  * byte order of the machine that saved it (the endianness marker tells).  The checksum is
  * 64-bit FNV-1a over the header with the checksum field zeroed, then the payload.
  *
@@ -37,7 +40,9 @@ const char *fp_lifecycle_name(int state);
 
 #define STATE_MAGIC "FPST"
 #define STATE_MAGIC_V1 "FPS1" /* format 1: unversioned, unchecked (before this one) */
-#define STATE_VERSION 2u
+/* 3: the payload carries the initialized marker (format 2 had padding there; the header is
+ * the same) */
+#define STATE_VERSION 3u
 #define STATE_ENDIAN 0x0102u
 #define STATE_FLAG_DIRTY 1u          /* parameters changed since the last initialize */
 #define STATE_FLAG_TUNABLES_DIRTY 2u /* tunable parameters changed while stepping */
@@ -45,7 +50,7 @@ const char *fp_lifecycle_name(int state);
 
 typedef struct {
     char magic[4];         /*  0: "FPST" */
-    uint16_t version;      /*  4: format version, 2 */
+    uint16_t version;      /*  4: format version, 3 */
     uint16_t endian;       /*  6: 0x0102 as the saving machine stores it */
     uint32_t header_size;  /*  8: sizeof(StateHeader), 80 */
     uint32_t payload_size; /* 12: sizeof the model struct */
@@ -67,19 +72,21 @@ void fp_state_write(unsigned char *buf, const char *guid, int32_t state, uint32_
 enum {
     STATE_HEADER = 0, /* magic, version, byte order, sizes, FMU identity: before reusing,
                          sizing or freeing a state (the payload is not read) */
-    STATE_ALL = 1     /* and the checksum and the lifecycle fields: before reading it */
+    STATE_ALL = 1     /* and the checksum and the lifecycle fields, the lifecycle against the
+                         payload's initialized marker: before reading it */
 };
 
 /*
  * Checks a state buffer before anything reads or writes beyond what is checked: the magic
  * first (4 bytes), then the header, then (STATE_ALL) header and payload.  `size` is the
  * buffer's size when the caller knows it (serialized data), 0 for a state this FMU
- * allocated (whose size the header must confirm).  `guid`, `model_name` and `model_size`
- * are the FMU's.  FP_OK with *out filled (when not NULL), or FP_ERROR with the reason in
- * why (a phrase to follow the name of what was checked: "is truncated: ...").
+ * allocated (whose size the header must confirm).  `guid`, `model_name`, `model_size` and
+ * `initialized_offset` (where the model's int32_t initialized marker is) are the FMU's.
+ * FP_OK with *out filled (when not NULL), or FP_ERROR with the reason in why (a phrase to
+ * follow the name of what was checked: "is truncated: ...").
  */
 FpStatus fp_state_check(const unsigned char *buf, size_t size, int level, const char *guid,
-                        const char *model_name, size_t model_size, StateHeader *out, char *why,
-                        size_t why_size);
+                        const char *model_name, size_t model_size, size_t initialized_offset,
+                        StateHeader *out, char *why, size_t why_size);
 
 #endif

@@ -202,6 +202,14 @@ typedef struct {
      * finite.  FP_ERROR, with the reason logged, refuses the state.
      */
     FpStatus (*check_restored)(const void *model, int initialized, const FpLogger *logger);
+    /*
+     * Where in the model struct its int32_t `initialized` marker is (offsetof): kept by the
+     * glue, 0 from instantiation and reset on, 1 once initialization has ended
+     * (fmi2ExitInitializationMode).  It travels in every FMU state's payload, so a state's
+     * lifecycle is checked against the model it holds (fmu_state.h); the model itself
+     * never writes it.
+     */
+    size_t initialized_offset;
 } FpModelInfo;
 
 /*

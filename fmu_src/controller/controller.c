@@ -590,6 +590,7 @@ static const FpModelInfo controller_info = {
     controller_step,
     controller_tunables_changed,
     controller_check_restored,
+    offsetof(ControllerModel, initialized),
 };
 
 const FpModelInfo *controller_model_info(void) { return &controller_info; }

@@ -136,6 +136,7 @@ typedef struct {
     double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */
     FpWls guid, alloc, twin_qp;
     int32_t guid_c_rows; /* which force set's rows guid's C holds (build_qp; 0: none yet) */
+    int32_t initialized; /* the glue's marker (FpModelInfo.initialized_offset); in padding */
 } ControllerModel;
 
 const FpModelInfo *controller_model_info(void);

@@ -593,6 +593,7 @@ static const FpModelInfo plant_info = {
     plant_step,
     NULL,
     plant_check_restored,
+    offsetof(PlantModel, initialized),
 };
 
 const FpModelInfo *plant_model_info(void) { return &plant_info; }

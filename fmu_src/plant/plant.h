@@ -31,6 +31,7 @@ typedef struct {
     double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
     double f_b[3], tau_b[3];
     int32_t sat_flags;
+    int32_t initialized; /* the glue's marker (FpModelInfo.initialized_offset); in padding */
     double t_step;
     double pos_true[3], vel_true[3], euler_true[3], quat_true[4], rate_true[3];
     double pose_age;

@@ -2,12 +2,15 @@
 versioned header, then the model struct.  A state survives serialization into another
 process bit for bit; a state of another FMU, of another format version, damaged or
 truncated is refused with a message naming what is wrong, before anything of it is used.
+The header's lifecycle state must agree with the model it holds: the payload carries the
+model's ``initialized`` marker (an int32 the glue keeps, 0 until fmi2ExitInitializationMode,
+1 from then on), so a header relabelled across the end of initialization never passes.
 
 Header (80 bytes, the saving machine's byte order), then ``payload_size`` bytes of model:
 
     offset size field
     0      4    magic b"FPST"
-    4      2    format version (2)
+    4      2    format version (3; 2 had padding where the marker is)
     6      2    byte-order marker 0x0102
     8      4    header size (80)
     12     4    payload size (sizeof the model struct)
@@ -21,6 +24,7 @@ Header (80 bytes, the saving machine's byte order), then ``payload_size`` bytes 
 
 from __future__ import annotations
 
+import ctypes
 import json
 import os
 import struct
@@ -40,7 +44,7 @@ ROOT = Path(__file__).resolve().parents[2]
 H = 0.002
 HEADER = struct.Struct("<4sHHII40siIdQ")
 HEADER_SIZE = 80
-STEP_COMPLETE, INSTANTIATED = 4, 1
+INSTANTIATED, INITIALIZATION_MODE, STEP_COMPLETE, TERMINATED, ERROR_STATE = 1, 2, 4, 16, 32
 FMI2_ERROR = 3
 NOISY = {"noise_pos": 0.01, "noise_vel": 0.02, "noise_acc": 0.1, "noise_att": 0.01,
          "noise_rate": 0.05, "noise_ang_acc": 0.5, "noise_seed": 42,
@@ -99,7 +103,7 @@ def test_the_header_is_the_documented_format(make, which):
         inst.step(H)
     blob = serialize(inst)
     h = header(blob)
-    assert h["magic"] == b"FPST" and h["version"] == 2 and h["endian"] == 0x0102
+    assert h["magic"] == b"FPST" and h["version"] == 3 and h["endian"] == 0x0102
     assert h["header_size"] == HEADER_SIZE == HEADER.size
     assert h["payload_size"] == len(blob) - HEADER_SIZE
     assert h["guid"] == inst.md.guid
@@ -188,8 +192,8 @@ def test_a_state_of_another_fmu_is_refused(make):
 def test_a_state_of_another_format_version_is_refused(make):
     inst = make("plant")
     blob = bytearray(serialize(inst))
-    blob[4:6] = (3).to_bytes(2, "little")
-    refused(inst, reseal(blob), "state format version 3; this FMU reads version 2 only")
+    blob[4:6] = (2).to_bytes(2, "little")  # format 2: the same header, no initialized marker
+    refused(inst, reseal(blob), "state format version 2; this FMU reads version 3 only")
     old = b"FPS1" + bytes(serialize(inst)[4:])  # the unchecked layout before format 2
     refused(inst, old, "state format 1")
 
@@ -223,7 +227,8 @@ def test_a_truncated_or_padded_state_is_refused(make):
 
 def test_a_relabelled_lifecycle_state_is_refused(make):
     """A state saved before initialization, relabelled as StepComplete: the checksum catches
-    the edit; resealed, the model's own checks catch the uninitialized model."""
+    the edit; resealed, the flags; cleared, the payload's initialized marker (every FMU:
+    test_a_state_relabelled_across_the_end_of_initialization_is_refused)."""
     fresh = make("plant", initialize=False)
     blob = bytearray(serialize(fresh))
     assert header(bytes(blob))["state"] == INSTANTIATED
@@ -231,9 +236,136 @@ def test_a_relabelled_lifecycle_state_is_refused(make):
     refused(fresh, bytes(blob), "checksum mismatch")
     refused(fresh, reseal(blob), "flags 0x1 do not fit its lifecycle state StepComplete")
     blob[60:64] = bytes(4)  # and the parameters-changed flag cleared as well
-    refused(fresh, reseal(blob), "the state is refused")  # by the model: "rotor count"
+    refused(fresh, reseal(blob), "its model was saved before the end of initialization")
     blob[56:60] = (STEP_COMPLETE | 8).to_bytes(4, "little")  # two states at once
     refused(fresh, reseal(blob), "is not one FMI state")
+
+
+def state_in(make, which: str, lifecycle: int) -> tuple[FmuInstance, bytes]:
+    """An instance of ``which`` and its serialized state in ``lifecycle`` with flags 0:
+    Instantiated (the parameters-changed flag cleared by a reseal: an importer's edit),
+    InitializationMode after a read has brought the model up to date, or StepComplete after
+    one step."""
+    if lifecycle == STEP_COMPLETE:
+        inst = make(which)
+        inst.step(H)
+        return inst, serialize(inst)
+    inst = make(which, initialize=False)
+    if lifecycle == INITIALIZATION_MODE:
+        inst.slave.setupExperiment(startTime=0.0)
+        inst.slave.enterInitializationMode()
+        inst.read(inst.signal("omega" if which == "plant" else "omega_cmd"))  # initialize()
+    blob = bytearray(serialize(inst))
+    assert header(bytes(blob))["state"] == lifecycle
+    blob[60:64] = bytes(4)
+    return inst, reseal(blob)
+
+
+LIFECYCLE = {INSTANTIATED: "Instantiated", INITIALIZATION_MODE: "InitializationMode",
+             STEP_COMPLETE: "StepComplete", TERMINATED: "Terminated"}
+
+
+@pytest.mark.parametrize("saved_in, relabelled", [
+    (INSTANTIATED, STEP_COMPLETE),         # issue 32, item 5: the controller stepped it
+    (INSTANTIATED, TERMINATED),
+    (INITIALIZATION_MODE, STEP_COMPLETE),  # initialize() ran, the initialization never ended
+    (STEP_COMPLETE, INSTANTIATED),
+    (STEP_COMPLETE, INITIALIZATION_MODE),
+], ids=lambda v: LIFECYCLE[v])
+@pytest.mark.parametrize("which", ["plant", "controller"])
+def test_a_state_relabelled_across_the_end_of_initialization_is_refused(make, which, saved_in,
+                                                                       relabelled):
+    """The header's lifecycle must agree with the payload: a model saved before the end of
+    initialization (Instantiated, InitializationMode) cannot pass as one after it
+    (StepComplete, StepFailed, Terminated), nor the reverse, with the checksum resealed and
+    the flags cleared.  Refused by fmi2DeSerializeFMUstate, by every FMU, naming what is
+    wrong; the instance that refused it is as it was, and no step runs on it."""
+    inst, blob = state_in(make, which, saved_in)
+    forged = bytearray(blob)
+    forged[56:60] = relabelled.to_bytes(4, "little")
+    forged = reseal(forged)
+    when = "before" if saved_in in (INSTANTIATED, INITIALIZATION_MODE) else "after"
+    said = (f"its model was saved {when} the end of initialization, its lifecycle state "
+            f"{LIFECYCLE[relabelled]} is not")
+    for target in (inst, make(which)):  # the saving instance, and one that has stepped
+        before = serialize(target)
+        refused(target, forged, said)
+        assert any(m.startswith("fmi2DeSerializeFMUstate") for m in logged(target, "ERROR"))
+        assert serialize(target) == before  # nothing of it reached the live model
+    # the saving instance is still in its own lifecycle state: a step is refused there, or
+    # (StepComplete) runs on its own model
+    if saved_in == STEP_COMPLETE:
+        inst.step(H)
+    else:
+        inst.messages.clear()
+        with pytest.raises(FMICallException):
+            inst.slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=H)
+        assert "fmi2DoStep may not be called in state" in " | ".join(logged(inst, "ERROR"))
+    # the state as saved is restored, and fmi2SetFMUstate refuses the forged one as well
+    restored = inst.slave.deSerializeFMUstate(blob)
+    try:
+        inst.slave.setFMUstate(restored)
+        memory = bytearray(ctypes.string_at(restored, len(blob)))
+        assert bytes(memory) == blob
+        ctypes.memmove(restored, bytes(forged), len(forged))  # relabelled in memory
+        for call in (lambda: inst.slave.setFMUstate(restored),
+                     lambda: inst.slave.serializeFMUstate(restored)):
+            inst.messages.clear()
+            with pytest.raises(FMICallException):
+                call()
+            assert said in " | ".join(logged(inst, "ERROR"))
+    finally:
+        ctypes.memmove(restored, blob, len(blob))
+        inst.slave.freeFMUstate(restored)
+
+
+def test_a_relabelled_state_never_steps_the_controller_to_garbage(make):
+    """Issue 32, item 5, as reported: the controller's state saved in Instantiated, relabelled
+    StepComplete with flags 0 and the checksum resealed, was accepted by
+    fmi2DeSerializeFMUstate and fmi2SetFMUstate and stepped to omega_cmd = 0 (and a division
+    by zero in the fault detector, detect.c).  Now refused, and a fresh instance cannot step."""
+    fresh, blob = state_in(make, "controller", INSTANTIATED)
+    forged = bytearray(blob)
+    forged[56:60] = STEP_COMPLETE.to_bytes(4, "little")
+    forged = reseal(forged)
+    accepted = False
+    try:
+        state = fresh.slave.deSerializeFMUstate(forged)
+        fresh.slave.setFMUstate(state)
+        accepted = True
+    except FMICallException as e:
+        assert e.status == FMI2_ERROR
+        assert "lifecycle state StepComplete" in " | ".join(logged(fresh, "ERROR"))
+    if accepted:  # what happened before the fix: it steps, on a model never initialized
+        fresh.slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=H)
+        omega = fresh.read(fresh.signal("omega_cmd"))
+        pytest.fail(f"the relabelled state was accepted and stepped: omega_cmd = {omega}")
+    with pytest.raises(FMICallException):
+        fresh.slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=H)
+
+
+@pytest.mark.parametrize("which", ["plant", "controller"])
+def test_an_error_state_takes_a_model_from_either_side_of_initialization(make, which):
+    """Error follows a failed initialization or a failed step, so its payload may be either;
+    nothing steps in Error, and a reset leaves it."""
+    stepped = make(which)
+    stepped.step(H)
+    with pytest.raises(FMICallException):
+        stepped.slave.doStep(stepped.time, -H)  # a refused step: Error, the model initialized
+    after = serialize(stepped)
+    assert header(after)["state"] == ERROR_STATE
+    _, before = state_in(make, which, INSTANTIATED)
+    relabelled = bytearray(before)
+    relabelled[56:60] = ERROR_STATE.to_bytes(4, "little")
+    for blob in (after, reseal(relabelled)):
+        inst = make(which)
+        state = inst.slave.deSerializeFMUstate(blob)
+        inst.slave.setFMUstate(state)
+        inst.slave.freeFMUstate(state)
+        assert serialize(inst) == blob
+        with pytest.raises(FMICallException):
+            inst.slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=H)
+        inst.slave.reset()
 
 
 def test_a_resealed_corrupt_model_is_refused_by_the_model_on_an_aligned_copy(make):
