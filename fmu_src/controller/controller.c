@@ -141,7 +141,7 @@ static CtrlDetectParams detect_params(const ControllerModel *m) {
     memcpy(p.inertia, m->af.inertia, sizeof p.inertia);
     for (i = 0; i < m->af.n_rotors; i++)
         arm += sqrt(v3_dot(m->af.rotor_pos[i], m->af.rotor_pos[i])) / m->af.n_rotors;
-    p.arm = arm > 0.0 ? arm : 1.0;
+    p.arm = arm * arm > 0.0 ? arm : 1.0; /* detect.c divides by arm^2: never 0 (underflow) */
     p.loss_min = m->fault_loss_min, p.fit_max = m->fault_fit_max;
     /* a rotor below a twentieth of its share of the weight has no signature to speak of */
     p.wrench_min = 0.05 * m->af.mass * fabs(m->af.g) / m->af.n_rotors;
@@ -538,6 +538,18 @@ static int structure_valid(const ControllerModel *m) {
     return 1;
 }
 
+/* The detector's constants of a restored model are those detect_params gives for its
+ * parameters (all fixed after initialization), bit for bit. */
+static int detect_params_agree(const ControllerModel *m) {
+    CtrlDetectParams p = detect_params(m);
+    const CtrlDetectParams *q = &m->detect_p;
+    int i;
+    for (i = 0; i < 9; i++)
+        if (!(q->inertia[i / 3][i % 3] == p.inertia[i / 3][i % 3])) return 0;
+    return q->mass == p.mass && q->g == p.g && q->arm == p.arm && q->loss_min == p.loss_min &&
+           q->fit_max == p.fit_max && q->wrench_min == p.wrench_min && q->persist == p.persist;
+}
+
 static FpStatus controller_check_restored(const void *model, int initialized,
                                           const FpLogger *logger) {
     const ControllerModel *m = (const ControllerModel *)model;
@@ -550,6 +562,22 @@ static FpStatus controller_check_restored(const void *model, int initialized,
     if (!initialized) return FP_OK; /* parameters are checked when initialization ends */
     if (ctrl_check_parameters(m, controller_vars, N_CTRL_VARS, logger) != 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
+        return FP_ERROR;
+    }
+    /* what initialization derives from the (fixed) parameters, as it derives it: the rotor
+     * set, and the detector's constants (detect.c divides by arm^2 and indexes by a count
+     * that reaches persist >= 1) */
+    if (m->rotors.n != m->af.n_rotors) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: rotor set of %ld rotors, the airframe has %ld",
+               (long)m->rotors.n, (long)m->af.n_rotors);
+        return FP_ERROR;
+    }
+    if (!detect_params_agree(m)) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: the fault detector's constants (mean arm %g m, %ld samples to "
+               "persist) are not those its parameters give",
+               m->detect_p.arm, (long)m->detect_p.persist);
         return FP_ERROR;
     }
     if (!fp_all_finite(&m->roll.filt[0][0], sizeof m->roll.filt / sizeof(double)) ||

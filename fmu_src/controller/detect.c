@@ -44,6 +44,8 @@ void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const CtrlFilt
         res[i] = r[i] * fw[0] + r[3 + i] * fw[1] + r[6 + i] * fw[2] - s->f_b_m[i];
         res[3 + i] = iw[i] + wiw[i] - s->tau_b_m[i];
         scale[i] = 1.0;
+        /* arm^2 > 0: detect_params makes it so, and a restored state whose constants are
+         * not detect_params' is refused (controller_check_restored) */
         scale[3 + i] = 1.0 / (p->arm * p->arm);
     }
     for (j = 0; j < 6; j++) rr += scale[j] * res[j] * res[j];
@@ -58,7 +60,9 @@ void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const CtrlFilt
         /* a rotor near standstill has no signature to fit: its loss would be noise */
         if (!(ww > p->wrench_min * p->wrench_min)) continue;
         d = -rw / ww;
-        if (!(d > 0.0)) continue;
+        /* rr = 0 leaves rw = 0 unless the squares underflowed: then nothing to fit (0 / 0
+         * made u NaN, never the best, before this test) */
+        if (!(d > 0.0) || !(rr > 0.0)) continue;
         u = sqrt(fmax(rr - rw * rw / ww, 0.0) / rr);
         if (u < best_u) best_u = u, best_d = d, best = i;
     }
@@ -72,7 +76,7 @@ void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const CtrlFilt
     } else {
         x->candidate = -1, x->count = 0;
     }
-    if (x->count >= p->persist) {
+    if (best >= 0 && x->count >= p->persist) { /* (count >= persist >= 1 has best >= 0) */
         x->est[best] = fmin(x->est[best], fmax(s->eff[best] - best_d, 0.0));
         x->found_mask |= (int32_t)1 << best;
         x->candidate = -1, x->count = 0;

@@ -368,6 +368,60 @@ def test_an_error_state_takes_a_model_from_either_side_of_initialization(make, w
         inst.slave.reset()
 
 
+def marker_at(make, which: str) -> int:
+    """Where the initialized marker is in a state: the one word that ending initialization
+    changes (InitializationMode, brought up to date, against StepComplete)."""
+    inst, during = state_in(make, which, INITIALIZATION_MODE)
+    inst.slave.exitInitializationMode()
+    after = serialize(inst)
+    changed = [i for i in range(HEADER_SIZE, len(after)) if during[i] != after[i]]
+    assert len(changed) == 1, changed  # 0 -> 1: one byte of a little-endian int32
+    return changed[0]
+
+
+@pytest.mark.parametrize("which", ["plant", "controller"])
+def test_the_initialized_marker_edited_too_is_refused_by_the_model(make, which):
+    """A model never initialized with its marker set as well (payload and header forged
+    together): the model's own check_restored refuses it, before anything steps."""
+    at = marker_at(make, which)
+    inst, blob = state_in(make, which, INSTANTIATED)
+    forged = bytearray(blob)
+    assert forged[at:at + 4] == bytes(4)
+    forged[at:at + 4] = (1).to_bytes(4, "little")
+    forged[56:60] = STEP_COMPLETE.to_bytes(4, "little")
+    refused(inst, reseal(forged), "the state is refused")
+    said = " | ".join(logged(inst, "ERROR"))
+    assert ("rotor count 6 (rotor set 0)" if which == "plant" else
+            "rotor set of 0 rotors, the airframe has 6") in said
+    with pytest.raises(FMICallException):
+        inst.slave.doStep(currentCommunicationPoint=0.0, communicationStepSize=H)
+
+
+@pytest.mark.parametrize("edit", ["arm", "persist"])
+def test_the_fault_detector_constants_of_a_restored_controller_are_checked(make, edit):
+    """The detector (detect.c) divides by the rotors' mean arm squared and counts to
+    `persist` before it indexes the rotor found: a state the controller accepts has the
+    constants its parameters give.  Zeroed (as in a model never initialized) they are
+    refused; before, arm 0 divided by zero and persist 0 wrote est[-1]."""
+    inst = make("controller")
+    inst.step(H)
+    good = serialize(inst)
+    pos = inst.read(inst.signal("rotor_pos")).reshape(-1, 3)[:int(inst.get("n_rotors"))]
+    arm = float(np.mean(np.linalg.norm(pos, axis=1)))
+    tail = struct.pack("<dd", 0.3, 0.35)  # fault_loss_min, fault_fit_max (the defaults)
+    found = [i - 8 for i in range(HEADER_SIZE + 8, len(good) - 16)
+             if good[i:i + 16] == tail
+             and struct.unpack_from("<d", good, i - 8)[0] == pytest.approx(arm, rel=1e-12)]
+    assert len(found) == 1, found  # detect_p: mass, inertia, g, arm, loss_min, fit_max, ...
+    at = found[0] if edit == "arm" else found[0] + 32  # arm, or persist after wrench_min
+    assert struct.unpack_from("<d" if edit == "arm" else "<i", good, at)[0] > 0
+    bad = bytearray(good)
+    bad[at:at + (8 if edit == "arm" else 4)] = bytes(8 if edit == "arm" else 4)
+    refused(inst, reseal(bad), "the fault detector's constants")
+    assert serialize(inst) == good
+    inst.step(H)
+
+
 def test_a_resealed_corrupt_model_is_refused_by_the_model_on_an_aligned_copy(make):
     """The checksum is no proof of sense: the model's check_restored still runs, on the
     glue's aligned scratch copy, and the live model stays as it was."""
