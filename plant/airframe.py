@@ -31,6 +31,7 @@ else:  # pragma: no cover
 
 MAX_ROTORS = 8
 RPM = 2.0 * math.pi / 60.0
+_EFFECT = {"k_t": "thrust", "k_d": "drag torque"}
 
 
 class AirframeError(FieldError):
@@ -361,6 +362,13 @@ def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe
     omega_max = prop.number("omega_max_rpm", positive=True) * RPM
     if omega_min > omega_max:
         raise prop.fail("omega_min_rpm", "exceeds omega_max_rpm")
+    square = omega_max * omega_max  # (float products overflow to inf; ** would raise)
+    for key, k in (("k_t", k_t), ("k_d", k_d)):
+        if not math.isfinite(k * square):
+            what = (f"its square, {omega_max:.5g}^2 (rad/s)^2," if math.isinf(square) else
+                    f"the rotor {_EFFECT[key]} {key} omega_max^2 = {k:.5g} x {square:.5g}")
+            raise prop.fail("omega_max_rpm", f"{omega_max:.5g} rad/s: {what} is beyond the "
+                            "range of a double (1.8e308)")
     tau_motor = prop.number("time_constant", positive=True)
     prop.reject_unknown()
 

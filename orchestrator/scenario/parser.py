@@ -95,6 +95,8 @@ from orchestrator.scenario.signals import ZERO, Scaled, Signal, parse_signal
 from orchestrator.sim.engine import COUPLINGS
 from orchestrator.sim.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
 from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
+from plant.common.toml_reader import NestingError
+from plant.common.toml_reader import loads as toml_loads
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -340,10 +342,12 @@ def _with_settings(scenario: Scenario, duration: float | None,
             raise ScenarioError(where, lhs, "expected plant.NAME=VALUE or "
                                 "controller.NAME=VALUE")
         try:
-            value = tomllib.loads(f"v = {text}")["v"]
+            value = toml_loads(f"v = {text}")["v"]
         except tomllib.TOMLDecodeError:
             raise ScenarioError(where, lhs, f"cannot read the value {text!r}: expected a "
                                 "number, true/false or an array like [1.0, 2.0]") from None
+        except NestingError as e:
+            raise ScenarioError(where, lhs, f"the value is {e}") from None
         target = plant_p if section == "plant" else ctrl_p
         fmu = PLANT_FMU if section == "plant" else CONTROLLER_FMU
         target.update(parameter_values(fmu, name, value, where, lhs))

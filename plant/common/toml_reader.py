@@ -116,17 +116,95 @@ def resolve_file(name_or_path: str | Path, package: str, folder: str, what: str,
                 f"{', '.join(shipped_names(package, folder))})")
 
 
+MAX_DEPTH = 32
+"""Tables and arrays nest at most this deep in a file (the deepest shipped field, a sum of
+signals' values, is 6 levels down)."""
+
+
+class Overflowed(float):
+    """A TOML float beyond a double's range (``1e400``): infinite, but shown in messages
+    as the file spells it, not as ``inf``."""
+
+    text: str
+
+    def __new__(cls, text: str) -> Overflowed:
+        """The float of ``text`` (infinite), keeping ``text``."""
+        obj = super().__new__(cls, float(text))
+        obj.text = text
+        return obj
+
+    def __repr__(self) -> str:
+        """The number as the file spells it."""
+        return self.text
+
+    __str__ = __repr__
+
+
+def _parse_float(text: str) -> float:
+    x = float(text)
+    if math.isinf(x) and "inf" not in text:
+        return Overflowed(text)
+    return x
+
+
+class NestingError(ValueError):
+    """A TOML document nested deeper than :data:`MAX_DEPTH`; ``field`` is the dotted path
+    where it does ("" when the parser itself could not follow)."""
+
+    def __init__(self, field: str) -> None:
+        self.field = field
+        super().__init__(f"nested deeper than {MAX_DEPTH} levels of tables and arrays")
+
+
+def _too_deep(doc: dict[str, Any]) -> str | None:
+    """The dotted path (keys only) of the first value nested deeper than MAX_DEPTH."""
+    stack: list[tuple[Any, int, tuple[str, ...]]] = [(doc, 0, ())]
+    while stack:
+        value, depth, path = stack.pop()
+        if depth > MAX_DEPTH:
+            shown = list(path[:4]) + (["..."] if len(path) > 4 else [])
+            return ".".join(shown)
+        if isinstance(value, dict):
+            stack.extend((v, depth + 1, (*path, str(k))) for k, v in value.items())
+        elif isinstance(value, list):
+            stack.extend((v, depth + 1, path) for v in value)
+    return None
+
+
+def loads(text: str) -> dict[str, Any]:
+    """A TOML document from text: ``tomllib.TOMLDecodeError`` when it is not TOML,
+    :class:`NestingError` when it nests deeper than :data:`MAX_DEPTH`; a number beyond a
+    double's range reads as :class:`Overflowed`."""
+    try:
+        doc = tomllib.loads(text, parse_float=_parse_float)
+    except RecursionError:  # (tomllib recurses into nested values: some hundred levels)
+        raise NestingError("") from None
+    where = _too_deep(doc)
+    if where is not None:
+        raise NestingError(where)
+    return doc
+
+
 def read_toml(path: Path, error: type[FieldError] = FieldError) -> dict[str, Any]:
     """The TOML document of the file at path; ``error`` naming the file when it is missing,
-    unreadable or not TOML."""
+    unreadable, not UTF-8 text, not TOML or nested deeper than :data:`MAX_DEPTH`."""
     source = str(path)
     try:
-        text = path.read_text(encoding="utf-8")
+        data = path.read_bytes()
     except FileNotFoundError:
         raise error(source, "", "file not found") from None
     except OSError as e:
         raise error(source, "", f"cannot read the file: {e}") from None
     try:
-        return tomllib.loads(text)
+        text = data.decode("utf-8")
+    except UnicodeDecodeError as e:
+        line = data.count(b"\n", 0, e.start) + 1
+        raise error(source, "", f"not UTF-8 text (byte 0x{data[e.start]:02x} at offset "
+                    f"{e.start}, line {line}): TOML files are UTF-8; save it as UTF-8"
+                    ) from None
+    try:
+        return loads(text.replace("\r\n", "\n").replace("\r", "\n"))  # (as read_text)
     except tomllib.TOMLDecodeError as e:
         raise error(source, "", f"not valid TOML: {e}") from None
+    except NestingError as e:
+        raise error(source, e.field, str(e)) from None

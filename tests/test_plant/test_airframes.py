@@ -113,6 +113,18 @@ def test_custom_file_and_explicit_rotor_list(tmp_path):
         ("radius = 0.2", "radius = 0.2\ncolour = 'red'", "ring.colour", "unknown field"),
         ("[ring]", "[rings]", "ring", "exactly one"),
         ('name = "custom"', "", "name", "missing"),
+        # numbers a file may hold whose square overflows a double (an OverflowError
+        # traceback in the force-set tools), or that are beyond a double themselves
+        ("omega_max_rpm = 3000", "omega_max_rpm = 1e300", "propulsion.omega_max_rpm",
+         "1.0472e+299 rad/s: its square, 1.0472e+299^2 (rad/s)^2, is beyond the range of a "
+         "double"),
+        ("k_t = 1.0e-4\nk_d = 1.0e-6\nomega_max_rpm = 3000",
+         "k_t = 1e20\nk_d = 1.0e-6\nomega_max_rpm = 1e150", "propulsion.omega_max_rpm",
+         "the rotor thrust k_t omega_max^2 = 1e+20 x 1.0966e+298"),
+        ("k_d = 1.0e-6", "k_d = 1e305", "propulsion.omega_max_rpm",
+         "the rotor drag torque k_d omega_max^2"),
+        ("omega_max_rpm = 3000", "omega_max_rpm = 1e400", "propulsion.omega_max_rpm",
+         "expected a finite number, got 1e400"),
     ],
 )
 def test_bad_files_name_file_and_field(tmp_path, old, new, field, reason):
@@ -142,6 +154,17 @@ def test_missing_and_unparsable_files(tmp_path):
     bad.write_text("name = \n")
     with pytest.raises(AirframeError, match="not valid TOML"):
         load_airframe(bad)
+    # the file named, not only Python's words for it
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(GOOD.replace('"custom"', '"caf\xe9"').encode("latin-1"))
+    with pytest.raises(AirframeError) as err:
+        load_airframe(latin)
+    assert str(err.value) == (f"{latin}: not UTF-8 text (byte 0xe9 at offset 12, line 2): "
+                              "TOML files are UTF-8; save it as UTF-8")
+    deep = tmp_path / "deep.toml"
+    deep.write_text(GOOD.replace("[body]", "x = " + "[" * 3000 + "]" * 3000 + "\n[body]"))
+    with pytest.raises(AirframeError, match=f"^{deep}: nested deeper than 32 levels"):
+        load_airframe(deep)
 
 
 def test_both_fmus_declare_the_one_airframe_table_with_equal_defaults():
