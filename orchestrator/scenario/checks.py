@@ -1,5 +1,6 @@
 """The checks a scenario passes before anything runs: FMU parameter overrides against the
-installed FMUs' modelDescriptions, the timing (step, duration, the FMUs' own steps), and the
+installed FMUs' modelDescriptions (types, integers within their declared or 32-bit range),
+the timing (step, duration, the FMUs' own steps), signals that stay finite, and the
 plausibility of units (docs/scenarios.md, "Plausibility checks").  Every failure is a
 :class:`~orchestrator.scenario.reader.ScenarioError` naming the file and the field."""
 
@@ -15,7 +16,7 @@ from functools import cache
 import numpy as np
 
 from controller import controller_fmu
-from orchestrator.scenario.model import POSITION_AXES, ParamValue, Scenario
+from orchestrator.scenario.model import ATTITUDE_AXES, POSITION_AXES, ParamValue, Scenario
 from orchestrator.scenario.reader import ScenarioError
 from orchestrator.scenario.signals import (
     Chirp,
@@ -41,10 +42,32 @@ _REL_TOL = 1e-9
 # FMU parameters
 
 
+FMI_INTEGER = (-2**31, 2**31 - 1)
+"""An FMI 2.0 Integer is a C int: 32 bits (fmi2Integer)."""
+
+
 @cache
 def _fmu_variables(model: str) -> dict[str, tuple[str, str]]:
     """name -> (causality, type) of an installed FMU's model variables."""
     return {name: (v.causality, v.type) for name, v in fmu_variables(installed_fmu(model)).items()}
+
+
+@cache
+def _integer_range(model: str, name: str) -> tuple[int, int, bool]:
+    """(min, max, declared) of an Integer variable: its modelDescription's range within
+    the FMI Integer's, or the FMI Integer's when it declares none."""
+    v = fmu_variables(installed_fmu(model))[name]
+    lo, hi = FMI_INTEGER
+    declared = False
+    for bound, which in ((v.min, 0), (v.max, 1)):
+        if bound is None:
+            continue
+        declared = True
+        if which == 0:
+            lo = max(lo, int(bound))
+        else:
+            hi = min(hi, int(bound))
+    return lo, hi, declared
 
 
 _INDEX = re.compile(r"\[(\d+)(?:,(\d+))?\]$")
@@ -130,6 +153,12 @@ def _scalar(model: str, name: str, info: tuple[str, str], raw: object, source: s
         if isinstance(raw, bool) or not isinstance(raw, int):
             raise ScenarioError(source, field_name, f"'{name}' is an Integer parameter: "
                                 f"expected an integer, got {_show(raw)}")
+        lo, hi, declared = _integer_range(model, name)
+        if not lo <= raw <= hi:  # (beyond 32 bits it would reach the FMU wrapped around)
+            where = (f"its declared range in the {model} FMU" if declared else
+                     "a 32-bit FMI Integer")
+            raise ScenarioError(source, field_name, f"'{name}' is an Integer parameter: "
+                                f"expected an integer in {lo}..{hi} ({where}), got {raw}")
         return int(raw)
     if kind == "Boolean":
         if not isinstance(raw, bool):
@@ -179,7 +208,14 @@ def check_timing(source: str, step: float, duration: float,
 POSITION_WARN_DISTANCE = 100.0
 """m: a position axis moving farther than this from its value at t = 0 ..."""
 POSITION_WARN_RATIO = 50.0
-"""... and farther than this many times the rest of the trajectory's size is a warning."""
+"""... and farther than this many times the rest of the trajectory's size is a warning;
+so is one ..."""
+POSITION_WARN_SPEED = 50.0
+"""... whose reference moves faster than this, m/s (180 km/h, beyond almost every
+multirotor; a step moves at its jump per step), and so is ..."""
+POSITION_MM_DISTANCE = 1000.0
+"""... a position axis reaching farther than this from the origin, m: a vehicle asked to
+be a kilometre away is more likely given millimetres (3000 for 3 m)."""
 _DEG = math.pi / 180.0
 _ANGLE_TOL = 1e-9  # rad: a reference exactly at a bound (say 60 deg converted) is inside
 _BOUNDED_AXES = {"roll": 1, "pitch": 2}  # the guidance bounds [phi_c, theta_c]; yaw is free
@@ -187,8 +223,42 @@ _BOUNDED_AXES = {"roll": 1, "pitch": 2}  # the guidance bounds [phi_c, theta_c];
 
 def checked(sc: Scenario) -> Scenario:
     """``sc`` after the plausibility checks: errors raised, warnings recorded."""
+    _check_finite(sc)
     _check_attitude(sc)
-    return replace(sc, warnings=_position_warnings(sc))
+    with np.errstate(over="ignore", invalid="ignore"):  # (a norm of 1e300 m is inf: fine)
+        return replace(sc, warnings=_position_warnings(sc))
+
+
+_DERIVATIVES = ("value", "rate of change", "second derivative")
+
+
+def _check_finite(sc: Scenario) -> None:
+    """Every signal the run feeds the FMUs (references with the derivatives fed forward,
+    disturbances) finite over the run: numbers a file may hold (up to 1.8e308) can still
+    overflow a double when a signal combines them (amplitude x omega^2, a ramp's slope)."""
+    degrees = any(isinstance(s, Scaled) and s.factor == _DEG for s in sc.attitude)
+    groups = (("reference.position", POSITION_AXES, sc.position, 2),
+              (f"reference.{'attitude_deg' if degrees else 'attitude'}", ATTITUDE_AXES,
+               sc.attitude, 1),
+              ("disturbance.force", POSITION_AXES, sc.force, 0),
+              ("disturbance.torque", POSITION_AXES, sc.torque, 0),
+              ("disturbance.acceleration", POSITION_AXES, sc.acceleration, 0))
+    t = _check_times(sc)
+    for table, axes, signals, orders in groups:
+        for axis, signal in zip(axes, signals, strict=True):
+            for order in range(orders + 1):
+                with np.errstate(all="ignore"):
+                    try:
+                        v = signal.value(t) if order == 0 else signal.derivative(t, order)
+                        bad: np.ndarray | None = ~np.isfinite(v)
+                    except OverflowError:
+                        bad = None
+                if bad is not None and not bad.any():
+                    continue
+                when = "" if bad is None else f" at t = {t[int(np.argmax(bad))]:.5g} s"
+                raise ScenarioError(sc.source, f"{table}.{axis}", f"its {_DERIVATIVES[order]} "
+                                    f"overflows{when}: the signal's numbers are too large "
+                                    "for a double (1.8e308) together")
 
 
 def _rad(x: float) -> str:
@@ -334,10 +404,18 @@ def _check_yaw(source: str, signal: Signal, field_name: str) -> None:
 
 
 def _position_warnings(sc: Scenario) -> tuple[str, ...]:
-    """A position axis moving (from its value at t = 0) more than POSITION_WARN_DISTANCE and
-    more than POSITION_WARN_RATIO times the rest of the trajectory's size (the largest
-    distance of the other two axes from the origin) -- a step of 1000 m on a vehicle flown
-    at 3 m: probably not metres."""
+    """Positions that are probably not metres, at most one warning per axis (the first rule
+    that applies; docs/scenarios.md, "Plausibility checks"):
+
+    - an axis moving (from its value at t = 0) more than POSITION_WARN_DISTANCE and more
+      than POSITION_WARN_RATIO times the rest of the trajectory's size (the largest distance
+      of the other two axes from the origin): a step of 1000 m on a vehicle flown at 3 m;
+    - an axis moving more than POSITION_WARN_DISTANCE whose reference moves faster than
+      POSITION_WARN_SPEED somewhere (the larger of its analytic rate and its change between
+      samples, so a step counts as its jump per step): a move no multirotor flies, and a
+      move of 1 m written in millimetres;
+    - an axis reaching farther than POSITION_MM_DISTANCE from the origin: a hover at 3 m
+      written as -3000."""
     t = _check_times(sc)
     p = np.column_stack([s.value(t) for s in sc.position])
     out: list[str] = []
@@ -347,17 +425,35 @@ def _position_warnings(sc: Scenario) -> tuple[str, ...]:
         k = int(np.argmax(moves))
         excursion = float(moves[k])
         rest = float(np.max(np.linalg.norm(np.delete(p, a, axis=1), axis=1)))
-        if excursion <= POSITION_WARN_DISTANCE or excursion <= POSITION_WARN_RATIO * rest:
-            continue
         jumps = np.abs(np.diff(x))
-        j = int(np.argmax(jumps))
-        if jumps[j] > 0.5 * excursion:
+        j = int(np.argmax(jumps)) if len(jumps) else 0
+        step = len(jumps) > 0 and jumps[j] > 0.5 * excursion
+        if step:
             what = (f"a step of {jumps[j]:.5g} m (from {x[j]:.5g} to {x[j + 1]:.5g} m at "
                     f"t = {t[j + 1]:.5g} s)")
         else:
             what = (f"an excursion of {excursion:.5g} m (from {x[0]:.5g} m at t = 0 to "
                     f"{x[k]:.5g} m at t = {t[k]:.5g} s)")
-        stays = f"within {rest:.3g} m of the origin" if rest > 0.0 else "at the origin"
-        out.append(f"{sc.source}: field 'reference.position.{axis}': {what} while the rest "
-                   f"of the trajectory stays {stays}; is this the intended unit (m)?")
+        field_name = f"{sc.source}: field 'reference.position.{axis}'"
+        if excursion > POSITION_WARN_DISTANCE and excursion > POSITION_WARN_RATIO * rest:
+            stays = f"within {rest:.3g} m of the origin" if rest > 0.0 else "at the origin"
+            out.append(f"{field_name}: {what} while the rest of the trajectory stays {stays}; "
+                       "is this the intended unit (m)?")
+            continue
+        if excursion > POSITION_WARN_DISTANCE:
+            rate = float(np.max(np.abs(sc.position[a].derivative(t, 1))))
+            dt = np.diff(t)
+            speed = max(rate, float(np.max(jumps / dt)) if len(dt) else 0.0)
+            if speed > POSITION_WARN_SPEED:
+                how = ("" if step else f" at up to {speed:.3g} m/s")
+                out.append(f"{field_name}: {what}{how}: a move of more than "
+                           f"{POSITION_WARN_DISTANCE:g} m faster than a multirotor flies "
+                           f"({POSITION_WARN_SPEED:g} m/s); is this the intended unit (m)? "
+                           f"In millimetres it would be {excursion / 1000.0:.5g} m")
+                continue
+        far = int(np.argmax(np.abs(x)))
+        if abs(x[far]) > POSITION_MM_DISTANCE:
+            out.append(f"{field_name}: the reference is {x[far]:.5g} m at t = {t[far]:.5g} s, "
+                       f"more than {POSITION_MM_DISTANCE:g} m from the origin; is this the "
+                       f"intended unit (m)? In millimetres it would be {x[far] / 1000.0:.5g} m")
     return tuple(out)

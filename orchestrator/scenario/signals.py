@@ -121,7 +121,7 @@ class Sine(Signal):
             return self.offset + self.amplitude * np.sin(arg)
         if order == 1:
             return self.amplitude * self.omega * np.cos(arg)
-        return -self.amplitude * self.omega**2 * np.sin(arg)
+        return -self.amplitude * (self.omega * self.omega) * np.sin(arg)  # (no OverflowError)
 
 
 @dataclass(frozen=True)

@@ -29,13 +29,23 @@ FULLPOSE = Path(sysconfig.get_path("scripts")) / ("fullpose.exe" if os.name == "
 CELL = re.compile(r"(?<!\\)\|")
 
 
+LATIN_1 = "(saved as Latin-1)"
+"""A file's first line ending so: the file is written in Latin-1, not UTF-8."""
+
+
 def doc_files() -> dict[str, str]:
-    """The TOML files of the document: code blocks whose first line is ``# NAME``."""
+    """The TOML files of the document: code blocks whose first line is ``# NAME``
+    (``# NAME (saved as Latin-1)``: see :func:`write_doc_file`)."""
     files = {}
     for block in re.findall(r"```toml\n(.*?)```", DOC.read_text(), flags=re.S):
         first, _, _ = block.partition("\n")
-        files[first.lstrip("# ").strip()] = block
+        files[first.lstrip("# ").removesuffix(LATIN_1).strip()] = block
     return files
+
+
+def write_doc_file(folder: Path, name: str, text: str) -> None:
+    first, _, _ = text.partition("\n")
+    (folder / name).write_bytes(text.encode("latin-1" if first.endswith(LATIN_1) else "utf-8"))
 
 
 def doc_rows() -> list[dict]:
@@ -80,7 +90,7 @@ def previous_results(tmp_path_factory) -> Path:
 @pytest.fixture
 def workdir(tmp_path, previous_results) -> Path:
     for name, text in doc_files().items():
-        (tmp_path / name).write_text(text)
+        write_doc_file(tmp_path, name, text)
     (tmp_path / "afile").write_text("not a folder\n")
     (tmp_path / "mine").mkdir()
     (tmp_path / "mine" / "notes.txt").write_text("the user's own notes\n")
@@ -114,7 +124,11 @@ def test_the_table_covers_every_kind_of_bad_input_the_issue_names():
     ids = {r["id"] for r in ROWS}
     assert {"plant-param", "ctrl-param", "unstable-gains", "lost-position", "radians",
             "huge-duration", "out-under-file", "interrupted"} <= ids
-    assert set(doc_files()) == {"radians.toml", "far.toml", "unstable.toml", "weak.toml"}
+    assert {"int-range", "int-32-bits", "not-utf8", "deep-nesting", "airframe-overflow",
+            "signal-overflow", "millimetres"} <= ids
+    assert set(doc_files()) == {"radians.toml", "far.toml", "unstable.toml", "weak.toml",
+                                "fast.toml", "mm.toml", "latin1.toml", "deep.toml",
+                                "overflow.toml"}
 
 
 @pytest.mark.parametrize("row", ROWS, ids=[r["id"] for r in ROWS])

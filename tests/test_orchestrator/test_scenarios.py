@@ -432,6 +432,22 @@ def test_with_overrides(tmp_path):
     ("plant.mass=heavy", "plant.mass", "expected a number, true/false or an array"),
     ("airframe.mass=1.0", "airframe.mass", "plant.NAME=VALUE or controller.NAME=VALUE"),
     ("controller.Ts=0.004", "controller.Ts", "divides the communication step"),
+    # integers beyond an FMI Integer's 32 bits reached the FMU wrapped around (4294967301
+    # flew as 5), or were refused as a value never typed (1661992959): named as typed
+    ("controller.qp_max_iter=4294967301", "controller.qp_max_iter",
+     "expected an integer in 1..1000 (its declared range in the FullPoseController FMU), "
+     "got 4294967301"),
+    ("controller.qp_max_iter=99999999999999999999", "controller.qp_max_iter",
+     "got 99999999999999999999"),
+    ("plant.noise_seed=99999999999999999999", "plant.noise_seed",
+     "expected an integer in -2147483648..2147483647 (a 32-bit FMI Integer), "
+     "got 99999999999999999999"),
+    ("plant.noise_seed=-2147483649", "plant.noise_seed", "got -2147483649"),
+    ("plant.mass=1e400", "plant.mass", "expected a finite number, got 1e400"),
+    ("controller.K_pos_D=" + "[" * 40 + "]" * 40, "controller.K_pos_D",
+     "nested deeper than 32 levels"),
+    ("controller.K_pos_D=" + "[" * 5000 + "]" * 5000, "controller.K_pos_D",
+     "nested deeper than 32 levels"),
 ])
 def test_with_overrides_rejects_bad_settings(setting, field, expect):
     sc = load_scenario("hover")
@@ -509,6 +525,14 @@ INVALID = [
     ("real-for-boolean", "[plant]\ninit_trim = 1.0", "plant.init_trim", "expected true or false"),
     ("real-for-integer", "[controller]\nqp_max_iter = 20.5", "controller.qp_max_iter",
      "expected an integer"),
+    ("integer-beyond-32-bits", "[plant]\nnoise_seed = 4294967297", "plant.noise_seed",
+     "-2147483648..2147483647 (a 32-bit FMI Integer), got 4294967297"),
+    ("integer-beyond-declared", "[controller]\nfail_poly_n = [0, 0, 0, 0, 0, 0, 0, 99]",
+     "controller.fail_poly_n[8]", "0..32 (its declared range"),
+    ("real-beyond-a-double", "[plant]\nmass = 1e400", "plant.mass",
+     "expected a finite number, got 1e400"),
+    ("signal-beyond-a-double", ("z = -3.0", "z = -1.8e308"), "reference.position.z",
+     "expected a finite number, got -1.8e308"),
     ("vector-element-type", "[controller]\nK_pos_D = [1.0, false, 2.0]", "controller.K_pos_D[2]",
      "expected a number"),
     ("matrix-shape", "[plant]\ninertia = [0.1, 0.2, 0.3]", "plant.inertia",
@@ -583,6 +607,32 @@ def test_unreadable_files(tmp_path):
         load_scenario(tmp_path / "absent.toml")
     with pytest.raises(ScenarioError, match="no such file or shipped scenario"):
         load_scenario("no_such_scenario")
+
+
+def test_files_that_are_not_utf8_or_nest_too_deep_are_named(tmp_path):
+    """A Latin-1 file and one nested thousands deep gave messages without the file ("'utf-8'
+    codec can't decode byte 0xe9 ...", "maximum recursion depth exceeded")."""
+    latin = tmp_path / "latin.toml"
+    latin.write_bytes(BASE.replace('name = "t"', '# caf\xe9\nname = "t"').encode("latin-1"))
+    with pytest.raises(ScenarioError) as info:
+        load_scenario(latin)
+    assert str(info.value) == (f"{latin}: not UTF-8 text (byte 0xe9 at offset 5, line 1): "
+                               "TOML files are UTF-8; save it as UTF-8")
+    for depth, field in ((40, "controller.K_pos_D"), (5000, "")):
+        deep = write(tmp_path, BASE + "[controller]\nK_pos_D = " + "[" * depth + "]" * depth
+                     + "\n", f"deep{depth}.toml")
+        with pytest.raises(ScenarioError) as info:
+            load_scenario(deep)
+        assert info.value.field == field
+        assert str(info.value).startswith(f"{deep}: ")
+        assert str(info.value).endswith("nested deeper than 32 levels of tables and arrays")
+    tables = write(tmp_path, BASE + "[controller]\nx = " + "{a=" * 1000 + "1" + "}" * 1000
+                   + "\n", "tables.toml")
+    with pytest.raises(ScenarioError, match=re.escape(str(tables)) + ": nested deeper"):
+        load_scenario(tables)
+    # as deep as a file of ours goes is fine, and line ends of any kind read as before
+    crlf = write(tmp_path, BASE.replace("\n", "\r\n"), "crlf.toml")
+    assert load_scenario(crlf).duration == 10.0
 
 
 def test_documented_example_loads(tmp_path):
@@ -765,11 +815,63 @@ def test_far_position_step_is_a_warning_naming_the_field(tmp_path):
 
 
 def test_large_but_proportionate_trajectory_is_no_warning(tmp_path):
-    sc = load_scenario(write(tmp_path, BASE.replace("z = -3.0", """\
-x = { type = "waypoints", times = [0.0, 10.0], values = [0.0, 400.0] }
+    """400 m in 40 s (a minimum-jerk peak of 1.875 x 10 m/s) beside a 20 m sine at 30 m."""
+    sc = load_scenario(write(tmp_path, BASE.replace("duration = 10.0", "duration = 40.0")
+                             .replace("z = -3.0", """\
+x = { type = "waypoints", times = [0.0, 40.0], values = [0.0, 400.0] }
 y = { type = "sine", amplitude = 20.0, omega = 0.5 }
 z = -30.0""")))
     assert sc.warnings == ()
+
+
+def test_millimetres_are_warnings_naming_the_field(tmp_path):
+    """A scenario written in millimetres (the issue's: a 1 m step flown at 3 m, as 1000
+    and -3000) flew without a word and reported a 1000 m error.  Now the step, a move of
+    more than 100 m at a speed no multirotor flies, and the altitude, more than 1000 m from
+    the origin, are warnings naming their fields; so is a fast 400 m move."""
+    path = write(tmp_path, BASE.replace("z = -3.0", """\
+x = { type = "steps", times = [1.0], values = [1000.0] }
+z = -3000.0"""))
+    sc = load_scenario(path)
+    assert sc.warnings == (
+        f"{path}: field 'reference.position.x': a step of 1000 m (from 0 to 1000 m at t = 1 s): "
+        "a move of more than 100 m faster than a multirotor flies (50 m/s); is this the "
+        "intended unit (m)? In millimetres it would be 1 m",
+        f"{path}: field 'reference.position.z': the reference is -3000 m at t = 0 s, more "
+        "than 1000 m from the origin; is this the intended unit (m)? In millimetres it would "
+        "be -3 m")
+    fast = load_scenario(write(tmp_path, BASE.replace("z = -3.0", """\
+x = { type = "waypoints", times = [0.0, 10.0], values = [0.0, 400.0] }
+y = { type = "sine", amplitude = 20.0, omega = 0.5 }
+z = -30.0""")))
+    (warning,) = fast.warnings
+    assert "field 'reference.position.x': an excursion of 400 m" in warning
+    assert "at up to 75 m/s" in warning and "faster than a multirotor flies" in warning
+    slow = load_scenario(write(tmp_path, BASE.replace("z = -3.0", """\
+x = { type = "ramp", from = 0.0, to = 300.0, t0 = 0.0, t1 = 10.0 }
+z = -999.0""")))
+    assert slow.warnings == ()  # 30 m/s, and within a kilometre
+
+
+@pytest.mark.parametrize(("body", "field", "what"), [
+    ('x = { type = "sine", amplitude = 1e308, omega = 1e308 }', "reference.position.x",
+     "its value overflows"),
+    ('x = { type = "sine", amplitude = 1e290, omega = 1e10 }', "reference.position.x",
+     "its second derivative overflows"),
+    ('x = { type = "ramp", from = -1e308, to = 1e308, t0 = 0.0, t1 = 1.0 }',
+     "reference.position.x", "its value overflows at t = 0 s"),
+    ('y = { type = "waypoints", times = [0.0, 1e-300], values = [0.0, 1e10] }',
+     "reference.position.y", "its second derivative overflows at t = 0 s"),
+    ('[reference.attitude_deg]\nyaw = { type = "sine", amplitude = 300.0, omega = 1e308 }',
+     "reference.attitude_deg.yaw", "its value overflows at t = 1.798 s"),
+    ('[disturbance.force]\nz = [1.7e308, 1.7e308]', "disturbance.force.z", "its value"),
+])
+def test_signals_that_overflow_are_errors_naming_the_field(tmp_path, body, field, what):
+    """Numbers a file may hold whose signal overflows a double (it ended in an
+    OverflowError traceback or in NaN start values)."""
+    err = _rejected(tmp_path, body + "\n")
+    assert err.field == field
+    assert what in str(err) and "too large for a double" in str(err), str(err)
 
 
 def test_shipped_and_documented_scenarios_have_no_warnings(tmp_path):
