@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import tempfile
+from collections.abc import Iterator
 from pathlib import Path
 
 import pytest
@@ -22,16 +23,21 @@ pytestmark = pytest.mark.skipif(not figure_pool.available(),
 
 
 @pytest.fixture(scope="module")
-def short(tmp_path_factory: pytest.TempPathFactory) -> tuple[Path, Path]:
-    """The same 3 s run written with the workers and without them."""
+def short(tmp_path_factory: pytest.TempPathFactory) -> Iterator[tuple[Path, Path]]:
+    """The same 3 s run written with the workers and without them, beside the file a killed
+    run of an earlier version whose pid this process reused would have left."""
     sc = prepare("hover_varying_orientation", duration=3.0)
     base = tmp_path_factory.mktemp("pool")
-    stale = Path("/dev/shm", f"{figure_pool.HANDOFF_PREFIX}{os.getpid()}-leftover.npy")
-    if stale.parent.is_dir():  # a killed run's file whose pid this process has reused
-        stale.write_bytes(b"")
-    run_scenario(sc, base / "pool", timing=False, figure_workers=True)
-    run_scenario(sc, base / "here", timing=False, figure_workers=False)
-    return base / "pool", base / "here"
+    folder = figure_pool.handoff_folder() or Path(tempfile.gettempdir())
+    stale = folder / f"{figure_pool.HANDOFF_PREFIX}{os.getpid()}-leftover.npy"
+    stale.write_bytes(b"")
+    try:
+        run_scenario(sc, base / "pool", timing=False, figure_workers=True)
+        run_scenario(sc, base / "here", timing=False, figure_workers=False)
+        assert not stale.exists()  # removed by the run
+        yield base / "pool", base / "here"
+    finally:
+        stale.unlink(missing_ok=True)
 
 
 def own_handoffs() -> list[Path]:

@@ -297,7 +297,9 @@ def test_a_killed_fullpose_run_leaves_nothing_once_the_next_one_ran(tmp_path: Pa
     proc = subprocess.Popen([str(FULLPOSE), "run", "hover_varying_orientation", "--duration",
                              "4", "--out", "res"], cwd=tmp_path, stdout=subprocess.DEVNULL,
                             stderr=subprocess.PIPE)
-    handoffs = f"{figure_pool.HANDOFF_PREFIX}{proc.pid}-*.npy"
+    # the run's own hand-over: its pid and start time (a file of an earlier process with
+    # that pid is not its)
+    handoffs = f"{figure_pool.HANDOFF_PREFIX}{proc.pid}-{figure_pool.process_start(proc.pid)}-*.npy"
     deadline = time.monotonic() + 300.0
     try:
         while True:  # until it writes: its results folder being filled, the workers drawing
