@@ -32,7 +32,7 @@ from mavlink_bridge.context import (
     PacingStats,
 )
 from mavlink_bridge.handlers import HANDLERS, signing
-from mavlink_bridge.links import Endpoint
+from mavlink_bridge.links import Address, Endpoint
 from mavlink_bridge.telemetry import mav
 
 __all__ = ["DEFAULT_URLS", "Bridge", "BridgeConfig", "PacingStats"]
@@ -70,10 +70,20 @@ class Bridge(Context):
         self._stop = True
 
     def run(self) -> PacingStats:
-        """Fly until stop() or the configured duration; returns the pacing statistics."""
+        """Fly until stop() or the configured duration; returns the pacing statistics (final
+        also when the loop ends by an exception, e.g. Ctrl-C: ``self.stats``)."""
+        t0 = time.perf_counter()
+        try:
+            self._loop(t0)
+        finally:
+            self.stats.wall_time = time.perf_counter() - t0
+            self.stats.sim_time = self.session.time
+            self.stats.sent = sum(ep.sent for ep in self.endpoints)
+        return self.stats
+
+    def _loop(self, t0: float) -> None:
         cfg, s = self.config, self.session
         chunk_dt = s.step_size * s.chunk
-        t0 = time.perf_counter()
         self._rx_window = (t0, 0)
         self._publish(force_heartbeat=True)
         while not self._stop:
@@ -100,10 +110,6 @@ class Bridge(Context):
             self.stats.wall_time = now - t0
             if self.on_chunk is not None:
                 self.on_chunk(self)
-        self.stats.wall_time = time.perf_counter() - t0
-        self.stats.sim_time = s.time
-        self.stats.sent = sum(ep.sent for ep in self.endpoints)
-        return self.stats
 
     def _step(self) -> None:
         s = self.session
@@ -212,7 +218,7 @@ class Bridge(Context):
         """Up to ``budget`` datagrams, stopping at the first datagram boundary after
         ``deadline`` (perf_counter time)."""
         last = None
-        for data, msg in ep.receive(budget, deadline):
+        for data, msg, addr in ep.receive(budget, deadline):
             if data is not last:
                 last = data
                 self._count_datagram()
@@ -221,7 +227,7 @@ class Bridge(Context):
                 continue
             self.stats.messages += 1
             try:
-                self._handle(ep, msg)
+                self._handle(ep, msg, addr)
             except Exception as e:  # a message the decoder accepted but we cannot use
                 self.stats.ignored += 1
                 self.statustext(mav.MAV_SEVERITY_WARNING,
@@ -238,14 +244,22 @@ class Bridge(Context):
         else:
             self._rx_window = (start, n + 1)
 
-    def _handle(self, ep: Endpoint, msg: Any) -> None:
+    def _handle(self, ep: Endpoint, msg: Any, addr: Address) -> None:
         kind = msg.get_type()
         hdr = msg.get_header()
         src = (hdr.srcSystem, hdr.srcComponent)
         if src == (SYSTEM_ID, COMPONENT_ID):
             self.stats.ignored += 1  # our own messages looped back
             return
+        self.sender = addr
         if signing.refused(self, msg, src):
+            return
+        if kind == "HEARTBEAT" and (self.signed or not self.signing.enabled):
+            ep.admit(addr)  # a udpin endpoint sends to the senders of valid heartbeats only
+        if not self.budget.allow(kind, (ep.link_id, addr), time.monotonic()):
+            self.stats.throttled += 1
+            self.statustext(mav.MAV_SEVERITY_WARNING,
+                            f"{kind[:24]} from {addr[0]}:{addr[1]} throttled", limited=True)
             return
         handler = HANDLERS.get(kind)
         if handler is None:

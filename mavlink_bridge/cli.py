@@ -31,10 +31,14 @@ def register(sub: Any) -> None:
                      help="WGS84 point of the local NED origin (deg, deg, m AMSL; default: "
                           "PX4 SITL's home 47.397742,8.545594,488; a negative LAT: "
                           "--origin=-33.9,151.2,40)")
-    fly.add_argument("--signing-setup-from", action="append", default=[], metavar="URL",
-                     help="accept SETUP_SIGNING (while disarmed, without --signing-key) only "
-                          "from this endpoint (udpin:HOST:PORT or udpout:HOST:PORT; added to "
-                          "the endpoints if not a --gcs one; default: SETUP_SIGNING refused)")
+    fly.add_argument("--signing-setup-key", default=None, metavar="FILE",
+                     help="a one-time key (as --signing-key): the first SETUP_SIGNING signed "
+                          "with it, while disarmed, installs the key it carries (default: "
+                          "SETUP_SIGNING only on a link already signed)")
+    fly.add_argument("--limit", action="append", default=[], metavar="FPB_NAME=VALUE",
+                     help="set a safety limit or timeout of the bridge (e.g. "
+                          "FPB_SP_XY_MAX=200; repeatable); over MAVLink they change only on a "
+                          "signed link")
     fly.add_argument("--duration", type=float, default=None, metavar="S",
                      help="stop after S simulated seconds (default: run until Ctrl-C)")
     fly.add_argument("--view", action="store_true",
@@ -54,9 +58,8 @@ def _fly(args: argparse.Namespace) -> int:
     if args.duration is not None and not args.duration > 0:
         raise ValueError("--duration must be positive")
     urls = list(args.gcs or DEFAULT_URLS)
-    urls += [u for u in args.signing_setup_from if u not in urls]
     config = BridgeConfig(urls=urls, speed=speed, duration=args.duration,
-                          signing_setup_from=tuple(args.signing_setup_from))
+                          bridge_parameters=_limits(args.limit))
     if args.scenario is not None:
         from orchestrator.runner import prepare
 
@@ -88,11 +91,13 @@ def _fly(args: argparse.Namespace) -> int:
         from mavlink_bridge.geodesy import parse_origin
 
         config.origin = parse_origin(args.origin)
-    if args.signing_key is not None:
-        try:
-            config.signing_key = load_key(args.signing_key)
-        except (OSError, UnicodeDecodeError) as e:
-            raise ValueError(f"signing key: {e}") from None
+    for option, path in (("signing_key", args.signing_key),
+                         ("signing_setup_key", args.signing_setup_key)):
+        if path is not None:
+            try:
+                setattr(config, option, load_key(path))
+            except (OSError, UnicodeDecodeError) as e:
+                raise ValueError(f"--{option.replace('_', '-')}: {e}") from None
     if args.view:  # before the sockets open: a viewer that cannot show is said at once
         from orchestrator.output.view import check_viewer
 
@@ -123,6 +128,21 @@ def _fly(args: argparse.Namespace) -> int:
                   f"({100 * share:.1f} % of the wall time)"
                   + (f", wrote {args.save}" if args.save is not None else ""))
     return 0
+
+
+def _limits(settings: list[str]) -> dict[str, float]:
+    """The --limit NAME=VALUE settings (checked against the parameter table by the bridge)."""
+    out = {}
+    for setting in settings:
+        name, sep, text = setting.partition("=")
+        try:
+            value = float(text)
+        except ValueError:
+            value = math.nan
+        if not sep or not name.strip() or not math.isfinite(value):
+            raise ValueError(f"--limit {setting!r}: expected FPB_NAME=NUMBER")
+        out[name.strip()] = value
+    return out
 
 
 def _live_view(bridge: Any, args: argparse.Namespace) -> Any:

@@ -18,8 +18,9 @@ from typing import Any
 import numpy as np
 
 from mavlink_bridge import px4, stability, telemetry
+from mavlink_bridge.budget import RequestBudget
 from mavlink_bridge.geodesy import Origin
-from mavlink_bridge.links import Endpoint, Signing
+from mavlink_bridge.links import Address, Endpoint, Signing
 from mavlink_bridge.params import ParameterTable, Range, fmu_range
 from mavlink_bridge.setpoints import (
     AttitudeSetpoint,
@@ -36,6 +37,7 @@ DEFAULT_URLS = ("udpout:127.0.0.1:14550", "udpout:127.0.0.1:14540")
 SYSTEM_ID = 1
 COMPONENT_ID = 1
 STATUSTEXT_PER_S = 5  # rejection/refusal messages per wall second, the rest are counted
+STATUSTEXT_CHUNK = 50  # characters per STATUSTEXT; longer texts go in chunks (MAVLink 2)
 EVENTS_KEPT = 1000  # STATUSTEXTs kept in Context.events (the older half dropped beyond)
 
 Source = tuple[int, int]
@@ -57,6 +59,7 @@ class PacingStats:
     malformed: int = 0
     ignored: int = 0
     refused_unsigned: int = 0
+    throttled: int = 0  # requests beyond a sender's budget (mavlink_bridge.budget)
     sent: int = 0
     max_rx_rate: float = 0.0  # datagrams per wall second, best 1 s window
 
@@ -75,7 +78,8 @@ class PacingStats:
             f"({self.late_chunks} of {self.chunks} chunks late by more than a chunk)",
             f"received            {self.datagrams} datagrams, {self.messages} messages "
             f"({self.malformed} malformed, {self.ignored} ignored, "
-            f"{self.refused_unsigned} refused by signing); peak {self.max_rx_rate:.0f}/s",
+            f"{self.refused_unsigned} refused by signing, {self.throttled} throttled); "
+            f"peak {self.max_rx_rate:.0f}/s",
             f"sent                {self.sent} messages",
         ]
 
@@ -94,13 +98,59 @@ class BridgeConfig:
     urls: Sequence[str] = DEFAULT_URLS
     speed: float = 1.0  # math.inf: as fast as possible
     signing_key: bytes | None = None
-    # endpoints (their URLs, as in ``urls``) SETUP_SIGNING is accepted from (while disarmed
-    # and without ``signing_key``); empty: SETUP_SIGNING is always refused
-    signing_setup_from: Sequence[str] = ()
+    # a one-time key: a SETUP_SIGNING signed with it (while disarmed, without ``signing_key``)
+    # installs the key it carries; None: SETUP_SIGNING only on a link already signed
+    signing_setup_key: bytes | None = None
+    # the bridge's own FPB_ parameters (safety limits, timeouts) set at start: over MAVLink
+    # they change only on a signed link
+    bridge_parameters: Mapping[str, float] | None = None
     duration: float | None = None  # simulated s; None: until stop()
     chunk: int = 5
     limits: Limits = field(default_factory=Limits)
     origin: Origin = field(default_factory=Origin)  # WGS84 point of local NED (0, 0, 0)
+
+
+def stopping_point(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, acc_limit: np.ndarray,
+                   jerk_limit: np.ndarray) -> np.ndarray:
+    """Where a reference at pos moving at vel with acceleration acc comes to rest when it
+    brakes at most at acc_limit [horizontal, vertical] with jerk at most jerk_limit: per
+    direction (the horizontal motion, the vertical one) the distance of a jerk-limited stop
+    (:func:`stop_distance`).  A zero limit (none known) stops where the reference is."""
+    out = np.array(pos, float)
+    v, a = np.asarray(vel, float), np.asarray(acc, float)
+    for idx, k in (([0, 1], 0), ([2], 1)):
+        s = float(np.linalg.norm(v[idx]))
+        if s <= 0.0:
+            continue
+        along = v[idx] / s
+        d = stop_distance(s, float(a[idx] @ along), float(acc_limit[k]), float(jerk_limit[k]))
+        out[idx] += along * d
+    return out
+
+
+def stop_distance(speed: float, acc: float, acc_max: float, jerk_max: float,
+                  dt: float = 1e-3) -> float:
+    """Distance to rest from speed (> 0) with acceleration acc along the motion: the jerk
+    is -jerk_max until the deceleration reaches acc_max, then +jerk_max from the moment the
+    speed left equals what the release to zero acceleration takes (a^2 / 2 jerk_max), so
+    the stop ends at zero speed and zero acceleration.  Integrated at dt (exact to O(dt))."""
+    if not acc_max > 0.0 or not jerk_max > 0.0:
+        return 0.0
+    x, v, a = 0.0, speed, acc
+    for _ in range(int(600.0 / dt)):  # 10 min of braking at most
+        if v <= 0.0 and a >= 0.0:
+            break
+        release = a < 0.0 and v <= a * a / (2.0 * jerk_max)
+        jerk = jerk_max if release else -jerk_max
+        a_next = min(max(a + jerk * dt, -acc_max), acc_max)
+        if release:
+            a_next = min(a_next, 0.0)
+        v_next = v + 0.5 * (a + a_next) * dt
+        x += 0.5 * (v + max(v_next, 0.0)) * dt
+        v, a = v_next, a_next
+        if v <= 0.0:
+            break
+    return x
 
 
 class Context:
@@ -135,6 +185,14 @@ class Context:
         self.airframe = self.session.airframe
         self.params = ParameterTable(self._tunables(), self.session.set_controller_parameter,
                                      guard=stability.guard)
+        for name, value in (config.bridge_parameters or {}).items():
+            if not name.startswith("FPB_") or self.params.index(name) is None:
+                self.close()
+                raise ValueError(f"{name}: not a bridge parameter (FPB_...)")
+            refused = self.params.set(name, float(value))
+            if refused is not None:
+                self.close()
+                raise ValueError(str(refused))
         self.limits = config.limits
         self.sync_limits()
         self.stats = PacingStats(speed=config.speed)
@@ -150,8 +208,17 @@ class Context:
         self.busy = 0.0  # wall s spent computing chunks
         self.events: list[str] = []  # STATUSTEXTs sent, for logs and tests
         self.told_unsupported: dict[tuple[str, int, int], float] = {}  # -> wall time
+        self.setup_key = config.signing_setup_key  # spent once used
+        self.budget = RequestBudget()
+        # the message being handled: its sender's address and whether its signature is valid
+        self.sender: Address = ("", 0)
+        self.signed = False
+        self._text_id = 0
         self._state = self.session.state()
         self._snapshot: Snapshot | None = None
+        inst = self.session.ctrl_inst
+        self._jerk_limit = np.array([float(inst.get("ref_jerk_max[1]")),
+                                     float(inst.get("ref_jerk_max[2]"))])
         self._text_budget: tuple[int, int] = (0, 0)  # (wall second, sent in it)
         self._text_dropped = 0
 
@@ -205,26 +272,25 @@ class Context:
         return VehicleState(p["pos"].copy(), p["euler"].copy())
 
     def freeze(self) -> None:
-        """Setpoints stale (older than FPB_SP_STALE): hold the pose reached, never fly the
-        last velocity, acceleration or rate on.  An absolute position or attitude target is
-        a place, not a motion: it is kept (clients streaming slowly still get there)."""
+        """Setpoints stale (older than FPB_SP_STALE): stop and hold where the vehicle stops.
+        Neither the last velocity nor the last target is flown on: the position held is the
+        end of a stop of the controller's shaped reference from its present speed within its
+        own acceleration and jerk limits (:func:`stopping_point`), so the vehicle brakes
+        once and never comes back; the attitude held is the one reached."""
         self.frozen = True
         v = self.vehicle()
-        ref = Reference.hold(v.pos, v.euler)
-        if self.pos_sp is not None:
-            have = ~np.isnan(self.pos_sp.pos)
-            ref.pos[have] = self.pos_sp.pos[have]
-            if not math.isnan(self.pos_sp.yaw):
-                ref.euler[2] = self.pos_sp.yaw
-        if self.att_sp is not None and self.att_sp.euler is not None:
-            ref.euler = self.att_sp.euler.copy()
-        self.ref = ref
+        ctrl = self._state["ctrl"]
+        pos = stopping_point(ctrl["pos_ref_s"], ctrl["vel_ref_s"], ctrl["acc_ref_s"],
+                             ctrl["ref_acc_limit"], self._jerk_limit)
+        self.ref = Reference.hold(pos, v.euler)
 
     def hold(self) -> None:
-        """Hold the pose reached and forget the setpoints."""
+        """Hold the pose reached and forget the setpoints; after a setpoint loss the pose
+        already held since (:meth:`freeze`) is kept, so the vehicle does not move again."""
+        if not self.frozen:
+            v = self.vehicle()
+            self.ref = Reference.hold(v.pos, v.euler)
         self.frozen = False
-        v = self.vehicle()
-        self.ref = Reference.hold(v.pos, v.euler)
         self.pos_sp = None
         self.att_sp = None
 
@@ -299,12 +365,26 @@ class Context:
         self._send_text(severity, text)
 
     def _send_text(self, severity: int, text: str) -> None:
+        """One STATUSTEXT, or for a text longer than a message the chunks MAVLink 2 defines:
+        one id (1..65535) for all, chunk_seq from 0, the end marked by a NUL (an empty last
+        chunk when the text fills its chunks exactly)."""
         self.events.append(text)
         if len(self.events) > EVENTS_KEPT:
             del self.events[:EVENTS_KEPT // 2]
-        m = mav.MAVLink_statustext_message(severity, text[:50].encode("ascii", "replace"))
-        for ep in self.endpoints:
-            ep.send(m)
+        data = text.encode("ascii", "replace")
+        if len(data) <= STATUSTEXT_CHUNK:
+            messages = [mav.MAVLink_statustext_message(severity, data)]
+        else:
+            self._text_id = self._text_id % 65535 + 1
+            pieces = [data[i:i + STATUSTEXT_CHUNK]
+                      for i in range(0, len(data), STATUSTEXT_CHUNK)]
+            if len(pieces[-1]) == STATUSTEXT_CHUNK:
+                pieces.append(b"")
+            messages = [mav.MAVLink_statustext_message(severity, piece, self._text_id, seq)
+                        for seq, piece in enumerate(pieces)]
+        for m in messages:
+            for ep in self.endpoints:
+                ep.send(m)
 
     def ack(self, ep: Endpoint, command: int, result: int, src: Source) -> None:
         """COMMAND_ACK of command with result to its sender."""

@@ -3,7 +3,10 @@
 An endpoint URL is a pymavlink connection string restricted to UDP:
 ``udpout:HOST:PORT`` (send to a ground station listening there, replies come back
 to our port: how PX4 SITL talks to QGroundControl/MAVSDK) or ``udpin:HOST:PORT``
-(listen; send to whoever talked to us last).  ``udpout`` sockets are bound to
+(listen).  A ``udpin`` endpoint sends only to its peers: the addresses that sent it a
+valid MAVLink HEARTBEAT (signed, while signing is on) within the last
+:data:`PEER_TIMEOUT` seconds, at most :data:`MAX_PEERS` of them; a datagram that is not
+such a heartbeat never makes its sender a peer.  ``udpout`` sockets are bound to
 127.0.0.1 when the destination is a loopback address, so nothing off the machine can
 reach the bridge unless the user names another address.
 
@@ -37,11 +40,35 @@ MAVLINK_IFLAG_SIGNED = 0x01
 SIGNING_EPOCH = 1420070400
 STALE_LIMIT = 60 * 100_000  # a new stream may lag our clock by one minute at most
 MAX_DATAGRAM = 65535
+PEER_TIMEOUT = 10.0  # s of wall time without a heartbeat before a udpin peer is dropped
+MAX_PEERS = 8  # udpin peers at most (the longest silent one makes room)
+
+Address = tuple[str, int]
+"""A UDP (host, port)."""
 
 
 def signing_now() -> int:
     """The MAVLink 2 signing timestamp of now (10 us units since 2015-01-01 UTC)."""
     return int((time.time() - SIGNING_EPOCH) * 100_000)
+
+
+def signature_error(key: bytes, msgbuf: bytes | bytearray, incompat_flags: int) -> str | None:
+    """None if the message is signed with key (the signature alone: no timestamp check),
+    else why not."""
+    if not incompat_flags & MAVLINK_IFLAG_SIGNED or len(msgbuf) < 13:
+        return "unsigned"
+    digest = hashlib.sha256(key + bytes(msgbuf[:-6])).digest()[:6]
+    return None if digest == bytes(msgbuf[-6:]) else "bad signature"
+
+
+def _stamp(msgbuf: bytes | bytearray) -> int:
+    tlow, thigh = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
+    return int(tlow | (thigh << 32))
+
+
+def fresh_stamp(msgbuf: bytes | bytearray, now: int) -> bool:
+    """Whether a signed message's timestamp is within STALE_LIMIT of now (10 us units)."""
+    return _stamp(msgbuf) + STALE_LIMIT >= now
 
 
 def load_key(path: str | Path) -> bytes:
@@ -85,15 +112,12 @@ class Signing:
     def verify(self, msgbuf: bytes | bytearray, incompat_flags: int, src: tuple[int, int]
                ) -> str | None:
         """None if the message carries a valid signature with our key, else why not."""
-        if not incompat_flags & MAVLINK_IFLAG_SIGNED or len(msgbuf) < 13:
-            return "unsigned"
         assert self.key is not None
+        why = signature_error(self.key, msgbuf, incompat_flags)
+        if why is not None:
+            return why
         link_id = msgbuf[-13]
-        tlow, thigh = struct.unpack("<IH", bytes(msgbuf[-12:-6]))
-        stamp = tlow | (thigh << 32)
-        digest = hashlib.sha256(self.key + bytes(msgbuf[:-6])).digest()[:6]
-        if digest != bytes(msgbuf[-6:]):
-            return "bad signature"
+        stamp = _stamp(msgbuf)
         stream = (link_id, src[0], src[1])
         last = self.streams.get(stream)
         if last is not None and stamp <= last:
@@ -127,7 +151,9 @@ class Endpoint:
         if scheme == "udpout" and _is_loopback(host):
             self.sock.bind(("127.0.0.1", 0))
         self.sock.setblocking(False)
-        self.sender = mavlink2.MAVLink(self.conn, system, component)
+        self.listening = scheme in ("udpin", "udp")
+        self.peers: dict[Address, float] = {}  # udpin: address -> wall time of its heartbeat
+        self.sender = mavlink2.MAVLink(self, system, component)
         self.sender.signing.link_id = link_id
         self.parser = mavlink2.MAVLink(None, 0, 0)
         self.parser.robust_parsing = True
@@ -147,21 +173,49 @@ class Endpoint:
         """Send one message; a socket error drops it, never the loop."""
         try:
             self.sender.send(msg)
-            self.sent += 1
         except (OSError, struct.error, ValueError):
             pass  # a full socket buffer or an unreachable peer must not stop the loop
 
+    def write(self, buf: bytes) -> None:
+        """The sender's output: to the destination (udpout) or to every peer (udpin)."""
+        if not self.listening:
+            self.conn.write(buf)
+            self.sent += 1
+            return
+        now = time.monotonic()
+        for addr, seen in list(self.peers.items()):
+            if now - seen > PEER_TIMEOUT:
+                del self.peers[addr]
+                continue
+            try:
+                self.sock.sendto(buf, addr)
+                self.sent += 1
+            except OSError:
+                pass
+
+    def admit(self, addr: Address) -> None:
+        """A udpin endpoint's peer: addr sent a valid heartbeat (the caller checked it)."""
+        if not self.listening:
+            return
+        if addr not in self.peers and len(self.peers) >= MAX_PEERS:
+            del self.peers[min(self.peers, key=self.peers.__getitem__)]
+        self.peers[addr] = time.monotonic()
+
     def receive(self, budget: int, deadline: float = float("inf")
-                ) -> Iterator[tuple[bytes, Any]]:
-        """Up to ``budget`` datagrams, as (datagram, parsed message or None) per message;
-        no datagram is started once ``time.perf_counter()`` has passed ``deadline``."""
+                ) -> Iterator[tuple[bytes, Any, Address]]:
+        """Up to ``budget`` datagrams, as (datagram, parsed message or None, sender) per
+        message; no datagram is started once ``time.perf_counter()`` has passed ``deadline``."""
         for i in range(budget):
             if i and time.perf_counter() >= deadline:
                 return
-            data = self.conn.recv()
-            if not data:
+            try:
+                data, addr = self.sock.recvfrom(MAX_DATAGRAM)
+            except (BlockingIOError, InterruptedError):
                 return
-            yield from self._parse(bytes(data))
+            except OSError:  # e.g. ECONNREFUSED after a send to a closed port
+                continue
+            for raw, msg in self._parse(bytes(data)):
+                yield raw, msg, (str(addr[0]), int(addr[1]))
 
     def _parse(self, data: bytes) -> Iterator[tuple[bytes, Any]]:
         p = self.parser

@@ -180,6 +180,25 @@ class Parameter:
         return self.range.integer
 
 
+MAV_PARAM_ERROR_DOES_NOT_EXIST = 1
+MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE = 2
+MAV_PARAM_ERROR_PERMISSION_DENIED = 3
+MAV_PARAM_ERROR_TYPE_UNSUPPORTED = 6
+MAV_PARAM_ERROR_TYPE_MISMATCH = 7
+
+
+@dataclass(frozen=True)
+class Refused:
+    """Why a parameter set was refused: the text told by STATUSTEXT and the MAV_PARAM_ERROR
+    code a PARAM_ERROR carries (what MAVSDK and QGroundControl turn into an error result)."""
+
+    reason: str
+    code: int
+
+    def __str__(self) -> str:
+        return self.reason
+
+
 #: Guard: (proposed {FMU name: value} of every controller parameter, the FMU name changed)
 #: -> the reason the change is refused, or None
 Guard = Callable[[Mapping[str, float], str], str | None]
@@ -222,15 +241,18 @@ class ParameterTable:
         return {p.fmu_name: p.value for p in self.items if p.fmu_name is not None}
 
     def set(self, name: str, value: float, param_type: int = MAV_PARAM_TYPE_REAL32
-            ) -> str | None:
-        """Check and apply a value; returns the reason it was refused, or None."""
+            ) -> Refused | None:
+        """Check and apply a value; returns why it was refused, or None."""
         i = self._by_name.get(name)
         if i is None:
-            return f"unknown parameter {name}"
+            return Refused(f"unknown parameter {name}", MAV_PARAM_ERROR_DOES_NOT_EXIST)
         p = self.items[i]
+        if param_type != MAV_PARAM_TYPE_REAL32 and not p.integer:
+            return Refused(f"{name} refused: a REAL32 parameter", MAV_PARAM_ERROR_TYPE_MISMATCH)
         reason = self._check(p, value, param_type)
         if reason is not None:
-            return f"{name} {value:.4g} refused: {reason}"
+            return Refused(f"{name} {value:.4g} refused: {reason}",
+                           MAV_PARAM_ERROR_VALUE_OUT_OF_RANGE)
         if p.fmu_name is not None:
             self._apply(p.fmu_name, int(value) if p.integer else float(value))
         p.value = float(value)
@@ -241,8 +263,6 @@ class ParameterTable:
             return "not finite"
         if p.integer and param_type == MAV_PARAM_TYPE_REAL32 and value != int(value):
             return "an integer parameter"
-        if not p.integer and param_type != MAV_PARAM_TYPE_REAL32:
-            return "a REAL32 parameter"
         if not p.range.contains(value):
             return f"outside {p.range.text()}"
         if p.fmu_name is None:

@@ -59,22 +59,36 @@ def unknown_param(ctx: Context, ep: Endpoint, msg: Any, src: Source, name: str,
 
 
 def on_param_set(ctx: Context, ep: Endpoint, msg: Any, src: Source) -> None:
-    """Set a parameter (checked by the table); every endpoint hears the value in force."""
+    """Set a parameter (checked by the table); every endpoint hears the value in force.  A
+    refusal is told three ways: STATUSTEXT with the reason, PARAM_ERROR to the sender (which
+    MAVSDK and QGroundControl turn into an error result at once) and the PARAM_VALUE in force.
+    The bridge's own FPB_ parameters (setpoint limits and timeouts) change only on a signed
+    link (or with ``fullpose fly --limit``)."""
     name = param_id(msg.param_id)
     index = ctx.params.index(name)
-    if index is None:
-        ctx.statustext(mav.MAV_SEVERITY_WARNING, f"unknown parameter {name[:30]}", limited=True)
-        return
     kind = int(msg.param_type)
     value = mparams.decode(float(msg.param_value), kind)
-    if value is None:
-        reason: str | None = f"{name} refused: param_type {kind} unsupported"
+    refused: mparams.Refused | None
+    if index is None:
+        refused = mparams.Refused(f"unknown parameter {name[:30]}",
+                                  mparams.MAV_PARAM_ERROR_DOES_NOT_EXIST)
+    elif value is None:
+        refused = mparams.Refused(f"{name} refused: param_type {kind} unsupported",
+                                  mparams.MAV_PARAM_ERROR_TYPE_UNSUPPORTED)
+    elif name.startswith("FPB_") and not ctx.signed:
+        refused = mparams.Refused(f"{name} refused: limits change on a signed link only",
+                                  mparams.MAV_PARAM_ERROR_PERMISSION_DENIED)
     else:
-        reason = ctx.params.set(name, value, kind)
-    if reason is not None:
-        ctx.statustext(mav.MAV_SEVERITY_WARNING, reason, limited=True)
+        refused = ctx.params.set(name, value, kind)
+    if refused is not None:
+        ctx.statustext(mav.MAV_SEVERITY_WARNING, str(refused), limited=True)
+        raw = param_id(msg.param_id).encode("ascii", "replace")[:16]
+        ep.send(mav.MAVLink_param_error_message(src[0], src[1], raw, -1 if index is None
+                                                else index, refused.code))
     elif name.startswith("FPB_"):
         ctx.sync_limits()
+    if index is None:
+        return
     m = param_value(ctx, index)  # the value in force, accepted or not
     for e in ctx.endpoints:
         e.send(m)

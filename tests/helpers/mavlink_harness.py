@@ -116,8 +116,7 @@ def flight_fixture(make: Callable[[], Flight]) -> Any:
 
 
 class Flight:
-    """``config`` goes to BridgeConfig (``urls`` aside: the client's port); ``setup_from_gcs``
-    names the client's link for SETUP_SIGNING."""
+    """``config`` goes to BridgeConfig (``urls`` aside: the client's port)."""
 
     def __init__(self, speed: float = 4.0, system: int = 255, component: int = 190,
                  dialect: str = "common", **config: Any) -> None:
@@ -126,15 +125,18 @@ class Flight:
                                               source_system=system,
                                               source_component=component, dialect=dialect)
         self.src = (system, component)
+        self._chunks: dict[int, dict[int, str]] = {}
         url = f"udpout:127.0.0.1:{self.port}"
-        if config.pop("setup_from_gcs", False):
-            config["signing_setup_from"] = (url,)
         config.setdefault("duration", 120.0)
         self.bridge = Bridge(BridgeConfig(urls=[url], speed=speed, **config))
         self.thread = threading.Thread(target=self.bridge.run, daemon=True)
         self.thread.start()
         self.texts: list[str] = []
         self.wait("HEARTBEAT", 10.0)
+
+    def bridge_port(self) -> int:
+        """The UDP port the bridge's endpoint listens on (where a stranger would send)."""
+        return int(self.bridge.endpoints[0].sock.getsockname()[1])
 
     def close(self) -> None:
         self.bridge.stop()
@@ -152,8 +154,8 @@ class Flight:
             m = self.gcs.recv_match(blocking=True, timeout=0.02)
             if m is None:
                 continue
-            if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
+            if m.get_type() == "STATUSTEXT" and not self._whole_text(m):
+                continue  # a chunk of a longer text: the message is its last chunk
             if m.get_type() == kind and cond(m):
                 return m
         raise AssertionError(f"no {kind} within {timeout} s (texts {self.texts[-5:]})")
@@ -161,7 +163,21 @@ class Flight:
     def drain(self) -> None:
         while (m := self.gcs.recv_match(blocking=False)) is not None:
             if m.get_type() == "STATUSTEXT":
-                self.texts.append(m.text)
+                self._whole_text(m)
+
+    def _whole_text(self, m: Any) -> bool:
+        """Reassemble MAVLink 2 STATUSTEXT chunks (id, chunk_seq; a text shorter than 50
+        characters ends one): on the last, ``m.text`` becomes the whole text, which joins
+        ``texts``; False while a longer text is still coming."""
+        if m.id != 0:
+            parts = self._chunks.setdefault(m.id, {})
+            parts[m.chunk_seq] = m.text
+            if len(m.text) >= 50:
+                return False
+            m.text = "".join(parts[k] for k in sorted(parts))
+            del self._chunks[m.id]
+        self.texts.append(m.text)
+        return True
 
     def command(self, cmd: int, *params: float, expect: int | None = None) -> Any:
         p = list(params) + [0.0] * (7 - len(params))

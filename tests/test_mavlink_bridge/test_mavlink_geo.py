@@ -105,15 +105,12 @@ def test_origin_option_and_scenario_field_reject_bad_values(tmp_path):
 
 class Flight(harness.Flight):
     def __init__(self, origin=None, speed=4.0):
-        super().__init__(speed, **({} if origin is None else {"origin": origin}))
         # these tests are about where the vehicle goes, not setpoint loss: a test process
         # stalled by a busy host, or a run of refused setpoints (which refresh nothing),
         # must not lose OFFBOARD (at speed 4, 1 s simulated is 0.25 s wall): the longest
-        # timeout the parameter allows
-        self.gcs.mav.param_set_send(1, 1, b"FPB_SP_TIMEOUT", 60.0,
-                                    mavutil.mavlink.MAV_PARAM_TYPE_REAL32)
-        self.wait("PARAM_VALUE", 3.0, lambda m: m.param_id == "FPB_SP_TIMEOUT"
-                  and m.param_value == 60.0)
+        # timeout the parameter allows, set as `fullpose fly --limit` does
+        super().__init__(speed, bridge_parameters={"FPB_SP_TIMEOUT": 60.0},
+                         **({} if origin is None else {"origin": origin}))
 
     def command(self, cmd, *params, expect=0):
         return super().command(cmd, *params, expect=expect)
