@@ -138,8 +138,9 @@ def recover(out_dir: Path) -> list[str]:
     previous results of a run killed between the two moves that publish (``NAME`` missing,
     ``.NAME.*.old`` there) go back into place; the temporary folders and recording files of
     runs that no longer run are removed, whatever results folder they were for.  A live
-    run's files are never touched.  Returns what was done, one line each.  Safe at every
-    instant: each step is one rename or the removal of a folder no one needs."""
+    run's files are never touched, nor a folder that does not hold what a run writes.
+    Returns what was done, one line each.  Safe at every instant: each step is one rename
+    or the removal of a folder no one needs; a step that fails is left for the next run."""
     parent = Path(out_dir).absolute().parent
     try:
         entries = [p for p in parent.iterdir() if p.name.startswith(".")]
@@ -159,31 +160,78 @@ def recover(out_dir: Path) -> list[str]:
                 done.append(f"removed {path.name}, left by a run that no longer runs")
             continue
         m = _LEGACY.fullmatch(path.name)
-        if m is None:
+        if m is None or not path.is_dir() or path.is_symlink():
             continue
-        if m.group(2).endswith(".old"):
-            inner = path / m.group(1)
-            if inner.is_dir() and not (parent / m.group(1)).exists():
-                os.replace(inner, parent / m.group(1))
-                done.append(f"restored {m.group(1)} from {path.name}")
-            _remove(path)
-        else:
+        name = m.group(1)
+        if m.group(2).endswith(".old"):  # (the previous results inside, as NAME)
+            inside = [p.name for p in _listing(path)]
+            if inside == [name] and (path / name).is_dir():
+                if _vacant(parent / name) and _move(path / name, parent / name):
+                    done.append(f"restored {name} from {path.name}, left by a killed run")
+                    inside = []
+                elif _holds_results(parent / name) and _results_or_empty(path / name):
+                    _remove(path / name)  # results older than those in place
+                    inside = []
+            if not inside:
+                with contextlib.suppress(OSError):
+                    path.rmdir()
+        elif _results_or_empty(path):
             with contextlib.suppress(OSError):
                 if time.time() - path.stat().st_mtime > LEGACY_PARTIAL_AGE:
                     _remove(path)
                     done.append(f"removed {path.name}, left by a killed run")
     for name, found in olds.items():
         target = parent / name
-        if not target.exists() and not target.is_symlink():
+        if _vacant(target):
             newest = max(found, key=_changed)  # (several only from runs side by side)
-            os.replace(newest, target)
-            found.remove(newest)
-            done.append(f"restored {name} from {newest.name}: the run publishing it was "
-                        "killed between its two moves")
-        for path in found:
-            _discard(path)
-            done.append(f"removed {path.name}, left by a run that no longer runs")
+            if _move(newest, target):
+                found.remove(newest)
+                done.append(f"restored {name} from {newest.name}: the run publishing it was "
+                            "killed between its two moves")
+        if _holds_results(target):  # the others are older results, replaced since
+            for path in found:
+                _discard(path)
+                done.append(f"removed {path.name}, left by a run that no longer runs")
     return done
+
+
+_RUN_FILES = re.compile(r"(results\.(parquet|csv|mcap|npz)|metrics\.json|force_sets\.json|"
+                        r"[\w.-]+\.png)")
+"""The names of the files a run writes into its results folder."""
+
+
+def _listing(folder: Path) -> list[Path]:
+    try:
+        return list(folder.iterdir())
+    except OSError:
+        return []
+
+
+def _results_or_empty(folder: Path) -> bool:
+    """Whether ``folder`` holds only files a run writes (or nothing): ours to remove."""
+    return folder.is_dir() and all(p.is_file() and _RUN_FILES.fullmatch(p.name)
+                                   for p in _listing(folder))
+
+
+def _holds_results(folder: Path) -> bool:
+    return (folder / RESULT_MARKER).is_file()
+
+
+def _vacant(target: Path) -> bool:
+    """Whether results can be moved back to ``target``: it is missing (or an empty folder,
+    which goes)."""
+    if target.is_dir() and not target.is_symlink() and not _listing(target):
+        with contextlib.suppress(OSError):
+            target.rmdir()
+    return not target.exists() and not target.is_symlink()
+
+
+def _move(src: Path, dst: Path) -> bool:
+    try:
+        os.replace(src, dst)
+    except OSError:
+        return False
+    return True
 
 
 def _remove(path: Path) -> None:

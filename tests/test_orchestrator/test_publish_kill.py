@@ -268,6 +268,36 @@ def test_leftovers_of_earlier_versions(tmp_path: Path):
     assert leftover_names(tmp_path) == [fresh.name]
 
 
+def test_what_is_not_ours_is_never_removed(tmp_path: Path):
+    """Folders whose names look like an earlier version's leftovers but hold other files
+    (a user's backup), and a killed run's previous results when the user has put a folder
+    of their own where they belong: all stay."""
+    from orchestrator.runner import recover
+
+    backup = tmp_path / ".vimrc.20240101.old"
+    (backup / "vimrc").mkdir(parents=True)
+    (backup / "vimrc" / "notes.txt").write_text("mine")
+    odd = tmp_path / ".thesis.0123456789ab.partial"
+    odd.mkdir()
+    (odd / "chapter1.tex").write_text("mine")
+    hour_ago = time.time() - 3700.0
+    os.utime(odd, (hour_ago, hour_ago))
+    (tmp_path / "vimrc").mkdir()
+    (tmp_path / "vimrc" / "other.txt").write_text("also mine")
+    ended = subprocess.run([sys.executable, "-c", "import os; print(os.getpid())"],
+                           capture_output=True, text=True, check=True)
+    aside = tmp_path / f".res.{int(ended.stdout)}-1.0123456789ab.old"
+    aside.mkdir()
+    (aside / "metrics.json").write_text("previous")
+    (tmp_path / "res").mkdir()
+    (tmp_path / "res" / "thesis.tex").write_text("the user's, put there since")
+    recover(tmp_path / "res")
+    assert (backup / "vimrc" / "notes.txt").read_text() == "mine"
+    assert (odd / "chapter1.tex").read_text() == "mine"
+    assert (aside / "metrics.json").read_text() == "previous"
+    assert (tmp_path / "res" / "thesis.tex").is_file()
+
+
 @pytest.mark.skipif(not Path("/proc/self/stat").exists(), reason="start times from /proc")
 def test_owner_tags_tell_processes_apart():
     from orchestrator.output import figure_pool as owners
