@@ -69,6 +69,7 @@ class LiveSession:
             self._dist_slices = self._slices(conn.dist, DIST_INPUTS)
             # controller outputs before the first step: its initial ones (spare row)
             self._last_ctrl_row = self.rec.spare
+            self._group_index: dict[str, list[tuple[str, int, np.ndarray]]] | None = None
         except Exception:
             self.close()
             raise
@@ -133,17 +134,28 @@ class LiveSession:
     def state(self) -> dict[str, dict[str, np.ndarray]]:
         """Latest outputs by FMU and variable group: ``state()["plant"]["pos"]`` (at
         ``time``), ``state()["ctrl"]["mu_c"]`` (the controller's latest answer)."""
-        rec, conn = self.rec, self.engine.conn
+        rec = self.rec
         rows = {"plant": (rec.plant[0], rec.ints[0]),
                 "ctrl": (rec.ctrl[self._last_ctrl_row], rec.ints[self._last_ctrl_row])}
-        out: dict[str, dict[str, list[float]]] = {"plant": {}, "ctrl": {}}
-        for fmu, names in (("plant", conn.plant_out), ("ctrl", conn.ctrl_out)):
-            for i, name in enumerate(names):
-                out[fmu].setdefault(name.split("[")[0], []).append(float(rows[fmu][0][i]))
-        for i, column in enumerate(rec.int_columns):
-            fmu, name = column.split(".", 1)
-            out[fmu].setdefault(name.split("[")[0], []).append(float(rows[fmu][1][i]))
-        return {fmu: {k: np.array(v) for k, v in d.items()} for fmu, d in out.items()}
+        return {fmu: {name: rows[fmu][kind][idx].astype(float)
+                      for name, kind, idx in self._groups()[fmu]}
+                for fmu in ("plant", "ctrl")}
+
+    def _groups(self) -> dict[str, list[tuple[str, int, np.ndarray]]]:
+        """Per FMU, (group name, 0: real / 1: integer columns, their indices) in output order:
+        worked out once, as the columns never change."""
+        if self._group_index is None:
+            conn = self.engine.conn
+            found: dict[str, dict[str, tuple[int, list[int]]]] = {"plant": {}, "ctrl": {}}
+            for fmu, names in (("plant", conn.plant_out), ("ctrl", conn.ctrl_out)):
+                for i, name in enumerate(names):
+                    found[fmu].setdefault(name.split("[")[0], (0, []))[1].append(i)
+            for i, column in enumerate(self.rec.int_columns):
+                fmu, name = column.split(".", 1)
+                found[fmu].setdefault(name.split("[")[0], (1, []))[1].append(i)
+            self._group_index = {fmu: [(name, kind, np.array(idx)) for name, (kind, idx)
+                                       in groups.items()] for fmu, groups in found.items()}
+        return self._group_index
 
     def close(self) -> None:
         """Free both FMU instances."""

@@ -1,17 +1,18 @@
 """Benchmark: the bridge's pacing under load (prints figures, asserts nothing).
 
-Four cases, each a bridge at speed 1 flying a position setpoint in OFFBOARD for
-``--duration`` simulated seconds, with the host busy (``--busy`` Python busy loops in other
-processes, default 2: both cores of the CI machine) and with or without a fuzzer process
-sending ``--rate`` datagrams/s (default 2,500: random bytes, mutated and truncated
-setpoints, NaN setpoints and valid setpoints, as the fuzz test of
-tests/test_mavlink_bridge/test_mavlink_bridge.py).  Each case runs with the input time
-budget (the default) and without it (the pre-budget behaviour: RX_TIME_LATE = RX_TIME_SHARE
-= inf, a count-only bound).  Reported: the worst lag behind wall time, chunks late by more
-than a chunk period, datagrams handled, and whether OFFBOARD survived (the ground station's
-20 Hz setpoints compete with the flood).
+Three cases, each a bridge at speed 1 flying a position setpoint in OFFBOARD for
+``--duration`` simulated seconds beside a 20 Hz ground station: the host idle, the host busy
+(``--busy`` Python busy loops in other processes, default 2: both cores of the CI machine),
+and busy with a fuzzer process sending ``--rate`` datagrams/s (default 2,500: random bytes,
+mutated and truncated setpoints, NaN setpoints and valid setpoints, as the fuzz test of
+tests/test_mavlink_bridge/test_mavlink_bridge.py).  Reported per run: the worst lag behind
+wall time, chunks late by more than a chunk period, datagrams handled, the bridge thread's
+CPU time per simulated second, and whether OFFBOARD survived (the ground station's
+setpoints compete with the flood).  ``--count-only`` adds each case with input bounded by
+count only (RX_TIME_LATE = RX_TIME_SHARE = inf), the comparison behind the time budget.
 
-Usage: python tests/bench/bench_pacing.py [--duration 10] [--busy 2] [--rate 2500]
+Usage: python tests/bench/bench_pacing.py [--duration 10] [--busy 2] [--rate 2500] [--repeat 3]
+       [--count-only]
 """
 
 from __future__ import annotations
@@ -93,10 +94,13 @@ def run_case(duration: float, busy: int, rate: float, budget: bool) -> dict[str,
         th = threading.Thread(target=setpoints, daemon=True)
         th.start()
         time.sleep(0.5)  # the load is up
+        cpu0 = time.thread_time()
         stats = b.run()
+        cpu = time.thread_time() - cpu0  # the bridge's own thread (the GCS thread apart)
         keep.set()
         th.join(2)
         return {"max_lag_ms": 1e3 * stats.max_lag, "late": stats.late_chunks,
+                "cpu_ms_per_s": 1e3 * cpu / max(stats.sim_time, 1e-9),
                 "chunks": stats.chunks, "datagrams": stats.datagrams,
                 "speed": stats.achieved_speed,
                 "lost": sum("offboard lost" in t for t in b.events), "mode": b.mode}
@@ -115,33 +119,47 @@ def _free_port() -> int:
         return int(s.getsockname()[1])
 
 
+CASES = (("idle", 0, 0.0), ("busy", None, 0.0), ("busy + fuzzer", None, None))
+"""(name, busy processes (None: --busy), fuzz rate (None: --rate)) of each case."""
+
+
 def main() -> None:
+    """Run the cases, interleaved --repeat times, with the shipped input budget (and with
+    --count-only, the count-only bound too); print a row per run and the summary."""
     parser = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     parser.add_argument("--duration", type=float, default=10.0, help="simulated s per case")
     parser.add_argument("--busy", type=int, default=2, help="busy-loop processes")
     parser.add_argument("--rate", type=float, default=2500.0, help="fuzz datagrams/s")
     parser.add_argument("--repeat", type=int, default=3, help="runs of each case, interleaved")
+    parser.add_argument("--count-only", action="store_true",
+                        help="also run each case with input bounded by count only")
     args = parser.parse_args()
     print(f"host: {os.cpu_count()} cpus, load average {os.getloadavg()[0]:.2f} at start; "
-          f"{args.busy} busy processes; {args.duration:g} s per case")
-    print(f"{'input budget':13s} {'fuzzer':>8s} {'max lag ms':>11s} {'late chunks':>14s} "
-          f"{'datagrams':>10s} {'speed':>6s}  mode at end (offboard losses)")
-    lags: dict[tuple[float, bool], list[float]] = {}
+          f"{args.duration:g} s per case at speed 1")
+    print(f"{'case':14s} {'budget':10s} {'max lag ms':>10s} {'late chunks':>14s} "
+          f"{'datagrams':>10s} {'cpu ms/s':>9s} {'speed':>6s}  mode (offboard losses)")
+    results: dict[tuple[str, bool], list[dict[str, Any]]] = {}
+    budgets = (True, False) if args.count_only else (True,)
     for _ in range(args.repeat):
-        for rate in (0.0, args.rate):
-            for budget in (False, True):
-                r = run_case(args.duration, args.busy, rate, budget)
-                lags.setdefault((rate, budget), []).append(r["max_lag_ms"])
-                print(f"{'time+count' if budget else 'count only':13s} {rate:8.0f} "
-                      f"{r['max_lag_ms']:11.1f} {r['late']:6d}/{r['chunks']:<7d} "
-                      f"{r['datagrams']:10d} {r['speed']:6.3f}  {r['mode']} ({r['lost']})",
-                      flush=True)
-    print(f"\nworst lag over {args.repeat} runs (median), ms; load average at end "
-          f"{os.getloadavg()[0]:.2f}")
-    for (rate, budget), v in lags.items():
-        v = sorted(v)
-        print(f"{'time+count' if budget else 'count only':13s} fuzzer {rate:6.0f}/s: "
-              f"worst {v[-1]:7.1f}  median {statistics.median(v):7.1f}")
+        for name, busy, rate in CASES:
+            busy = args.busy if busy is None else busy
+            rate = args.rate if rate is None else rate
+            for budget in budgets:
+                r = run_case(args.duration, busy, rate, budget)
+                results.setdefault((name, budget), []).append(r)
+                print(f"{name:14s} {'time+count' if budget else 'count':10s} "
+                      f"{r['max_lag_ms']:10.1f} {r['late']:6d}/{r['chunks']:<7d} "
+                      f"{r['datagrams']:10d} {r['cpu_ms_per_s']:9.1f} {r['speed']:6.3f}  "
+                      f"{r['mode']} ({r['lost']})", flush=True)
+    print(f"\nover {args.repeat} runs; busy = {args.busy} busy-loop processes, fuzzer "
+          f"{args.rate:g} datagrams/s; load average at end {os.getloadavg()[0]:.2f}")
+    print(f"{'case':14s} {'budget':10s} {'worst lag ms':>12s} {'median':>8s} "
+          f"{'bridge cpu ms per simulated s (mean)':>37s}")
+    for (name, budget), rs in results.items():
+        lags = sorted(r["max_lag_ms"] for r in rs)
+        cpu = statistics.fmean(r["cpu_ms_per_s"] for r in rs)
+        print(f"{name:14s} {'time+count' if budget else 'count':10s} {lags[-1]:12.1f} "
+              f"{statistics.median(lags):8.1f} {cpu:37.1f}")
 
 
 if __name__ == "__main__":
