@@ -565,6 +565,22 @@ static FpStatus plant_check_restored(const void *model, int initialized,
                (long)m->af.n_rotors, (long)m->rotors.n, FP_MAX_ROTORS);
         return FP_ERROR;
     }
+    /* the measurement-delay ring: the step writes hist[(hist_head + 1) % PLANT_HISTORY] and walks
+     * hist_count points back from hist_head (any lifecycle: a model's own values are in range) */
+    if (m->hist_head < 0 || m->hist_head >= PLANT_HISTORY) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: hist_head = %ld is outside 0..%d (the index of the latest "
+               "point of the measurement-delay history)",
+               (long)m->hist_head, PLANT_HISTORY - 1);
+        return FP_ERROR;
+    }
+    if (m->hist_count < 0 || m->hist_count > PLANT_HISTORY) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: hist_count = %ld is outside 0..%d (the points kept in the "
+               "measurement-delay history)",
+               (long)m->hist_count, PLANT_HISTORY);
+        return FP_ERROR;
+    }
     if (!initialized) return FP_OK; /* parameters are checked when initialization ends */
     if (validate(m, logger) != 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");

@@ -434,3 +434,70 @@ def test_a_resealed_corrupt_model_is_refused_by_the_model_on_an_aligned_copy(mak
     refused(inst, reseal(bad), "rotor count 40")
     assert serialize(inst) == good  # nothing of it reached the live model
     inst.step(H)  # and the instance is still usable
+
+
+def history_indices_at(make) -> int:
+    """Where the plant's measurement-delay ring indices (int32 hist_head, then hist_count)
+    are in its state: after n steps they are n and n + 1 (one point per communication point,
+    the initial one included); the one place where that holds for two n."""
+    found = None
+    for n in (3, 7):
+        inst = make("plant")
+        for _ in range(n):
+            inst.step(H)
+        blob = serialize(inst)
+        here = {i for i in range(HEADER_SIZE, len(blob) - 8, 4)
+                if struct.unpack_from("<ii", blob, i) == (n, n + 1)}
+        found = here if found is None else found & here
+    assert len(found) == 1, found
+    return found.pop()
+
+
+PLANT_HISTORY = 512  # fmu_src/plant/plant.h: communication points kept for mocap_delay
+
+
+@pytest.mark.parametrize("field, value", [
+    ("hist_head", -100000),  # issue 32: accepted, and the next step wrote hist[-159]
+    ("hist_head", -1),
+    ("hist_head", PLANT_HISTORY),
+    ("hist_count", -1),
+    ("hist_count", PLANT_HISTORY + 1),
+    ("hist_count", 2**31 - 1),
+])
+def test_a_restored_plant_history_index_out_of_range_is_refused(make, field, value):
+    """The plant's ring of past true poses (for mocap_delay) is addressed by hist_head and
+    walked hist_count points back: a resealed state with either outside its array passes
+    fmi2DeSerializeFMUstate (the header is sound) and is refused by fmi2SetFMUstate, whose
+    model check (check_restored, on the glue's aligned copy) names the field; the instance
+    that refuses it is as it was and still steps.  Before, hist_head = -100000 was taken and
+    the next step wrote hist[-159] (UBSan, then a segfault)."""
+    at = history_indices_at(make) + (0 if field == "hist_head" else 4)
+    inst = make("plant", parameters={"mocap_delay": 0.004})  # the ring is read, too
+    for _ in range(5):
+        inst.step(H)
+    good = serialize(inst)
+    bad = bytearray(good)
+    bad[at:at + 4] = struct.pack("<i", value)
+    said = f"restored state: {field} = {value} is outside"
+    refused(inst, reseal(bad), said)
+    assert "fmi2SetFMUstate: the state is refused" in logged(inst, "ERROR")
+    assert serialize(inst) == good  # nothing of it reached the live model
+    for _ in range(3):
+        inst.step(H)  # still usable
+
+
+@pytest.mark.parametrize("head, count", [(0, 0), (PLANT_HISTORY - 1, PLANT_HISTORY)])
+def test_a_restored_plant_history_at_its_bounds_is_accepted(make, head, count):
+    """The bounds are the array's, no tighter: the first and last index, an empty and a
+    full ring restore and step."""
+    at = history_indices_at(make)
+    inst = make("plant")
+    inst.step(H)
+    blob = bytearray(serialize(inst))
+    blob[at:at + 8] = struct.pack("<ii", head, count)
+    state = inst.slave.deSerializeFMUstate(reseal(blob))
+    try:
+        inst.slave.setFMUstate(state)
+    finally:
+        inst.slave.freeFMUstate(state)
+    inst.step(H)
