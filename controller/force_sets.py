@@ -44,7 +44,9 @@ Method (deterministic; no randomness anywhere)
   the directions the LP maximisers do not span; such a set is written with explicit pairs of
   opposite facets (an equality as two inequalities) plus facets in its affine hull, so the
   H-representation stays bounded and exact in the flat directions.
-* An empty S(tau) raises :class:`EmptyForceSetError`; LP failures raise RuntimeError.
+* An empty S(tau) raises :class:`EmptyForceSetError`; an LP or Qhull failure raises
+  :class:`ForceSetError` (a RuntimeError), one line naming the airframe's file: Qhull's own
+  report (pages of options and input) never reaches the user.
 * Facets are returned in a canonical order (:func:`canonical_facets`: sorted by normal, then
   offset), so round-off differences between library versions do not permute them; compare
   two polytopes as sets with :func:`same_polytope` (support LPs, tolerance scaled to the set),
@@ -78,7 +80,7 @@ from controller.polytope import (
     outer_vertices,
     z_extremes,
 )
-from plant.airframe import Airframe, load_airframe
+from plant.airframe import ROTOR_THRUST_LIMITS, Airframe, load_airframe
 from plant.effectiveness import thrust_direction
 
 Array = NDArray[np.float64]
@@ -92,6 +94,10 @@ DEFAULT_GRID = 17
 
 FLOOR = 0.05
 """Floor of the relative error measure of the direction refinement, times the force scale."""
+
+
+class ForceSetError(RuntimeError):
+    """A force set the numerics (an LP, Qhull) could not compute, with the airframe named."""
 
 
 # ---------------------------------------------------------------------------
@@ -441,8 +447,28 @@ def _distances(outer: Array, inner: Array) -> Array:
 
 
 def _build(af: Airframe, torque: Array | None, n_directions: int, grid: int) -> Polytope:
+    """The polytope; a failure of its LPs or of Qhull as one ForceSetError line that names
+    the airframe's file (Qhull's message is pages long)."""
     if not 6 <= n_directions <= MAX_FACETS:
         raise ValueError(f"n_directions must be in 6..{MAX_FACETS}, got {n_directions}")
+    what = "attainable force set" if torque is None else "feasible force set S(tau)"
+    where = f"{af.source or af.name}: the {what} of airframe '{af.name}'"
+    # an airframe made in code skips the file's checks: Qhull must never see numbers that
+    # it cannot resolve (a thrust of 1e-296 N crashes it, not only makes it fail)
+    t_max, (lo, hi) = af.k_t * (af.omega_max * af.omega_max), ROTOR_THRUST_LIMITS
+    if not lo <= t_max <= hi:
+        raise ForceSetError(f"{where}: a rotor's maximum thrust k_t omega_max^2 = "
+                            f"{t_max:.5g} N is outside [{lo:g}, {hi:g}] N")
+    try:
+        return _build_polytope(af, torque, n_directions, grid)
+    except RuntimeError as e:  # scipy's QhullError is one, and so are the LP failures
+        lines = [line.strip() for line in str(e).splitlines() if line.strip()]
+        reason = lines[0] if lines else type(e).__name__
+        raise ForceSetError(f"{where} could not be computed ({reason})") from None
+
+
+def _build_polytope(af: Airframe, torque: Array | None, n_directions: int,
+                    grid: int) -> Polytope:
     oracle = _make_oracle(af, torque, grid)
     tol = REL_TOL * oracle.scale
     p0, Q, W = _affine_hull(oracle)

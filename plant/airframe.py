@@ -33,6 +33,18 @@ MAX_ROTORS = 8
 RPM = 2.0 * math.pi / 60.0
 _EFFECT = {"k_t": "thrust", "k_d": "drag torque"}
 
+# Physical plausibility of the propulsion (docs/airframes.md, "Plausible numbers"): the
+# bounds fp_check_airframe applies in both FMUs (FP_* in fmu_src/common/multirotor.h; a test
+# compares them), computed here in the same order so that both refuse the same airframes.
+OMEGA_MAX_RPM_LIMITS = (1.0, 500000.0)
+"""A rotor's top speed omega_max (rpm): no lifting rotor turns slower or faster."""
+ROTOR_THRUST_LIMITS = (1e-3, 1e5)
+"""A rotor's maximum thrust k_t omega_max^2 (N): 0.1 gram-force to 10 tonnes-force."""
+DRAG_RATIO_MAX = 10.0
+"""The drag torque per newton of thrust, k_d / k_t (m)."""
+THRUST_TO_WEIGHT_LIMITS = (0.1, 100.0)
+"""n k_t omega_max^2 / (m g), when g > 0."""
+
 
 class AirframeError(FieldError):
     """An airframe file is missing, unreadable or inconsistent."""
@@ -341,6 +353,48 @@ def _per_rotor(reader: _Reader, key: str, n: int, default: float) -> list[float]
     return values
 
 
+def _check_propulsion(prop: _Reader, k_t: float, k_d: float, omega_max: float) -> float:
+    """A rotor's maximum thrust k_t omega_max^2 (N) after the plausibility bounds of the
+    rotor speed, the thrust and the drag torque (fp_check_airframe's, in its order: the
+    first bound missed is blamed on the field it names)."""
+    rpm = omega_max / RPM
+    lo, hi = (v * RPM for v in OMEGA_MAX_RPM_LIMITS)
+    if not lo <= omega_max <= hi:
+        what = (f"below {OMEGA_MAX_RPM_LIMITS[0]:g} rpm, slower" if omega_max < lo else
+                f"beyond {OMEGA_MAX_RPM_LIMITS[1]:g} rpm, faster")
+        raise prop.fail("omega_max_rpm", f"{rpm:.5g} rpm is {what} than any rotor turns "
+                        "(see 'Plausible numbers' in docs/airframes.md)")
+    t_max = k_t * (omega_max * omega_max)
+    t_lo, t_hi = ROTOR_THRUST_LIMITS
+    if not t_lo <= t_max <= t_hi:
+        what = (f"below {t_lo:g} N, less" if t_max < t_lo else f"beyond {t_hi:g} N, more")
+        raise prop.fail("k_t", f"{k_t:.5g} N/(rad/s)^2 gives a rotor a maximum thrust "
+                        f"k_t omega_max^2 = {t_max:.5g} N at {rpm:.5g} rpm, {what} than any "
+                        "rotor's; is k_t in N/(rad/s)^2?")
+    ratio = k_d / k_t
+    if not ratio <= DRAG_RATIO_MAX:
+        raise prop.fail("k_d", f"{k_d:.5g} N m/(rad/s)^2 gives a drag torque per newton of "
+                        f"thrust k_d / k_t = {ratio:.5g} m, beyond {DRAG_RATIO_MAX:g} m, more "
+                        "than any rotor's; is k_d in N m/(rad/s)^2?")
+    return t_max
+
+
+def _check_thrust_to_weight(body: _Reader, n: int, t_max: float, mass: float,
+                            gravity: float) -> None:
+    """The thrust-to-weight ratio n k_t omega_max^2 / (m g) within its plausibility bounds
+    (under gravity; fp_check_airframe's rule)."""
+    if not gravity > 0.0:
+        return
+    weight = mass * gravity
+    ratio = n * t_max / weight
+    lo, hi = THRUST_TO_WEIGHT_LIMITS
+    if not lo <= ratio <= hi:
+        what = f"below {lo:g}" if ratio < lo else f"beyond {hi:g}"
+        raise body.fail("mass", f"{mass:.5g} kg: the thrust-to-weight ratio n k_t "
+                        f"omega_max^2 / (m g) = {n} x {t_max:.5g} N / {weight:.5g} N = "
+                        f"{ratio:.5g} is {what}, not a vehicle's; is the mass in kg?")
+
+
 def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe:
     """An airframe from a TOML document already read (source names it in errors)."""
     top = _Reader(source, data)
@@ -369,6 +423,7 @@ def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe
                     f"the rotor {_EFFECT[key]} {key} omega_max^2 = {k:.5g} x {square:.5g}")
             raise prop.fail("omega_max_rpm", f"{omega_max:.5g} rad/s: {what} is beyond the "
                             "range of a double (1.8e308)")
+    t_max = _check_propulsion(prop, k_t, k_d, omega_max)
     tau_motor = prop.number("time_constant", positive=True)
     prop.reject_unknown()
 
@@ -430,6 +485,7 @@ def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe
     top.reject_unknown()
 
     n = len(positions)
+    _check_thrust_to_weight(body, n, t_max, mass, gravity)
     if tilting:
         if any(a != 0 for a in fixed_alpha + fixed_beta):
             raise AirframeError(source, "servo", "fixed tilt angles (alpha_deg/beta_deg) need "

@@ -267,6 +267,57 @@ static void check_authority(FpCheck *c, const FpRotorSet *rs) {
                        "third): the vehicle cannot be controlled");
 }
 
+/*
+ * Physical plausibility of the propulsion (the FP_* bounds of multirotor.h; plant/airframe.py
+ * applies the same ones, computed in the same order, to airframe files): a rotor speed
+ * between 1 and 500000 rpm, a rotor's maximum thrust between 1 mN and 100 kN, at most 10 m
+ * of drag torque per newton of thrust and, under gravity, a thrust-to-weight ratio between
+ * 0.1 and 100.  Outside them no vehicle exists, and the numbers leave the range the force
+ * sets and the allocation resolve (the controller's sets are bounded at 1e6 N).  A speed out
+ * of range skips the thrust checks it would skew, a thrust out of range the ratio.  These
+ * are not declared ranges (most bound a product of parameters): the messages read
+ * "parameter NAME: ..." or "parameters A, B: ...", never "parameter NAME = VALUE: ...",
+ * which reports a value outside its declared range.
+ */
+static void check_propulsion(FpCheck *c, const FpAirframe *af) {
+    const double rpm = 2.0 * PI / 60.0;
+    const double w_lo = FP_OMEGA_MAX_RPM_MIN * rpm, w_hi = FP_OMEGA_MAX_RPM_MAX * rpm;
+    const double t_max = af->k_t * (af->omega_max * af->omega_max);
+    const double ratio = af->k_d / af->k_t;
+    if (!(af->omega_max >= w_lo && af->omega_max <= w_hi)) {
+        fp_check_error(c,
+                       "parameter omega_max: %.6g rad/s is outside [%.6g, %.6g] rad/s (%g to %g "
+                       "rpm): %s than any rotor turns",
+                       af->omega_max, w_lo, w_hi, FP_OMEGA_MAX_RPM_MIN, FP_OMEGA_MAX_RPM_MAX,
+                       af->omega_max < w_lo ? "slower" : "faster");
+        return;
+    }
+    if (!(t_max >= FP_ROTOR_THRUST_MIN && t_max <= FP_ROTOR_THRUST_MAX)) {
+        fp_check_error(c,
+                       "parameters k_t, omega_max: a rotor's maximum thrust k_t omega_max^2 = "
+                       "%.6g N is outside [%g, %g] N: %s than any rotor's",
+                       t_max, FP_ROTOR_THRUST_MIN, FP_ROTOR_THRUST_MAX,
+                       t_max < FP_ROTOR_THRUST_MIN ? "less" : "more");
+        return;
+    }
+    if (!(ratio <= FP_DRAG_RATIO_MAX))
+        fp_check_error(c,
+                       "parameters k_d, k_t: the drag torque per newton of thrust k_d / k_t = "
+                       "%.6g m exceeds %g m: more than any rotor's",
+                       ratio, FP_DRAG_RATIO_MAX);
+    if (af->g > 0.0) {
+        const double weight = af->mass * af->g;
+        const double tw = (double)af->n_rotors * t_max / weight;
+        if (!(tw >= FP_THRUST_TO_WEIGHT_MIN && tw <= FP_THRUST_TO_WEIGHT_MAX))
+            fp_check_error(c,
+                           "parameters mass, g, k_t, omega_max: the thrust-to-weight ratio "
+                           "n_rotors k_t omega_max^2 / (mass g) = %d x %.6g N / %.6g N = %.6g "
+                           "is outside [%g, %g]",
+                           (int)af->n_rotors, t_max, weight, tw, FP_THRUST_TO_WEIGHT_MIN,
+                           FP_THRUST_TO_WEIGHT_MAX);
+    }
+}
+
 FpStatus fp_check_airframe(FpCheck *c, const FpAirframe *af) {
     FpRotorSet set;
     const FpRotorSet *rs = &set;
@@ -305,6 +356,7 @@ FpStatus fp_check_airframe(FpCheck *c, const FpAirframe *af) {
                     "exceeds omega_max (inverted limits)");
     fp_need_param(c, "tau_motor", &af->tau_motor, 1, NULL);
     fp_need_param(c, "tau_servo", &af->tau_servo, 1, NULL);
+    if (c->errors == errors0) check_propulsion(c, af);
     if (c->errors == errors0) check_authority(c, rs);
     return FP_OK;
 }

@@ -84,6 +84,9 @@ const char *fp_range_why(const FpRange *r, int integer, char *buf, size_t size);
  *   rotor_dir                    within its range, and +1 or -1
  *   alpha_min/max, beta_min/max  finite, within their ranges, min <= max
  *   omega_min <= omega_max; tau_motor, tau_servo positive
+ *   physical plausibility (the FP_* bounds of multirotor.h): omega_max within [1, 500000]
+ *                rpm, k_t omega_max^2 within [1e-3, 1e5] N, k_d / k_t <= 10 m, with g > 0
+ *                n_rotors k_t omega_max^2 / (mass g) within [0.1, 100]
  *   control authority: no two rotors at one place; the moment arms give torque about two
  *                axes and, with the drag torques, about all three
  * Errors are logged and counted in c.  Returns FP_ERROR only for a bad n_rotors.

@@ -29,6 +29,21 @@
  * range both FMUs' tables give those rows (and so the bound fp_check_airframe applies). */
 #define FP_SERVO_LIMIT 1.57079632679489661923
 
+/* Physical plausibility of an airframe's propulsion, checked by fp_check_airframe in both
+ * FMUs and by plant/airframe.py alike (tests/test_plant/test_airframes.py compares the
+ * numbers; docs/airframes.md, "Plausible numbers", gives the physics):
+ *   omega_max                   within [1, 500000] rpm (x 2 pi / 60 rad/s)
+ *   k_t omega_max^2             (a rotor's maximum thrust) within [1e-3, 1e5] N
+ *   k_d / k_t                   (drag torque per newton of thrust) at most 10 m
+ *   n k_t omega_max^2 / (m g)   (thrust-to-weight ratio, when g > 0) within [0.1, 100] */
+#define FP_OMEGA_MAX_RPM_MIN 1.0
+#define FP_OMEGA_MAX_RPM_MAX 500000.0
+#define FP_ROTOR_THRUST_MIN 1e-3
+#define FP_ROTOR_THRUST_MAX 1e5
+#define FP_DRAG_RATIO_MAX 10.0
+#define FP_THRUST_TO_WEIGHT_MIN 0.1
+#define FP_THRUST_TO_WEIGHT_MAX 100.0
+
 /* Bit of rotor i (0-based) in both FMUs' sat_flags output: FP_SAT_<kind> + i.
  * (Python: controller.fmu_parameters.SAT_FLAG_SHIFT; a test compares them.) */
 enum { FP_SAT_MOTOR = 0, FP_SAT_ALPHA = 8, FP_SAT_BETA = 16 };

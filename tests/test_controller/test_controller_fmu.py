@@ -326,6 +326,17 @@ SHARED_AIRFRAME_RULES = [
     ({"beta_min[2]": 0.5, "beta_max[2]": 0.2},
      "parameter beta_min[2] = 0.5: exceeds beta_max (inverted limits)"),
     ({"n_rotors": 9}, "parameter n_rotors = 9: must be in 1..8"),
+    # physical plausibility (FP_* of common/multirotor.h; plant/airframe.py applies the same;
+    # not declared ranges, so not "parameter NAME = VALUE")
+    ({"k_t": 1e-300}, "parameters k_t, omega_max: a rotor's maximum thrust k_t omega_max^2 = "
+                      "4.38649e-296 N is outside [0.001, 100000] N: less than any rotor's"),
+    ({"omega_max": 1e19}, "parameter omega_max: 1e+19 rad/s is outside [0.10472, 52359.9] "
+                          "rad/s (1 to 500000 rpm): faster than any rotor turns"),
+    ({"k_d": 1.0}, "parameters k_d, k_t: the drag torque per newton of thrust k_d / k_t = "
+                   "8771.93 m exceeds 10 m"),
+    ({"mass": 665.6}, "parameters mass, g, k_t, omega_max: the thrust-to-weight ratio n_rotors "
+                      "k_t omega_max^2 / (mass g) = 6 x 5.0006 N / 6529.54 N = 0.00459506 is "
+                      "outside [0.1, 100]"),
 ]
 
 

@@ -460,3 +460,41 @@ def test_plot_is_written(tmp_path):
     out_q = plot_force_sets("quadrotor", tmp_path / "quad.png", afs=afs_of("quadrotor"),
                             s0=s0_of("quadrotor"))
     assert out_q.stat().st_size > 20_000
+
+
+# ---------------------------------------------------------------------------
+# (9) a failure of the numerics: one line naming the airframe, never Qhull's report
+
+
+def test_a_qhull_failure_is_one_line_naming_the_airframe(tmp_path, monkeypatch, capsys):
+    """Qhull's error (here planted; 1e150 rpm gave one before the airframe checks refused such
+    speeds) is pages of options and input: the user sees its first line, with the airframe's
+    file and name, and `fullpose force-set` exits 2."""
+    from helpers.airframe_kinds import write_kind
+    from scipy.spatial import QhullError
+
+    import controller.force_sets as fs
+    from orchestrator.cli import main
+
+    report = ("QH6154 Qhull precision error: Initial simplex is flat (facet 1 is coplanar "
+              "with the interior point)\n\nWhile executing:  | qhull H\nOptions selected for "
+              "Qhull 2020.2.r 2020/08/31:\n" + "  run-id 617027435  Halfspace\n" * 60)
+
+    def flat(*args, **kwargs):
+        raise QhullError(report)
+
+    monkeypatch.setattr(fs, "intersection", flat)
+    monkeypatch.setenv("FULLPOSE_CACHE_DIR", str(tmp_path / "cache"))  # computed, not cached
+    path = write_kind("tilting_quadrotor", tmp_path)
+    with pytest.raises(fs.ForceSetError) as err:
+        fs.feasible_force_set(path)
+    assert str(err.value) == (
+        f"{path}: the feasible force set S(tau) of airframe 'tilting_quadrotor' could not be "
+        "computed (QH6154 Qhull precision error: Initial simplex is flat (facet 1 is coplanar "
+        "with the interior point))")
+    assert main(["force-set", "--airframe", str(path)]) == 2
+    out = capsys.readouterr()
+    assert out.err.splitlines() == [
+        f"fullpose: error: {path}: the attainable force set of airframe 'tilting_quadrotor' "
+        "could not be computed (QH6154 Qhull precision error: Initial simplex is flat (facet 1 "
+        "is coplanar with the interior point))"]

@@ -126,9 +126,10 @@ def test_the_table_covers_every_kind_of_bad_input_the_issue_names():
             "huge-duration", "out-under-file", "interrupted"} <= ids
     assert {"int-range", "int-32-bits", "not-utf8", "deep-nesting", "airframe-overflow",
             "signal-overflow", "millimetres"} <= ids
+    assert {"airframe-thrust", "airframe-speed", "airframe-grams"} <= ids
     assert set(doc_files()) == {"radians.toml", "far.toml", "unstable.toml", "weak.toml",
-                                "fast.toml", "mm.toml", "latin1.toml", "deep.toml",
-                                "overflow.toml"}
+                                "fast.toml", "feeble.toml", "spin.toml", "mm.toml",
+                                "latin1.toml", "deep.toml", "overflow.toml"}
 
 
 @pytest.mark.parametrize("row", ROWS, ids=[r["id"] for r in ROWS])

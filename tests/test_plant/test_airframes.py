@@ -1,6 +1,7 @@
 """Airframe files: shipped ones load, bad ones fail naming file and field."""
 
 import math
+import re
 from pathlib import Path
 
 import numpy as np
@@ -125,6 +126,29 @@ def test_custom_file_and_explicit_rotor_list(tmp_path):
          "the rotor drag torque k_d omega_max^2"),
         ("omega_max_rpm = 3000", "omega_max_rpm = 1e400", "propulsion.omega_max_rpm",
          "expected a finite number, got 1e400"),
+        # finite numbers no vehicle has (docs/airframes.md, "Plausible numbers"): a thrust of
+        # 1e-296 N crashed Qhull (exit 139), 1e6..1e20 rpm failed in an LP naming nothing,
+        # 1e150 rpm printed pages of Qhull's report
+        ("k_t = 1.0e-4", "k_t = 1e-300", "propulsion.k_t",
+         "1e-300 N/(rad/s)^2 gives a rotor a maximum thrust k_t omega_max^2 = 9.8696e-296 N "
+         "at 3000 rpm, below 0.001 N, less than any rotor's"),
+        ("k_t = 1.0e-4", "k_t = 2.0", "propulsion.k_t",
+         "k_t omega_max^2 = 1.9739e+05 N at 3000 rpm, beyond 100000 N, more than any rotor's"),
+        ("omega_max_rpm = 3000", "omega_max_rpm = 1e20", "propulsion.omega_max_rpm",
+         "1e+20 rpm is beyond 500000 rpm, faster than any rotor turns"),
+        ("omega_max_rpm = 3000", "omega_max_rpm = 1e6", "propulsion.omega_max_rpm",
+         "1e+06 rpm is beyond 500000 rpm"),
+        ("omega_max_rpm = 3000", "omega_max_rpm = 1e150", "propulsion.omega_max_rpm",
+         "1e+150 rpm is beyond 500000 rpm"),
+        ("omega_max_rpm = 3000", "omega_max_rpm = 0.5", "propulsion.omega_max_rpm",
+         "0.5 rpm is below 1 rpm, slower than any rotor turns"),
+        ("k_d = 1.0e-6", "k_d = 1e10", "propulsion.k_d",
+         "drag torque per newton of thrust k_d / k_t = 1e+14 m, beyond 10 m"),
+        ("mass = 1.0", "mass = 1e-300", "body.mass",
+         "the thrust-to-weight ratio n k_t omega_max^2 / (m g) = 4 x 9.8696 N / 9.81e-300 N = "
+         "4.0243e+300 is beyond 100"),
+        ("mass = 1.0", "mass = 1000.0", "body.mass",  # grams written as kilograms
+         "= 4 x 9.8696 N / 9810 N = 0.0040243 is below 0.1, not a vehicle's; is the mass in kg?"),
     ],
 )
 def test_bad_files_name_file_and_field(tmp_path, old, new, field, reason):
@@ -188,3 +212,125 @@ def test_both_fmus_declare_the_one_airframe_table_with_equal_defaults():
         assert (p.type, p.unit, p.min, p.max) == (c.type, c.unit, c.min, c.max), name
         assert math.isclose(float(p.start), float(c.start), rel_tol=1e-15, abs_tol=1e-15), name
         assert math.isclose(float(p.start), float(value), rel_tol=1e-12, abs_tol=1e-15), name
+
+
+# ---------------------------------------------------------------------------
+# Physical plausibility: the file's checks and both FMUs' fp_check_airframe (one rule set)
+
+ROOT = Path(__file__).resolve().parents[2]
+
+
+def test_the_plausibility_bounds_are_the_c_cores():
+    """plant/airframe.py's bounds are the FP_* macros fp_check_airframe applies in both FMUs
+    (fmu_src/common/multirotor.h), number for number."""
+    from plant import airframe
+
+    header = (ROOT / "fmu_src" / "common" / "multirotor.h").read_text()
+
+    def macro(name: str) -> float:
+        found = re.search(rf"#define {name} (\S+)", header)
+        assert found, name
+        return float(found.group(1))
+
+    assert airframe.OMEGA_MAX_RPM_LIMITS == (macro("FP_OMEGA_MAX_RPM_MIN"),
+                                             macro("FP_OMEGA_MAX_RPM_MAX"))
+    assert airframe.ROTOR_THRUST_LIMITS == (macro("FP_ROTOR_THRUST_MIN"),
+                                            macro("FP_ROTOR_THRUST_MAX"))
+    assert airframe.DRAG_RATIO_MAX == macro("FP_DRAG_RATIO_MAX")
+    assert airframe.THRUST_TO_WEIGHT_LIMITS == (macro("FP_THRUST_TO_WEIGHT_MIN"),
+                                                macro("FP_THRUST_TO_WEIGHT_MAX"))
+
+
+# The paper hexacopter (6 rotors, 0.6656 kg, g = 9.81) with its propulsion and mass changed to
+# lie close inside and outside each bound (on it for the top speed): the change, and the field
+# a file is refused on with how the FMUs' message begins (None: accepted).
+THRUST = ("propulsion.k_t", "parameters k_t, omega_max: ")
+WEIGHT = ("body.mass", "parameters mass, g, k_t, omega_max: ")
+PAPER = {"k_t": 1.14e-4, "k_d": 1.14e-6, "omega_max_rpm": 2000.0, "mass": 0.6656}
+BOUNDS = [
+    ({"omega_max_rpm": 500000.0, "k_t": 1e-8, "k_d": 1e-10}, None),  # on the bound: accepted
+    ({"omega_max_rpm": 500000.5, "k_t": 1e-8, "k_d": 1e-10},
+     ("propulsion.omega_max_rpm", "parameter omega_max: ")),
+    ({"omega_max_rpm": 1.0, "k_t": 400.0, "k_d": 4.0}, None),
+    ({"omega_max_rpm": 0.999, "k_t": 400.0, "k_d": 4.0},
+     ("propulsion.omega_max_rpm", "parameter omega_max: ")),
+    ({"k_t": 1e-300}, THRUST),
+    ({"k_t": 2.3e-8, "k_d": 2.3e-10, "mass": 1.3e-4}, None),  # 1.009 mN
+    ({"k_t": 2.2e-8, "k_d": 2.2e-10, "mass": 1.3e-4}, THRUST),  # 0.965 mN
+    ({"k_t": 2.27, "k_d": 2.27e-2, "mass": 13000.0}, None),  # 99.6 kN
+    ({"k_t": 2.3, "k_d": 2.3e-2, "mass": 13000.0}, THRUST),  # 100.9 kN
+    ({"k_d": 1.1e-3}, None),  # 9.6 m of drag torque per newton
+    ({"k_d": 1.2e-3}, ("propulsion.k_d", "parameters k_d, k_t: ")),  # 10.5 m
+    ({"mass": 0.031}, None),  # thrust-to-weight 98.7
+    ({"mass": 0.030}, WEIGHT),  # 102
+    ({"mass": 30.0}, None),  # 0.102: accepted by the rule (then no hover trim in the plant)
+    ({"mass": 31.0}, WEIGHT),  # 0.0987
+    ({"mass": 1e-300}, WEIGHT),
+]
+RULES = ("than any rotor", "thrust-to-weight ratio")
+"""Words of the plausibility messages (and only of those)."""
+
+
+def _bounds_case(change: dict[str, float]) -> tuple[str, dict[str, float | int | bool]]:
+    """The airframe file's text and the FMU parameters of one case of BOUNDS."""
+    from plant.airframe import RPM
+
+    values = {**PAPER, **change}
+    text = (ROOT / "plant" / "airframes" / "paper_hexacopter.toml").read_text()
+    for key, value in values.items():
+        text, found = re.subn(rf"^{key} = [^#\n]*", f"{key} = {value!r}  ", text, count=1,
+                              flags=re.M)
+        assert found == 1, key
+    params = load_airframe("paper_hexacopter").fmu_parameters()
+    params.update(k_t=values["k_t"], k_d=values["k_d"], mass=values["mass"],
+                  omega_max=values["omega_max_rpm"] * RPM)
+    return text, params
+
+
+def _fmu_log(make_fmu, which: str, params: dict[str, float | int | bool]) -> str:
+    """What the FMU logs initializing with these parameters ('' when it initializes)."""
+    from fmpy.fmi1 import FMICallException
+    from helpers import problems
+
+    inst = make_fmu(which, initialize=False)
+    try:
+        inst.initialize(parameters=params)
+    except FMICallException:
+        return problems(inst) or "refused"
+    return ""
+
+
+@pytest.mark.parametrize(("change", "refused"), BOUNDS,
+                         ids=[",".join(f"{k}={v:g}" for k, v in c.items()) for c, _ in BOUNDS])
+def test_the_file_and_both_fmus_refuse_the_same_implausible_airframes(tmp_path, make_fmu,
+                                                                      change, refused):
+    text, params = _bounds_case(change)
+    path = write(tmp_path, text)
+    if refused is None:
+        load_airframe(path)
+    else:
+        with pytest.raises(AirframeError) as err:
+            load_airframe(path)
+        assert str(err.value).startswith(f"{path}: field '{refused[0]}': ")
+        assert any(words in str(err.value) for words in RULES), str(err.value)
+    for which in ("plant", "controller"):
+        log = _fmu_log(make_fmu, which, params)
+        rule = [m for m in log.split(" | ") if any(words in m for words in RULES)]
+        if refused is None:
+            assert not rule, (which, log)
+        else:
+            assert rule and rule[0].startswith(refused[1]), (which, log)
+
+
+def test_an_implausible_thrust_never_reaches_qhull_even_from_code():
+    """An Airframe made in code skips the file's checks; the force sets refuse its thrust in
+    one line naming it, rather than letting Qhull crash on 1e-296 N (exit 139)."""
+    import dataclasses
+
+    from controller.force_sets import ForceSetError, feasible_force_set
+
+    af = dataclasses.replace(load_airframe("paper_hexacopter"), k_t=1e-300)
+    with pytest.raises(ForceSetError, match=r"paper_hexacopter.toml: the feasible force set "
+                       r"S\(tau\) of airframe 'paper_hexacopter': a rotor's maximum thrust "
+                       r"k_t omega_max\^2 = 4.3865e-296 N is outside \[0.001, 100000\] N$"):
+        feasible_force_set(af)
