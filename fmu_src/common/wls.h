@@ -39,9 +39,9 @@
  *                      result.max_violation tells which.
  *   FP_WLS_INFEASIBLE  no x satisfies the constraints.  x is within the bounds
  *                      and minimises the largest violation of the rows of
- *                      C x <= d, each row scaled to unit norm (if the cap cut
- *                      that search short: the best point found).  If a zero
- *                      row of C has d < 0, x is the solution without it.  If
+ *                      C x <= d, each row scaled to unit norm as given (if the
+ *                      cap cut that search short: the best point found).  If a
+ *                      zero row of C has d < 0, x is the solution without it.  If
  *                      the bounds cross (lb > ub), x is the previous solution
  *                      clamped into [min(lb,ub), max(lb,ub)].
  *   FP_WLS_BAD_INPUT   NaN anywhere in the data, inf in A, b or C, lb = +inf,
@@ -49,6 +49,15 @@
  *                      max_iter < 1 or sizes not set up.  x is left at the
  *                      previous solution (zero after setup) and the working
  *                      set is unchanged.
+ *
+ * Units: the solver works on the variables scaled by powers of 2, x_j = 2^e_j z_j, chosen
+ * from A's column norms and the rows of C (wls.c, column_exponents), so that a problem
+ * given with its variables in other units (columns of A and C times s_j, bounds over s_j)
+ * is solved as the same problem: the answer moves only by rounding.  The scaling is exact
+ * (powers of 2) and invisible to the caller: x, the working set, the result's objective
+ * and max_violation are in the caller's units; the tolerances below act on the scaled
+ * problem.  Neither the objective's weight (A and b times a factor) nor the rows' scales of
+ * C change the scaling.
  *
  * Numerics: the equality-constrained subproblems are solved by a null-space
  * method with Householder QR (no normal equations), rank-revealing QR with
@@ -63,10 +72,11 @@
  * Goldfarb-Idnani dual method; degenerate vertices are handled with Bland's rule.  See wls.c.
  * An iteration is one factorisation of the working set: O(n^2 (n + rows)) flops.
  *
- * Known limit: with A scaled by 1e-12 .. 1e12 against bounds and rows of C near unit
- * size (faces whose reduced least-squares problem is close to the rank cutoff), an
- * OPTIMAL result can still violate a constraint by up to ~1e-6 (about 2 % of such
- * random problems); unscaled problems showed none in 20,000.
+ * Known limit: a problem whose reduced least-squares problem lies near the rank cut-off
+ * (an objective 1e12 times more sensitive in one direction than in another, e.g. the
+ * controller's support problem min (c'f - 1e9)^2 + 1e-12 |f|^2 in force_sets.c) can end
+ * OPTIMAL with a constraint violated by some 1e-7 of the data's size: its iterates pass
+ * through magnitudes 1e8 times the answer's.
  */
 #ifndef FP_WLS_H
 #define FP_WLS_H
@@ -113,6 +123,13 @@ typedef struct {
     double r[FP_WLS_MAX_ROWS];
     double cinv[FP_WLS_MAX_CONS];
     double csq[FP_WLS_MAX_CONS], cnorm[FP_WLS_MAX_CONS]; /* row norms of the last solve's C */
+    double tw[FP_WLS_MAX_CONS];                          /* minimax phase 1: weights of t */
+    /* the variables' scaling x_j = 2^e_j z_j: the scaled A, C and bounds, and the factors */
+    double as[FP_WLS_MAX_ROWS * FP_WLS_MAX_VARS];
+    double ds[FP_WLS_MAX_VARS]; /* a diagonal tail's diagonal, scaled (as: the dense rows) */
+    double cs[FP_WLS_MAX_CONS * FP_WLS_MAX_VARS];
+    double lbs[FP_WLS_MAX_VARS], ubs[FP_WLS_MAX_VARS];
+    double sc[FP_WLS_MAX_VARS], sc_inv[FP_WLS_MAX_VARS]; /* 2^e_j and 2^-e_j */
     double qm[FP_WLS_NV1 * FP_WLS_NV1];
     double z[FP_WLS_NV1 * FP_WLS_NV1];
     double az[FP_WLS_MAX_ROWS * FP_WLS_NV1];
@@ -126,8 +143,15 @@ typedef struct {
     int8_t act[FP_WLS_MAX_CONS];
     int8_t use[FP_WLS_MAX_CONS];
     /* the last solve found every row of its n_cons x n_vars C usable and kept its norm in
-     * csq, cnorm, cinv: c_rows_ok = n_cons, c_cols_ok = n_vars (else -1) */
+     * csq, cnorm, cinv: c_rows_ok = n_cons, c_cols_ok = n_vars (else -1); the norms are of
+     * C scaled by the exponents c_exp (its copy in cs unless every one is 0) */
     int32_t c_rows_ok, c_cols_ok;
+    double c_top; /* the largest |C_ij| of the C of c_rows_ok */
+    /* exps: the last solve's e_j (sc, sc_inv hold 2^+-exps; all 0 after setup) */
+    int16_t exps[FP_WLS_MAX_VARS], c_exp[FP_WLS_MAX_VARS];
+    /* the balance of the last solve that computed one: from the Jacobi exponents e_jac to
+     * e_bal (before the common part and the limits), a function of C and e_jac (wls.c) */
+    int16_t e_jac[FP_WLS_MAX_VARS], e_bal[FP_WLS_MAX_VARS];
 } FpWlsWork;
 
 typedef struct {

@@ -139,7 +139,7 @@ int wls_pick_drop(Ctx *c) {
             if (nw > 0 || k->state[j] == ST_LB || k->state[j] == ST_UB) cols[ncol++] = j;
         }
         for (i = 0; i < dense; i++) {
-            const double *a = c->w->A + i * c->n;
+            const double *a = c->A + i * c->n;
             double ri = -2.0 * k->r[i], an;
             if (i % 4 == 0) vnorm4(a, c->n, dense - i < 4 ? dense - i : 4, nv, an4);
             an = an4[i % 4];
@@ -152,22 +152,27 @@ int wls_pick_drop(Ctx *c) {
             gs += 2.0 * an * ei;
         }
         for (q = 0; dense < nr && q < ncol; q++) { /* the diagonal row of each column */
-            const double *dj;
-            double an, ei;
+            double dj, an, ei;
             j = cols[q];
             i = dense + j;
-            dj = c->w->A + i * c->n + j;
-            an = vnorm(dj, 1); /* = vnorm of the row */
+            dj = tail_d(c, j);
+            an = vnorm(&dj, 1); /* = vnorm of the row */
             ei = fabs(k->r[i]) + fabs(c->w->b[i]) + an * xn;
-            k->g[j] += *dj * (-2.0 * k->r[i]);
-            gsj[j] += 2.0 * fabs(*dj) * ei;
+            k->g[j] += dj * (-2.0 * k->r[i]);
+            gsj[j] += 2.0 * fabs(dj) * ei;
             gs += 2.0 * an * ei;
         }
     }
     tol = TOL_MULT * gs;
     if (!(tol > DBL_MIN)) tol = DBL_MIN;
     for (j = 0; j < nv; j++) {
-        tolj[j] = TOL_MULT * gsj[j];
+        /* a bound's multiplier also carries the active rows' (mu_j = -g_j - sum lam c_j):
+         * their rounding scale times the rows' entries in column j (a column zero in A has
+         * no gradient of its own, and its multiplier is that share alone) */
+        double share = 0.0;
+        if (!c->ph1 && nw > 0 && (k->state[j] == ST_LB || k->state[j] == ST_UB))
+            for (q = 0; q < nw; q++) share += fabs(cval(c, k->act_idx[q], j));
+        tolj[j] = TOL_MULT * (gsj[j] + gs * share);
         if (!(tolj[j] > DBL_MIN)) tolj[j] = DBL_MIN;
     }
     /* stationarity: -g = sum lam c + sum mu n (+ z = 0 at the face minimiser); with no

@@ -37,6 +37,9 @@
 
 /* Magnitudes above this are bad input (their squares would overflow). */
 #define BIG 1e150
+/* The column scaling keeps every scaled entry of A and C and every finite scaled bound at
+ * or below 2^SCALE_EXP_MAX (about 3e150: just above BIG, so their squares still fit). */
+#define SCALE_EXP_MAX 500
 
 /* Outcomes of the iteration loop. */
 enum { RUN_OPTIMAL, RUN_CAP, RUN_FEASIBLE, RUN_INFEASIBLE, RUN_NUMERIC };
@@ -44,6 +47,11 @@ enum { RUN_OPTIMAL, RUN_CAP, RUN_FEASIBLE, RUN_INFEASIBLE, RUN_NUMERIC };
 typedef struct {
     FpWls *w;
     FpWlsWork *k;
+    /* The problem the iteration sees: the variables scaled, x = 2^e z per variable (wls.c:
+     * column_exponents), so A and C are the caller's with column j times 2^e_j and the
+     * bounds times 2^-e_j.  Each points to the caller's array when every e_j is 0, else to
+     * the scaled copy in the workspace.  b and d are the caller's (no row is scaled). */
+    const double *A, *C, *lb, *ub;
     int n;        /* variables of the problem */
     int nv;       /* variables iterated: n, or n + 1 in phase 1 (t last) */
     int ph1;      /* phase 1: objective t^2, rows of C get a -t term */
@@ -58,38 +66,51 @@ typedef struct {
      * columns (dual form) or of one reflector per free variable on 1 + m0 rows (primal
      * form, for a large M_F D_F^-1) (wls_qr.c).  m0 = n_rows - n; diag_tail 0: not so. */
     int diag_tail, m0;
+    /* The diagonal d_j of such a tail: dg[j * dgs], in A (dgs = n + 1) or, scaled, in a
+     * packed copy (dgs = 1; the scaled A then holds only the dense rows). */
+    const double *dg;
+    int dgs;
 } Ctx;
 
 /* ------------------------------------------------------------------------ */
 /* Problem accessors (phase 1 and phase 2 share the loop).                  */
 
-static inline double lbv(const Ctx *c, int j) { return j < c->n ? c->w->lb[j] : 0.0; }
+static inline double lbv(const Ctx *c, int j) { return j < c->n ? c->lb[j] : 0.0; }
 
-static inline double ubv(const Ctx *c, int j) { return j < c->n ? c->w->ub[j] : INFINITY; }
+static inline double ubv(const Ctx *c, int j) { return j < c->n ? c->ub[j] : INFINITY; }
 
-/* Row i of the scaled C (with the -t column in phase 1). */
+/* Row i of the scaled C (with the -t column in phase 1: -tw[i], see wls_phase1.c). */
 static inline double cval(const Ctx *c, int i, int j) {
-    return j < c->n ? c->w->C[i * c->n + j] * c->k->cinv[i] : -1.0;
+    return j < c->n ? c->C[i * c->n + j] * c->k->cinv[i] : -c->k->tw[i];
 }
 
 static inline double dval(const Ctx *c, int i) { return c->w->d[i] * c->k->cinv[i]; }
 
-/* sum_j cval(c, i, j) x[j]: the unscaled row's product times the row's 1 / norm (one
- * multiplication per row, not per element), then the phase-1 -t term. */
+/* d_j of a diagonal tail (Ctx.diag_tail). */
+static inline double tail_d(const Ctx *c, int j) { return c->dg[j * c->dgs]; }
+
+/* Element (i, j) of A as the iteration sees it (a diagonal tail's zeros included). */
+static inline double aval(const Ctx *c, int i, int j) {
+    if (c->diag_tail && i >= c->m0) return i - c->m0 == j ? tail_d(c, j) : 0.0;
+    return c->A[i * c->n + j];
+}
+
+/* sum_j cval(c, i, j) x[j]: the row's product before normalising times the row's 1 / norm
+ * (one multiplication per row, not per element), then the phase-1 -t term. */
 static inline double crow_dot(const Ctx *c, int i, const double *x) {
-    const double *row = c->w->C + i * c->n;
+    const double *row = c->C + i * c->n;
     double s = 0.0;
     int j;
     for (j = 0; j < c->n; j++) s += row[j] * x[j];
     s *= c->k->cinv[i];
-    for (; j < c->nv; j++) s += -1.0 * x[j];
+    for (; j < c->nv; j++) s -= c->k->tw[i] * x[j];
     return s;
 }
 
 /* crow_dot of the four rows i..i+3 side by side (each the same arithmetic as crow_dot). */
 static inline void crow_dot4(const Ctx *c, int i, const double *x, double s[4]) {
-    const double *r0 = c->w->C + i * c->n, *r1 = r0 + c->n, *r2 = r1 + c->n, *r3 = r2 + c->n;
-    const double *ci = c->k->cinv + i;
+    const double *r0 = c->C + i * c->n, *r1 = r0 + c->n, *r2 = r1 + c->n, *r3 = r2 + c->n;
+    const double *ci = c->k->cinv + i, *tw = c->k->tw + i;
     double s0 = 0.0, s1 = 0.0, s2 = 0.0, s3 = 0.0;
     int j;
     for (j = 0; j < c->n; j++) {
@@ -100,10 +121,10 @@ static inline void crow_dot4(const Ctx *c, int i, const double *x, double s[4]) 
     }
     s0 *= ci[0], s1 *= ci[1], s2 *= ci[2], s3 *= ci[3];
     for (; j < c->nv; j++) {
-        s0 += -1.0 * x[j];
-        s1 += -1.0 * x[j];
-        s2 += -1.0 * x[j];
-        s3 += -1.0 * x[j];
+        s0 -= tw[0] * x[j];
+        s1 -= tw[1] * x[j];
+        s2 -= tw[2] * x[j];
+        s3 -= tw[3] * x[j];
     }
     s[0] = s0, s[1] = s1, s[2] = s2, s[3] = s3;
 }
@@ -132,9 +153,9 @@ static inline void residual(Ctx *c) {
      * terms change no non-zero sum) */
     int dense = c->diag_tail ? c->m0 : c->w->n_rows;
     for (i = dense; i < c->w->n_rows; i++)
-        k->r[i] = c->w->b[i] - c->w->A[i * n + (i - dense)] * k->x[i - dense];
+        k->r[i] = c->w->b[i] - tail_d(c, i - dense) * k->x[i - dense];
     for (i = 0; i + 4 <= dense; i += 4) { /* four rows side by side */
-        const double *a0 = c->w->A + i * n, *a1 = a0 + n, *a2 = a1 + n, *a3 = a2 + n;
+        const double *a0 = c->A + i * n, *a1 = a0 + n, *a2 = a1 + n, *a3 = a2 + n;
         double s0 = c->w->b[i], s1 = c->w->b[i + 1], s2 = c->w->b[i + 2], s3 = c->w->b[i + 3];
         for (j = 0; j < n; j++) {
             double xj = k->x[j];
@@ -146,7 +167,7 @@ static inline void residual(Ctx *c) {
         k->r[i] = s0, k->r[i + 1] = s1, k->r[i + 2] = s2, k->r[i + 3] = s3;
     }
     for (; i < dense; i++) {
-        const double *a = c->w->A + i * n;
+        const double *a = c->A + i * n;
         double s = c->w->b[i];
         for (j = 0; j < n; j++) s -= a[j] * k->x[j];
         k->r[i] = s;

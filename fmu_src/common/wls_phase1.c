@@ -25,11 +25,44 @@ static double row_violation(Ctx *c, int *arg) {
     return v;
 }
 
-/* Minimax phase 1 from k->x (within the bounds, k->state consistent with it)
- * with largest scaled violation t0 > tol_feas at row arg. */
-static int phase1_minimax(Ctx *c, double t0, int arg, int max_iter, int *iter) {
+/* The weights of t in the minimax rows, so that t measures each row's violation in the
+ * caller's units: row i of the iteration (unit norm in the scaled variables) is
+ * (C_i x - d_i) / |C_i S|, S the column scaling, and its violation over |C_i| (the caller's
+ * row normalised, as wls.h documents x) is that over rho_i = |C_i| / |C_i S|.  The rows
+ * C_i x - rho_i t <= d_i hold for t >= every such violation; tw = rho / max rho keeps the
+ * column of t at most 1 (a constant factor on t changes no minimiser), so that t <= tol_feas
+ * still means every row holds within tol_feas.  Without scaling every tw is 1. */
+static void minimax_weights(Ctx *c) {
     FpWlsWork *k = c->k;
-    int rc, i, n = c->n;
+    double top = 0.0;
+    int i;
+    for (i = 0; i < c->w->n_cons; i++) {
+        k->tw[i] = 1.0;
+        if (c->C == c->w->C || !k->use[i]) continue;
+        k->tw[i] = vnorm(c->w->C + i * c->n, c->n) * k->cinv[i];
+        if (k->tw[i] > top) top = k->tw[i];
+    }
+    for (i = 0; top > 0.0 && i < c->w->n_cons; i++)
+        if (k->use[i]) k->tw[i] /= top;
+}
+
+/* Minimax phase 1 from k->x (within the bounds, k->state consistent with it), whose largest
+ * scaled violation is above tol_feas: the start t is the largest weighted violation. */
+static int phase1_minimax(Ctx *c, int max_iter, int *iter) {
+    FpWlsWork *k = c->k;
+    int rc, i, n = c->n, arg = -1;
+    double t0 = 0.0, cx4[4];
+    minimax_weights(c);
+    for (i = 0; i < c->w->n_cons; i++) {
+        double v;
+        if (i % 4 == 0) crow_dots(c, i, k->x, cx4); /* phase-2 view: nv == n */
+        if (!k->use[i]) continue;
+        v = (cx4[i % 4] - dval(c, i)) / k->tw[i];
+        if (arg < 0 || v > t0) {
+            t0 = v;
+            arg = i;
+        }
+    }
     c->ph1 = 1;
     c->nv = n + 1;
     c->bland = 0;
@@ -71,12 +104,12 @@ static int phase1_project(Ctx *c, int first, int max_iter, int *iter) {
         } else {
             for (j = 0; j < n; j++) {
                 if (k->state[j] != ST_FREE) continue;
-                if (w->lb[j] - k->x[j] > pv) {
-                    pv = w->lb[j] - k->x[j];
+                if (c->lb[j] - k->x[j] > pv) {
+                    pv = c->lb[j] - k->x[j];
                     pidx = j;
                     psign = -1;
-                } else if (k->x[j] - w->ub[j] > pv) {
-                    pv = k->x[j] - w->ub[j];
+                } else if (k->x[j] - c->ub[j] > pv) {
+                    pv = k->x[j] - c->ub[j];
                     pidx = j;
                     psign = 1;
                 }
@@ -103,7 +136,7 @@ static int phase1_project(Ctx *c, int first, int max_iter, int *iter) {
             for (j = 0; j < n; j++) nv[j] = 0.0;
             if (pidx < n) {
                 nv[pidx] = (double)psign;
-                viol = psign > 0 ? k->x[pidx] - w->ub[pidx] : w->lb[pidx] - k->x[pidx];
+                viol = psign > 0 ? k->x[pidx] - c->ub[pidx] : c->lb[pidx] - k->x[pidx];
             } else {
                 for (j = 0; j < n; j++) nv[j] = cval(c, pidx - n, j);
                 viol = crow_dot(c, pidx - n, k->x) - dval(c, pidx - n);
@@ -154,7 +187,7 @@ static int phase1_project(Ctx *c, int first, int max_iter, int *iter) {
             if (tau1 <= tau2) {
                 if (pidx < n) {
                     k->state[pidx] = (int8_t)(psign > 0 ? ST_UB : ST_LB);
-                    k->x[pidx] = psign > 0 ? w->ub[pidx] : w->lb[pidx];
+                    k->x[pidx] = psign > 0 ? c->ub[pidx] : c->lb[pidx];
                     k->mub[pidx] = up;
                 } else {
                     k->act[pidx - n] = 1;
@@ -177,16 +210,15 @@ static int phase1_project(Ctx *c, int first, int max_iter, int *iter) {
  * variables on a bound join the working set, otherwise all are freed. */
 static void clamp_start(Ctx *c, int fix) {
     FpWlsWork *k = c->k;
-    FpWls *w = c->w;
     int j;
     for (j = 0; j < c->n; j++) {
         if (k->state[j] == ST_EQ) continue;
         k->state[j] = ST_FREE;
-        if (k->x[j] <= w->lb[j]) {
-            k->x[j] = w->lb[j];
+        if (k->x[j] <= c->lb[j]) {
+            k->x[j] = c->lb[j];
             if (fix) k->state[j] = ST_LB;
-        } else if (k->x[j] >= w->ub[j]) {
-            k->x[j] = w->ub[j];
+        } else if (k->x[j] >= c->ub[j]) {
+            k->x[j] = c->ub[j];
             if (fix) k->state[j] = ST_UB;
         }
     }
@@ -215,7 +247,7 @@ int wls_find_feasible(Ctx *c, int max_iter, int *iter) {
     clamp_start(c, 1);
     viol = row_violation(c, &arg);
     if (viol <= c->tol_feas) return RUN_FEASIBLE;
-    rc = phase1_minimax(c, viol, arg, max_iter, iter);
+    rc = phase1_minimax(c, max_iter, iter);
     if (rc == RUN_FEASIBLE || rc == RUN_NUMERIC) return rc;
     return RUN_INFEASIBLE;
 }

@@ -269,12 +269,11 @@ static int ls_full_rank(Ctx *c, int nr, int nz, double *y) {
  * general path) when some |d_q| is at the general path's rank cut-off. */
 static int diag_tail_primal(Ctx *c, double *y) {
     FpWlsWork *k = c->k;
-    const FpWls *w = c->w;
     int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
     double *r = k->r, *rt = &AZ(0, nf), tmp[FP_WLS_MAX_ROWS + 1]; /* rt: column nf */
     for (q = 0; q < nf; q++) {
         int v = k->free_idx[q];
-        double dq = w->A[(m0 + v) * n + v];
+        double dq = tail_d(c, v);
         if (!(fabs(dq) > TOL_RANK * c->anorm)) return 0;
     }
     /* AZ rows 0..nf-1: D_F (R grows there), rows nf..nf+m0-1: M_F; rt likewise */
@@ -282,8 +281,8 @@ static int diag_tail_primal(Ctx *c, double *y) {
         int v = k->free_idx[j];
         double *col = &AZ(0, j);
         for (q = 0; q < nf; q++) col[q] = 0.0;
-        col[j] = w->A[(m0 + v) * n + v];
-        for (i = 0; i < m0; i++) col[nf + i] = w->A[i * n + v];
+        col[j] = tail_d(c, v);
+        for (i = 0; i < m0; i++) col[nf + i] = c->A[i * n + v];
         rt[j] = r[m0 + v];
     }
     for (i = 0; i < m0; i++) rt[nf + i] = r[i];
@@ -352,20 +351,19 @@ static int diag_tail_primal(Ctx *c, double *y) {
  * rank cut-off, -1 when E is too large (or rounding ate a pivot). */
 static int diag_tail_dual(Ctx *c, double *y) {
     FpWlsWork *k = c->k;
-    const FpWls *w = c->w;
     int nf = c->nf, n = c->n, m0 = c->m0, i, j, q;
     double *r = k->r, dinv[NV1], rd[NV1], lam[NV1], g[NV1 * NV1], e2 = 0.0;
     if (m0 + 1 > NV1) return -1; /* AZ holds NV1 columns */
     for (q = 0; q < nf; q++) {
         int v = k->free_idx[q];
-        double dq = w->A[(m0 + v) * n + v];
+        double dq = tail_d(c, v);
         if (!(fabs(dq) > TOL_RANK * c->anorm)) return 0;
         dinv[q] = 1.0 / dq;
         rd[q] = r[m0 + v];
     }
     /* AZ column i: row i of E (free variable q in row q) */
     for (i = 0; i < m0; i++) {
-        const double *a = w->A + i * n;
+        const double *a = c->A + i * n;
         double *col = &AZ(0, i);
         for (q = 0; q < nf; q++) {
             col[q] = a[k->free_idx[q]] * dinv[q];
@@ -425,19 +423,18 @@ static int diag_tail_step(Ctx *c, double *y) {
  * other terms are zeros (0.0 + keeps its +0.0 for a zero term). */
 static void az_diag_tail(Ctx *c, int nz) {
     FpWlsWork *k = c->k;
-    const FpWls *w = c->w;
     int nf = c->nf, n = c->n, m0 = c->m0, i, j, q, pos[FP_WLS_MAX_VARS];
     for (i = 0; i < n; i++) pos[i] = -1;
     for (q = 0; q < nf; q++) pos[k->free_idx[q]] = q;
     for (j = 0; j < nz; j++) {
         for (i = 0; i < m0; i++) {
-            const double *a = w->A + i * n;
+            const double *a = c->A + i * n;
             double s = 0.0;
             for (q = 0; q < nf; q++) s += a[k->free_idx[q]] * ZM(q, j);
             AZ(i, j) = s;
         }
         for (i = 0; i < n; i++)
-            AZ(m0 + i, j) = pos[i] < 0 ? 0.0 : 0.0 + w->A[(m0 + i) * n + i] * ZM(pos[i], j);
+            AZ(m0 + i, j) = pos[i] < 0 ? 0.0 : 0.0 + tail_d(c, i) * ZM(pos[i], j);
     }
 }
 
@@ -476,10 +473,10 @@ int wls_compute_step(Ctx *c) {
                     for (q = 0; q < nf; q++)
                         if (k->free_idx[q] == c->n) s = nw > 0 ? ZM(q, j) : (q == j ? 1.0 : 0.0);
                 } else if (nw > 0) {
-                    const double *a = c->w->A + i * c->n;
+                    const double *a = c->A + i * c->n;
                     for (q = 0; q < nf; q++) s += a[k->free_idx[q]] * ZM(q, j);
                 } else {
-                    s = c->w->A[i * c->n + k->free_idx[j]];
+                    s = aval(c, i, k->free_idx[j]);
                 }
                 AZ(i, j) = s;
             }
