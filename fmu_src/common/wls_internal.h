@@ -1,8 +1,9 @@
 /*
- * Internal to the solver (wls.c, wls_active_set.c, wls_qr.c, wls_phase1.c): the iteration
- * context, the working-set states, the tolerances and the accessors shared by the four
- * files.  Not part of the API (wls.h).  The files call each other in layers only:
- * wls_qr.c <- wls_active_set.c <- wls_phase1.c <- wls.c.
+ * Internal to the solver (wls.c, wls_active_set.c, wls_qr.c, wls_phase1.c, wls_scale.c): the
+ * iteration context, the working-set states, the tolerances and the accessors shared by the
+ * five files.  Not part of the API (wls.h).  The files call each other in layers only:
+ * wls_qr.c <- wls_active_set.c <- wls_phase1.c <- wls.c, and wls_scale.c <- wls.c (the
+ * scaling calls none of the others).
  */
 #ifndef FP_WLS_INTERNAL_H
 #define FP_WLS_INTERNAL_H
@@ -47,8 +48,8 @@ enum { RUN_OPTIMAL, RUN_CAP, RUN_FEASIBLE, RUN_INFEASIBLE, RUN_NUMERIC };
 typedef struct {
     FpWls *w;
     FpWlsWork *k;
-    /* The problem the iteration sees: the variables scaled, x = 2^e z per variable (wls.c:
-     * column_exponents), so A and C are the caller's with column j times 2^e_j and the
+    /* The problem the iteration sees: the variables scaled, x = 2^e z per variable (wls_scale.c:
+     * wls_column_exponents), so A and C are the caller's with column j times 2^e_j and the
      * bounds times 2^-e_j.  Each points to the caller's array when every e_j is 0, else to
      * the scaled copy in the workspace.  b and d are the caller's (no row is scaled). */
     const double *A, *C, *lb, *ub;
@@ -282,5 +283,28 @@ void wls_drop_constraint(Ctx *c, int idx);
  * the cap), RUN_CAP (x: phase-1 iterate clamped into the bounds) or
  * RUN_NUMERIC. */
 int wls_find_feasible(Ctx *c, int max_iter, int *iter);
+
+/* ------------------------------------------------------------------------ */
+/* wls_scale.c: the variables' units (powers of 2).                         */
+
+/* The exponents of the variables' scaling x_j = 2^e_j z_j: A's column of about unit norm
+ * (Jacobi, from colsq, A's squared column norms), balanced against the column's entries in
+ * the rows of C (Curtis-Reid style; kept in k->e_jac, k->e_bal and taken again while C is
+ * unchanged, c_same, and so are the Jacobi exponents), the common part removed, all scaled
+ * up when every finite bound is below 1/2, and limited so that no scaled entry of A or C
+ * (ctop: the largest |C_ij|) and no finite scaled bound (bfield: the largest exponent field
+ * of a finite bound) exceeds 2^SCALE_EXP_MAX.  The exponents go to k->exps, 2^e_j and 2^-e_j
+ * to k->sc, k->sc_inv; *as_c_exp says whether they are k->c_exp.  Returns 1 when some
+ * e_j != 0. */
+int wls_column_exponents(const FpWls *w, FpWlsWork *k, const double *colsq, int c_same,
+                         double ctop, int bfield, int *as_c_exp);
+
+/* A and the bounds with the variables scaled (k->sc set): into k->as, k->lbs, k->ubs; when
+ * A ends in a diagonal block (diag_tail, rows m0 + j = d_j e_j') k->as holds its dense rows
+ * only and k->ds the diagonal. */
+void wls_scale_a_bounds(const FpWls *w, FpWlsWork *k, int diag_tail, int m0);
+
+/* C with the variables scaled (k->sc set): into k->cs. */
+void wls_scale_c(const FpWls *w, FpWlsWork *k);
 
 #endif
