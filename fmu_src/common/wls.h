@@ -51,7 +51,7 @@
  *                      set is unchanged.
  *
  * Units: the solver works on the variables scaled by powers of 2, x_j = 2^e_j z_j, chosen
- * from A's column norms and the rows of C (wls.c, column_exponents), so that a problem
+ * from A's column norms and the rows of C (wls_scale.c, wls_column_exponents), so that a problem
  * given with its variables in other units (columns of A and C times s_j, bounds over s_j)
  * is solved as the same problem: the answer moves only by rounding.  The scaling is exact
  * (powers of 2) and invisible to the caller: x, the working set, the result's objective
