@@ -408,16 +408,8 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->roll.psi_raw = m->roll.psi_unwrapped = isfinite(m->pose_now[8]) ? m->pose_now[8] : 0.0;
     m->roll.psi_ref_raw = m->roll.psi_ref_unwrapped = isfinite(m->euler_ref[2]) ? m->euler_ref[2] : 0.0;
     memcpy(m->mu_c, m->euler_ref, sizeof m->mu_c);
-    /* the reference as given, no jump being shaped, the initialization's reference the
-     * shaping's last input; the twin at the reference pose */
-    {
-        double mu0[3];
-        CtrlShapingInputs shin;
-        mu0[0] = m->euler_ref[0], mu0[1] = m->euler_ref[1], mu0[2] = m->roll.psi_ref_unwrapped;
-        shin.pos = m->pos_ref, shin.vel = m->vel_ref, shin.acc = m->acc_ref;
-        shin.mu = mu0, shin.mu_rate = m->euler_rate_ref;
-        ctrl_shaping_start(&shin, m->Ts, &m->roll.shaping);
-    }
+    /* the reference as given, no jump being shaped; the twin at the reference pose */
+    memset(&m->roll.shaping, 0, sizeof m->roll.shaping);
     ctrl_detect_start(&m->roll.detect);
     m->detect_p = detect_params(m);
     for (i = 0; i < FP_MAX_ROTORS; i++) m->rotor_eff_est[i] = 1.0;

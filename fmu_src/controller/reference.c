@@ -114,27 +114,6 @@ static int all_below(const double *v, int n, double tol) {
     return 1;
 }
 
-void ctrl_shaping_start(const CtrlShapingInputs *in, double ts, CtrlShaping *x) {
-    int i;
-    memset(x, 0, sizeof *x);
-    for (i = 0; i < 3; i++) {
-        /* one sample back along the derivatives: the first sample's jump test then finds
-         * zero for a smooth reference (the same instant, seen as one sample later) */
-        x->acc_in[i] = in->acc[i];
-        x->vel_in[i] = in->vel[i] - ts * in->acc[i];
-        x->pos_in[i] = in->pos[i] - ts * in->vel[i] + 0.5 * ts * ts * in->acc[i];
-        x->mu_rate_in[i] = in->mu_rate[i];
-        x->mu_in[i] = in->mu[i] - ts * in->mu_rate[i];
-    }
-    for (i = 0; i < 3; i++)
-        if (!isfinite(x->pos_in[i]) || !isfinite(x->vel_in[i]) || !isfinite(x->acc_in[i]) ||
-            !isfinite(x->mu_in[i]) || !isfinite(x->mu_rate_in[i])) {
-            memset(x, 0, sizeof *x); /* no usable reference yet: the first sample's is taken */
-            return;
-        }
-    x->started = 1;
-}
-
 void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *in,
                           CtrlShaping *x, CtrlShapedRef *out) {
     double ts = p->Ts;

@@ -80,12 +80,6 @@ typedef struct {
     double pos[3], vel[3], acc[3], mu[3], mu_rate[3];
 } CtrlShapedRef;
 
-/* The shaping's state at initialization: no jump being shaped, and the reference given at
- * initialization taken as the previous sample's input (carried back one sample by its own
- * derivatives), so that a reference that jumps between initialization and the first sample
- * is shaped like any later jump, and one that moves smoothly is seen moving smoothly. */
-void ctrl_shaping_start(const CtrlShapingInputs *in, double ts, CtrlShaping *x);
-
 /* One sample of the shaped reference; x carries the error state. */
 void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *in,
                           CtrlShaping *x, CtrlShapedRef *out);

@@ -136,24 +136,3 @@ def test_feed_forward_follows_mu_c_where_mu_ref_is_infeasible():
         assert np.sqrt(np.mean(err ** 2)) <= 2.0 * level, name
         pos = r.get(r.judged("plant.pos")) - r.get("ref.pos_ref")
         assert np.linalg.norm(pos, axis=1).max() < 0.02, name
-
-
-def test_a_jump_before_the_first_sample_is_shaped_like_any_other():
-    """A reference that differs between initialization and the controller's first sample (a
-    ground station entering OFFBOARD within the first chunk; an importer writing its inputs
-    after initialization) is a jump like any later one: shaped within the tilt limit, not
-    flown as a raw 10 m step (which reached 8 m/s)."""
-    from orchestrator.sim.live import LiveSession
-
-    with LiveSession("paper_hexacopter", pos0=(0.0, 0.0, -3.0), chunk=5) as live:
-        live.set_reference(pos_ref=[10.0, 0.0, -3.0])  # before any step
-        live.advance()
-        assert live.state()["ctrl"]["pos_ref_s"][0] < 0.01  # the jump is being shaped
-        tilts, speeds = [], []
-        for _ in range(400):  # 4 s
-            live.advance()
-            state = live.state()["plant"]
-            tilts.append(tilt_deg(state["euler"][None, :])[0])
-            speeds.append(float(np.linalg.norm(state["vel"])))
-        assert max(tilts) <= TILT_MAX
-        assert max(speeds) <= 2.0 * 1.05  # the shaping's default speed limit, 2 m/s
