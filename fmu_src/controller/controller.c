@@ -119,9 +119,9 @@ static void controller_set_defaults(void *model) {
      * itself; thresholds from docs/controller.md's measurements (no false alarm over the
      * shipped scenarios with sensor noise on). */
     m->fault_detect = 1;
-    m->fault_loss_min = 0.3;
-    m->fault_fit_max = 0.35;
-    m->fault_time = 0.03;
+    m->fault_loss_min = 0.1;
+    m->fault_fit_max = 0.3;
+    m->fault_time = 0.02;
     /* Measurements start at the hover trim of the default airframe. */
     w[2] = -m->af.mass * m->af.g;
     fp_preferred_config(&rs, w, m->alpha, m->beta, m->omega, NULL, 0);
@@ -133,20 +133,48 @@ static void controller_set_defaults(void *model) {
 /* ------------------------------------------------------------------------ */
 /* Initialization: the detector's constants                                 */
 
+/* Window of an event: an explanation not found in this time is a load. */
+#define DETECT_WINDOW 0.2 /* s */
+
 static CtrlDetectParams detect_params(const ControllerModel *m) {
     CtrlDetectParams p;
-    double arm = 0.0;
-    int i;
-    p.mass = m->af.mass, p.g = m->af.g;
+    const double(*in)[3] = (const double(*)[3])m->af.inertia;
+    double arm = 0.0, det, share;
+    int i, j;
+    memset(&p, 0, sizeof p); /* bit-for-bit comparable (detect_params_agree) */
+    p.mass = m->af.mass, p.g = m->af.g, p.Ts = m->Ts;
     memcpy(p.inertia, m->af.inertia, sizeof p.inertia);
     for (i = 0; i < m->af.n_rotors; i++)
         arm += sqrt(v3_dot(m->af.rotor_pos[i], m->af.rotor_pos[i])) / m->af.n_rotors;
-    p.arm = arm * arm > 0.0 ? arm : 1.0; /* detect.c divides by arm^2: never 0 (underflow) */
+    p.arm = arm * arm > 0.0 ? arm : 1.0;
+    /* arm I^-1 (adjugate over determinant; the airframe rules make I positive definite) */
+    det = in[0][0] * (in[1][1] * in[2][2] - in[1][2] * in[2][1]) -
+          in[0][1] * (in[1][0] * in[2][2] - in[1][2] * in[2][0]) +
+          in[0][2] * (in[1][0] * in[2][1] - in[1][1] * in[2][0]);
+    for (i = 0; i < 3; i++)
+        for (j = 0; j < 3; j++) {
+            int r0 = (j + 1) % 3, r1 = (j + 2) % 3, c0 = (i + 1) % 3, c1 = (i + 2) % 3;
+            p.acc_of_torque[i][j] =
+                det > 0.0 ? p.arm * (in[r0][c0] * in[r1][c1] - in[r0][c1] * in[r1][c0]) / det
+                          : 0.0;
+        }
     p.loss_min = m->fault_loss_min, p.fit_max = m->fault_fit_max;
-    /* a rotor below a twentieth of its share of the weight has no signature to speak of */
-    p.wrench_min = 0.05 * m->af.mass * fabs(m->af.g) / m->af.n_rotors;
+    /* a rotor's share of the weight, as the acceleration it gives */
+    share = fabs(m->af.g) / (m->af.n_rotors > 0 ? m->af.n_rotors : 1);
+    /* a rotor below a twentieth of its share has no signature to speak of */
+    p.wrench_min = 0.05 * share;
+    /* an event opens at a change of half the smallest loss concluded, and a rotor's fit
+     * must beat the load's by more than 5 % of its share per sample (sensor noise) */
+    p.onset = 0.5 * m->fault_loss_min * share;
+    p.floor2 = (0.05 * share) * (0.05 * share);
+    p.base_gain = fmin(m->Ts / 0.5, 1.0); /* the quiet level follows within 0.5 s */
+    p.probe_omega = fp_clamp(sqrt(0.3 * m->af.mass * fabs(m->af.g) /
+                                  ((m->af.n_rotors > 0 ? m->af.n_rotors : 1) * m->af.k_t)),
+                             m->rotors.omega_min, m->rotors.omega_max);
     p.persist = (int32_t)ceil(m->fault_time / m->Ts - 1e-9);
     if (p.persist < 1) p.persist = 1;
+    p.window = (int32_t)ceil(DETECT_WINDOW / m->Ts - 1e-9);
+    if (p.window < p.persist) p.window = p.persist;
     return p;
 }
 
@@ -542,12 +570,7 @@ static int structure_valid(const ControllerModel *m) {
  * parameters (all fixed after initialization), bit for bit. */
 static int detect_params_agree(const ControllerModel *m) {
     CtrlDetectParams p = detect_params(m);
-    const CtrlDetectParams *q = &m->detect_p;
-    int i;
-    for (i = 0; i < 9; i++)
-        if (!(q->inertia[i / 3][i % 3] == p.inertia[i / 3][i % 3])) return 0;
-    return q->mass == p.mass && q->g == p.g && q->arm == p.arm && q->loss_min == p.loss_min &&
-           q->fit_max == p.fit_max && q->wrench_min == p.wrench_min && q->persist == p.persist;
+    return memcmp(&p, &m->detect_p, sizeof p) == 0;
 }
 
 static FpStatus controller_check_restored(const void *model, int initialized,

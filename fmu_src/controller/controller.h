@@ -26,20 +26,42 @@ typedef struct {
 
 /* The detector's constants (detect.c), derived from fixed parameters at initialization. */
 typedef struct {
-    double mass, inertia[3][3], g;
+    double mass, inertia[3][3], g, Ts;
     double arm;        /* m: the rotors' mean distance from the centre (torque scale) */
-    double loss_min;   /* share of a rotor's efficiency lost before it is indicated */
-    double fit_max;    /* share of the residual its signature may leave unexplained */
-    double wrench_min; /* N: a rotor whose full wrench is below this is not fitted */
-    int32_t persist;   /* samples in a row a rotor must be indicated */
+    double acc_of_torque[3][3]; /* arm I^-1: a torque as the acceleration it causes */
+    double loss_min;   /* smallest change of a rotor's efficiency an event may conclude */
+    double fit_max;    /* share of an event's residual a rotor's model may leave unexplained */
+    double wrench_min; /* m/s^2: a rotor whose full wrench stays below this is not fitted */
+    double onset;      /* m/s^2: residual change (smoothed) that opens an event */
+    double floor2;     /* (m/s^2)^2: per-sample noise floor the hypotheses' gap must exceed */
+    double base_gain;  /* per sample: how fast the quiet residual level follows */
+    double probe_omega; /* rad/s: a lost rotor's idle speed, 30 % of its share of the weight */
+    int32_t persist;   /* samples an event lasts before it may conclude a fault */
+    int32_t window;    /* samples after which an unexplained event is taken as a load */
 } CtrlDetectParams;
 
-/* Rotor-fault detection (detect.c): the rotor indicated in the last samples and for how
- * many in a row, each rotor's efficiency estimate (1 until a detection), the rotors
- * detected (bit i-1: rotor i). */
+/* Estimates below this: the rotor cannot produce thrust and is lost (motor idled at the
+ * probe speed); a lost rotor's estimate back at or above CTRL_DETECT_RESTORE restores it. */
+#define CTRL_DETECT_LOST 0.15
+#define CTRL_DETECT_RESTORE 0.3
+#define CTRL_PROBE_HALF_PERIOD 0.05 /* s */
+
+/* Samples the detector averages its raw signals over (detect.c). */
+#define CTRL_DETECT_SPAN 4
+
+/* Rotor-fault detection (detect.c): the last CTRL_DETECT_SPAN + 1 samples of the raw
+ * signals, the residual's quiet level and noise, the event under test (its least-squares
+ * sums), each rotor's efficiency estimate (1 until a detection), the rotors found faulty
+ * and those the detector holds lost (bit i-1: rotor i). */
 typedef struct {
-    int32_t candidate, count, found_mask;
+    int32_t filled, head, active, n, found_mask, lost_mask;
     double est[FP_MAX_ROTORS];
+    double rate[CTRL_DETECT_SPAN + 1][3], force[CTRL_DETECT_SPAN + 1][3]; /* accelerations */
+    double wrench[CTRL_DETECT_SPAN + 1][FP_MAX_ROTORS][6]; /* each rotor's, as accelerations */
+    double base[6];   /* the residual's level before the event */
+    double onset[6];  /* smoothed residual change */
+    double noise2;    /* the residual's mean square per sample about its level */
+    double s_rr, s_r[6], s_ww[FP_MAX_ROTORS], s_wr[FP_MAX_ROTORS]; /* event sums */
 } CtrlDetect;
 
 /* The reference twin's pose (guidance.c, ctrl_guidance_twin): attitude and body force. */

@@ -116,8 +116,8 @@ static CtrlAllocationParams allocation_params(const ControllerModel *m) {
 /* ------------------------------------------------------------------------ */
 /* One sample                                                               */
 
-/* Rotors below half efficiency are lost: pick the feasible-force set that goes with
- * the losses and say so once per change. */
+/* Rotors told below half efficiency, or lost to the detector, are lost: pick the
+ * feasible-force set that goes with the losses and say so once per change. */
 void ctrl_update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     CtrlLosses l;
     int i;
@@ -125,7 +125,9 @@ void ctrl_update_rotor_losses(ControllerModel *m, const FpLogger *logger) {
     for (i = 0; i < FP_MAX_ROTORS; i++)
         m->health[i] = m->fault_detect ? fmin(m->rotor_health[i], m->roll.detect.est[i])
                                        : m->rotor_health[i];
-    ctrl_rotor_losses(m->af.n_rotors, m->health, m->set_fail_n, m->hover_ok, &l);
+    ctrl_rotor_losses(m->af.n_rotors, m->rotor_health,
+                      m->fault_detect ? m->roll.detect.lost_mask : 0, m->set_fail_n, m->hover_ok,
+                      &l);
     if (l.lost_mask == m->lost_mask) return;
     m->lost_mask = l.lost_mask;
     m->rotors_lost = l.rotors_lost;
@@ -160,6 +162,7 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     /* what a sample changes besides its outputs: restored when the sample is discarded */
     CtrlRolled before;
     CtrlDetectOut dout;
+    double residual[6];
     int i, n = m->af.n_rotors;
     /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
     fp_wls_prefetch(&m->guid);
@@ -209,11 +212,19 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
                       m->lost_mask, &s);
     if (m->fault_detect) {
         /* a detection counts from the next sample on (ctrl_update_rotor_losses) */
-        ctrl_detect(&m->detect_p, &m->rotors, &s, &m->roll.detect, &dout);
-        if (dout.detected >= 0)
+        CtrlDetectInputs din;
+        din.acc = m->acc, din.euler = s.mu_m, din.rate = m->rate;
+        din.omega = m->omega, din.alpha = m->alpha, din.beta = m->beta;
+        din.eff = s.eff;
+        ctrl_detect(&m->detect_p, &m->rotors, &m->rotor_trig, &din, &m->roll.detect, &dout);
+        ctrl_detect_residual(&m->detect_p, &s, residual);
+        if (dout.detected >= 0) {
+            double e = m->roll.detect.est[dout.detected];
             fp_log(logger, FP_WARNING, FP_LOG_WARNING,
-                   "rotor %d fault detected from the INDI residual: efficiency %.2f estimated",
-                   dout.detected + 1, m->roll.detect.est[dout.detected]);
+                   "rotor %d: efficiency %.2f estimated from the residual (was %.2f)%s",
+                   dout.detected + 1, e, s.eff[dout.detected],
+                   e < CTRL_DETECT_LOST ? ": lost" : "");
+        }
     }
     /* 2. guidance */
     gin.acc_ref = r.acc;
@@ -236,6 +247,17 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     }
     ap = allocation_params(m);
     ctrl_allocation(&ap, &s, dnu_c, m->lost_mask, &m->alloc, &a);
+    if (m->fault_detect) {
+        /* rotors lost to the detector idle at the probe speed, switched between two levels
+         * every CTRL_PROBE_HALF_PERIOD: a rotor that produces thrust after all shows it
+         * moving with its speed (a load would not), and is restored */
+        int64_t half = (int64_t)ceil(CTRL_PROBE_HALF_PERIOD / m->Ts - 1e-9);
+        double level = (m->samples_run / (half > 0 ? half : 1)) % 2 ? 1.0 : 0.6;
+        for (i = 0; i < n; i++)
+            if (((m->roll.detect.lost_mask & m->lost_mask) >> i) & 1 &&
+                !(m->rotor_health[i] < 0.5))
+                a.omega_cmd[i] = level * m->detect_p.probe_omega;
+    }
     /* never a non-finite output: a sample that computed one is discarded whole (states
      * restored, the QPs' warm starts dropped) and the last valid outputs held */
     if (!fp_all_finite(a.alpha_cmd, (size_t)n) || !fp_all_finite(a.beta_cmd, (size_t)n) ||
@@ -259,7 +281,7 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     memcpy(m->mu_ff, mu_ff, sizeof m->mu_ff);
     memcpy(m->mu_rate_ff, mu_rate_ff, sizeof m->mu_rate_ff);
     if (m->fault_detect) {
-        memcpy(m->indi_residual, dout.residual, sizeof m->indi_residual);
+        memcpy(m->indi_residual, residual, sizeof m->indi_residual);
         memcpy(m->rotor_eff_est, m->roll.detect.est, sizeof m->rotor_eff_est);
         m->rotors_detected = m->roll.detect.found_mask;
     }

@@ -84,9 +84,9 @@
     X(ref_att_rate_max, 649, REAL, PARAM_FIXED, 3, 1, ANGULAR_VELOCITY, FP_POSITIVE, "Euler-rate limits of the shaped attitude correction [roll, pitch, heading]") \
     X(ref_att_acc_max, 652, REAL, PARAM_FIXED, 3, 1, ANGULAR_ACCELERATION, FP_POSITIVE, "Euler-acceleration limits of the shaped attitude correction [roll, pitch, heading]") \
     X(fault_detect, 660, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Detect a lost or degraded rotor from the INDI residual without being told, and reconfigure (docs/controller.md)") \
-    X(fault_loss_min, 661, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_OPEN(0, 1), "Share of a rotor's efficiency lost before the detector indicates it") \
-    X(fault_fit_max, 662, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_OPEN(0, 1), "Share of the INDI residual a rotor's own wrench may leave unexplained for the rotor to be indicated") \
-    X(fault_time, 663, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time a rotor must be indicated without a break before it counts as detected") \
+    X(fault_loss_min, 661, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_OPEN(0, 1), "Smallest change of a rotor's efficiency the detector concludes (an event opens at half of it, as an acceleration of that share of the rotor's weight share)") \
+    X(fault_fit_max, 662, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_OPEN(0, 1), "Share of an event's residual change (beyond sensor noise) a rotor's own wrench may leave unexplained for a fault to be concluded") \
+    X(fault_time, 663, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Least time an event is fitted before it may conclude a rotor fault") \
     /* inputs: references */                                                                       \
     X(pos_ref, 1000, REAL, INPUT, 3, 1, LENGTH, FP_IN(-CTRL_MAX_DISTANCE, CTRL_MAX_DISTANCE), "Reference position xi_ref, world NED") \
     X(euler_ref, 1003, REAL, INPUT, 3, 1, ANGLE, FP_IN(-CTRL_MAX_ANGLE, CTRL_MAX_ANGLE), "Reference attitude mu_ref") \
@@ -136,7 +136,7 @@
     X(mu_ff, 2122, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "Feed-forward attitude: the guidance's mu_c for a vehicle exactly on the shaped reference (the shaped mu_ref where that is feasible)") \
     X(mu_rate_ff, 2125, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Euler-rate feed-forward of the attitude loop: the rate of mu_ff") \
     X(ref_acc_limit, 2128, REAL, OUTPUT, 2, 1, ACCELERATION, FP_ANY, "Acceleration limits the shaping uses [horizontal, vertical] (ref_acc_max, or derived)") \
-    X(rotor_eff_est, 2130, REAL, OUTPUT, 8, 1, RATIO, FP_ANY, "Rotor efficiencies the detector estimates (1 until it detects a fault; below 0.5: lost)") \
+    X(rotor_eff_est, 2130, REAL, OUTPUT, 8, 1, RATIO, FP_ANY, "Rotor efficiencies the detector estimates (1 until it detects a fault; below 0.15: lost, idled at a probe speed and restored when its thrust shows at 0.3 or more)") \
     X(rotors_detected, 2140, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Rotors the detector found faulty: bit i-1 rotor i") \
     X(indi_residual, 2141, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "INDI residual: measured minus modelled rotor wrench [f_b (N); tau_b (N.m)], body")
 

@@ -108,13 +108,13 @@ FpStatus ctrl_force_set_prepare(FpCheck *c, const char *name, const double (*A)[
     return FP_OK;
 }
 
-void ctrl_rotor_losses(int n_rotors, const double rotor_health[], const int32_t fail_poly_n[],
-                       const int32_t hover_ok[], CtrlLosses *out) {
+void ctrl_rotor_losses(int n_rotors, const double rotor_health[], int32_t detected_lost,
+                       const int32_t fail_poly_n[], const int32_t hover_ok[], CtrlLosses *out) {
     int i, lost = -1;
     out->lost_mask = 0;
     out->rotors_lost = 0;
     for (i = 0; i < n_rotors; i++)
-        if (rotor_health[i] < 0.5) {
+        if (rotor_health[i] < 0.5 || ((detected_lost >> i) & 1)) {
             out->lost_mask |= (int32_t)1 << i;
             out->rotors_lost++;
             lost = i;

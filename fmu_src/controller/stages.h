@@ -186,7 +186,8 @@ FpStatus ctrl_force_sets_resolve(FpCheck *c, const FpRotorSet *rs, const CtrlGiv
                                  double b_out[], int32_t fail_n_out[], double fail_A_out[][3],
                                  double fail_b_out[], int32_t *derived);
 
-/* Which rotors are lost (efficiency below one half) and which force set goes with it. */
+/* Which rotors are lost (told efficiency below one half, or lost to the detector) and which
+ * force set goes with it. */
 typedef struct {
     int32_t lost_mask;       /* bit i-1: rotor i */
     int32_t rotors_lost;     /* how many */
@@ -194,9 +195,10 @@ typedef struct {
     int32_t hover_possible;  /* the hover force lies in that set */
 } CtrlLosses;
 
-/* hover_ok[0]: nominal set, [i]: set after losing rotor i (ControllerModel.hover_ok). */
-void ctrl_rotor_losses(int n_rotors, const double rotor_health[], const int32_t fail_poly_n[],
-                       const int32_t hover_ok[], CtrlLosses *out);
+/* rotor_health: as told; detected_lost: the detector's lost rotors (bit i-1: rotor i);
+ * hover_ok[0]: nominal set, [i]: set after losing rotor i (ControllerModel.hover_ok). */
+void ctrl_rotor_losses(int n_rotors, const double rotor_health[], int32_t detected_lost,
+                       const int32_t fail_poly_n[], const int32_t hover_ok[], CtrlLosses *out);
 
 /* Say which force set a change of losses leaves the guidance with. */
 void ctrl_log_losses(const CtrlLosses *l, const FpLogger *logger);
@@ -205,16 +207,27 @@ void ctrl_log_losses(const CtrlLosses *l, const FpLogger *logger);
 /* detect.c                                                                 */
 
 
+/* What the detector takes in one sample: raw measurements, not H(s)-filtered. */
 typedef struct {
-    double residual[6]; /* [force (N); torque (N m)], body */
-    int detected;       /* the rotor (0-based) detected in this sample, else -1 */
+    const double *acc, *euler, *rate;   /* world acceleration, attitude now, body rates */
+    const double *omega, *alpha, *beta; /* actuator measurements, n_rotors each */
+    const double *eff;                  /* efficiencies in use, 0 for lost rotors */
+} CtrlDetectInputs;
+
+typedef struct {
+    int detected; /* the rotor (0-based) whose estimate this sample concluded, else -1 */
 } CtrlDetectOut;
 
 void ctrl_detect_start(CtrlDetect *x);
 
-/* One sample of the detector on the filtered signals s (s->eff: the efficiencies in use). */
-void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const CtrlFiltered *s,
-                 CtrlDetect *x, CtrlDetectOut *out);
+/* The INDI residual of the filtered signals (output indi_residual): the rotor wrench the
+ * filtered measurements say minus the one the filtered actuators give with s->eff,
+ * [force (N); torque (N m)], body. */
+void ctrl_detect_residual(const CtrlDetectParams *p, const CtrlFiltered *s, double res[6]);
+
+/* One sample of the detector (mounts: the rotors' azimuth sin and cos). */
+void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const FpRotorTrig *mounts,
+                 const CtrlDetectInputs *in, CtrlDetect *x, CtrlDetectOut *out);
 
 /* ------------------------------------------------------------------------ */
 /* guidance.c                                                               */
