@@ -20,6 +20,7 @@ import sys
 from collections.abc import Iterable
 from importlib.metadata import entry_points
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -55,6 +56,37 @@ def _warn(lines: Iterable[str]) -> None:
         print(f"fullpose: warning: {line}", file=sys.stderr)
 
 
+STEP_LINES = 10
+"""``fullpose run`` prints at most this many steps' lines (metrics.json has them all)."""
+
+
+def _print_tracking(m: dict[str, Any]) -> None:
+    """The run's tracking errors and, with steps of the setpoint, a line per step."""
+    from orchestrator.output.step_metrics import step_line
+
+    pos = m.get("position_error") or {}
+    measured = (m.get("measured") or {}).get("position_error")
+    steps = m.get("steps") or []
+    against = ""  # with steps: say which reference, a step of the input is no error
+    if steps:
+        shaped = (m.get("errors_against") or {}).get("position") == "ctrl.pos_ref_s"
+        against = " against the " + ("flown (shaped)" if shaped else "given") + " reference"
+    print(f"max position error  {_fmt(pos.get('max'), '.4f', 'm')} "
+          f"(RMS {_fmt(pos.get('rms'), '.4f', 'm')})"
+          + ("" if measured is None else " of the true state") + against)
+    if measured is not None:  # imperfect sensors: what they said, as such
+        print(f"  as measured       {_fmt(measured.get('max'), '.4f', 'm')} "
+              f"(RMS {_fmt(measured.get('rms'), '.4f', 'm')}), as the sensors read it")
+    if any(step.get("kind") == "attitude" for step in steps):
+        att = m.get("attitude_error_vs_mu_ref") or {}
+        print(f"max attitude error  {_fmt(att.get('max'), '.3f', 'deg')} "
+              f"(RMS {_fmt(att.get('rms'), '.3f', 'deg')}){against}")
+    for step in steps[:STEP_LINES]:
+        print(step_line(step))
+    if len(steps) > STEP_LINES:
+        print(f"... and {len(steps) - STEP_LINES} more steps in metrics.json")
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from orchestrator.runner import prepare, run_scenario
     from orchestrator.sim.outcome import EXIT_LOST
@@ -80,14 +112,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
         raise
     m = output.metrics
     wall = m.get("wall_time")
-    pos = m.get("position_error") or {}
-    measured = (m.get("measured") or {}).get("position_error")
-    print(f"max position error  {_fmt(pos.get('max'), '.4f', 'm')} "
-          f"(RMS {_fmt(pos.get('rms'), '.4f', 'm')})"
-          + ("" if measured is None else " of the true state"))
-    if measured is not None:  # imperfect sensors: what they said, as such
-        print(f"  as measured       {_fmt(measured.get('max'), '.4f', 'm')} "
-              f"(RMS {_fmt(measured.get('rms'), '.4f', 'm')}), as the sensors read it")
+    _print_tracking(m)
     print(f"real-time factor    {_fmt(m.get('real_time_factor'), '.0f')}x "
           f"({_fmt(wall, '.2f', 's')} wall)")
     for line in output.paper:

@@ -24,20 +24,34 @@ Keys (units in brackets)
     The errors below use it.
 ``nonfinite_rows`` [-]
     Rows where the judged position or attitude is not finite.
+``errors_against``
+    ``{"position": column, "attitude": column}``: the reference the errors below are
+    against, the one the controller flies: its shaped reference ``ctrl.pos_ref_s``,
+    ``ctrl.euler_ref_s`` (a step of the input flown within the shaping's limits; the input
+    itself wherever no jump is being shaped), or, in results recorded without them, the
+    reference as given, ``ref.pos_ref``, ``ref.euler_ref`` (None when neither is recorded).
+    So a 1 m step is not a 1 m error; what the step did is in ``steps``.
 ``position_error`` [m]
-    e = ``plant.pos_true`` (or ``plant.pos``) - ``ref.pos_ref`` (world NED).  ``max`` and
-    ``rms`` of the norm |e|; per axis ``x``, ``y``, ``z``: ``{"max": max |e_i|, "rms":
-    sqrt(mean(e_i^2))}``.
+    e = ``plant.pos_true`` (or ``plant.pos``) - the flown position reference
+    (``errors_against["position"]``; world NED).  ``max`` and ``rms`` of the norm |e|; per
+    axis ``x``, ``y``, ``z``: ``{"max": max |e_i|, "rms": sqrt(mean(e_i^2))}``.
 ``measured``
     With the true state recorded: ``position_error``, ``attitude_error_vs_mu_c`` and
     ``attitude_error_vs_mu_ref`` of the *measured* state (what the sensors said), reported
     as such; else None.
 ``attitude_error_vs_mu_c``, ``attitude_error_vs_mu_ref`` [deg]
-    e = ``plant.euler_true`` (or ``plant.euler``) - ``ctrl.mu_c`` (resp. ``ref.euler_ref``),
-    each component wrapped to
+    e = ``plant.euler_true`` (or ``plant.euler``) - ``ctrl.mu_c`` (resp. the flown attitude
+    reference, ``errors_against["attitude"]``: mu_ref as shaped), each component wrapped to
     [-180, 180) deg.  Per axis ``phi``, ``theta``, ``psi``: ``{"max": max |e_i|, "rms": ...}``;
     ``max_axis``: the largest of the three per-axis maxima (how the paper reads its plots);
     overall ``max`` and ``rms`` of the norm of the wrapped Euler-error vector.
+``steps``
+    One dict per step of the setpoint (jumps of ``ref.pos_ref`` or ``ref.euler_ref``, e.g.
+    from a scenario's ``steps`` signal), in time order, judged against the setpoint as given:
+    ``kind``, ``time``, ``end``, ``jump``, ``size``, ``band``, ``settle_time`` (to within
+    1 cm / 1 deg for good), ``overshoot``, ``peak_tilt``, ``sag``, ``sag_of``,
+    ``acc_limit``, ``bound`` (2 sqrt(L/a_max)) and ``bound_ratio``
+    (:mod:`orchestrator.output.step_metrics` defines each); an empty list without steps.
 ``infeasible_fraction`` [-]
     Fraction of samples where the reference pose was infeasible: 1 - mean(``ctrl.feasible``).
 ``saturation`` [-]
@@ -63,7 +77,10 @@ Keys (units in brackets)
     spent outside the two FMUs (the Python master), or None when fmu_time is not recorded.
 
 :func:`compare_with_paper` states the quantitative claims of the paper's Section IV for the
-paper's three scenarios next to our values.
+paper's three scenarios next to our values.  Their references are smooth (sines, chirps), so
+the flown reference is the input and the lines are those against ``ref.pos_ref`` and
+``ref.euler_ref`` (positions bit for bit; a sine heading to 3e-14 rad, the rounding of the
+controller's unwrapped heading; tests/test_orchestrator/test_step_metrics.py).
 """
 
 from __future__ import annotations
@@ -78,11 +95,17 @@ import numpy as np
 from controller.fmu_parameters import SAT_FLAG_SHIFT
 from controller.wls import STATUS_NAMES
 from orchestrator.output.run_result import RunResult
+from orchestrator.output.step_metrics import step_metrics
 
 """Names of the QP status codes 0..3 (controller outputs guid_status and alloc_status)."""
 
 POSITION_AXES = ("x", "y", "z")
 EULER_AXES = ("phi", "theta", "psi")
+
+FLOWN_REFERENCE = {"position": ("ctrl.pos_ref_s", "ref.pos_ref"),
+                   "attitude": ("ctrl.euler_ref_s", "ref.euler_ref")}
+"""The reference each error is against, the first recorded: the controller's shaped one
+(the input wherever no jump is being shaped), else the input."""
 
 PAPER_MAX_POSITION_ERROR = 0.02
 """m, scenario 1 (hovering with varying orientations), Sec. IV-A / Fig. 4."""
@@ -168,18 +191,29 @@ def _timing(result: RunResult) -> dict[str, dict[str, float | None] | None]:
     return out
 
 
+def flown_reference(result: RunResult) -> dict[str, str | None]:
+    """The columns the errors are against (``errors_against``): the position and attitude
+    reference the controller flies (its shaped ``ctrl.pos_ref_s``, ``ctrl.euler_ref_s``),
+    else the reference as given (``ref.pos_ref``, ``ref.euler_ref``), else None."""
+    out: dict[str, str | None] = {}
+    for key, names in FLOWN_REFERENCE.items():
+        out[key] = next((name for name in names if result.has(name)), None)
+    return out
+
+
 def _tracking(result: RunResult, pos_name: str, euler_name: str) -> dict[str, Any]:
     """Position and attitude errors of the signals ``pos_name`` and ``euler_name``."""
     out: dict[str, Any] = {}
     t = result.time
-    pos, pos_ref = result.optional(pos_name), result.optional("ref.pos_ref")
-    euler = result.optional(euler_name)
+    flown = flown_reference(result)
+    pos, euler = result.optional(pos_name), result.optional(euler_name)
+    pos_ref = None if flown["position"] is None else result.get(flown["position"])
     out["position_error"] = None
     if pos is not None and pos_ref is not None and t.size:
         out["position_error"] = _error_stats(pos - pos_ref, POSITION_AXES)
     for key, ref_name in (("attitude_error_vs_mu_c", "ctrl.mu_c"),
-                          ("attitude_error_vs_mu_ref", "ref.euler_ref")):
-        ref = result.optional(ref_name)
+                          ("attitude_error_vs_mu_ref", flown["attitude"])):
+        ref = None if ref_name is None else result.optional(ref_name)
         out[key] = None
         if euler is not None and ref is not None and t.size:
             err = wrap_deg(np.degrees(euler - ref))
@@ -230,8 +264,10 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
         if sig is not None:
             bad |= ~np.all(np.isfinite(np.atleast_2d(sig.T).T), axis=1)
     m["nonfinite_rows"] = int(np.sum(bad))
+    m["errors_against"] = flown_reference(result)
     m.update(_tracking(result, *judged))
     m["measured"] = _tracking(result, "plant.pos", "plant.euler") if truth else None
+    m["steps"] = step_metrics(result, *judged)
 
     feasible = result.optional("ctrl.feasible")
     m["infeasible_fraction"] = (None if feasible is None or feasible.size == 0
