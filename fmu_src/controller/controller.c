@@ -98,23 +98,23 @@ static void controller_set_defaults(void *model) {
      * step saturated the servos for yaw and gave up the force, and the vehicle was lost. */
     m->W_nu[3] = m->W_nu[4] = 100.0;
     m->W_nu[5] = 1.0;
-    m->yaw_rate_max = 0.5;
+    m->yaw_rate_max = 0.0; /* derived with the heading's shaping limits */
     m->w_pref = 0.1;
     m->pref_omega_scale = 1.0 / 50.0;
     m->qp_max_iter = 50;
-    /* Reference shaping: a jump flown at most at ref_tilt_max of tilt (a 10 m step must not
-     * become a 50-degree lunge); the heading at 0.4 rad/s leaves yaw_rate_max's 0.5 some
-     * room for feedback. */
+    /* Reference shaping: a jump flown at the airframe's pace (shaping_limits.c derives
+     * every limit left at 0), at most at ref_tilt_max of tilt (a 10 m step must not become a
+     * 50-degree lunge); roll and pitch steps at 1 rad/s and 2 rad/s^2. */
     m->ref_shaping = 1;
-    m->ref_bandwidth = 3.0;
+    m->ref_bandwidth = 10.0;
     m->ref_tilt_max = 15.0 * CTRL_PI / 180.0;
-    m->ref_vel_max[0] = 2.0, m->ref_vel_max[1] = 1.0;
-    m->ref_acc_max[0] = m->ref_acc_max[1] = 0.0; /* derived at initialization */
-    m->ref_jerk_max[0] = m->ref_jerk_max[1] = 5.0;
+    m->ref_vel_max[0] = m->ref_vel_max[1] = 0.0;
+    m->ref_acc_max[0] = m->ref_acc_max[1] = 0.0;
+    m->ref_jerk_max[0] = m->ref_jerk_max[1] = 0.0;
     m->ref_att_rate_max[0] = m->ref_att_rate_max[1] = 1.0;
-    m->ref_att_rate_max[2] = 0.4;
+    m->ref_att_rate_max[2] = 0.0;
     m->ref_att_acc_max[0] = m->ref_att_acc_max[1] = 2.0;
-    m->ref_att_acc_max[2] = 1.0;
+    m->ref_att_acc_max[2] = 0.0;
     /* Fault detection (detect.c): on, as on a vehicle that must notice a broken propeller
      * itself; thresholds from docs/controller.md's measurements (no false alarm over the
      * shipped scenarios with sensor noise on). */
@@ -245,18 +245,45 @@ static FpStatus prepare_force_sets(ControllerModel *m, const FpLogger *logger) {
     return FP_OK;
 }
 
-/* The shaping's acceleration limits: ref_acc_max where given, else what the nominal force
- * set allows.  Horizontally 90 % of the acceleration a conventional multirotor reaches at
- * ref_tilt_max, g tan(tilt) (the rest is the feedback's), within the thrust the set has
- * (|f_bz| at most -fz_min): over-actuated vehicles reach it with less tilt.  Vertically half of what is left of the
- * thrust range at that tilt, up and down, so a climb or descent never saturates it. */
-static void derive_acc_limits(ControllerModel *m) {
-    double g = m->af.g, up = -m->fz_min / m->af.mass, least = -m->fz_max / m->af.mass;
-    double a_h = 0.9 * g * tan(m->ref_tilt_max), a_z;
-    if (up > g) a_h = fmin(a_h, sqrt(up * up - g * g));
-    a_z = 0.5 * fmin(up * cos(m->ref_tilt_max) - g, g - least);
-    m->acc_limit[0] = m->ref_acc_max[0] > 0.0 ? m->ref_acc_max[0] : a_h;
-    m->acc_limit[1] = m->ref_acc_max[1] > 0.0 ? m->ref_acc_max[1] : fmax(a_z, 0.05 * g);
+/* The shaping's limits in use: as given, or derived from the airframe (shaping_limits.c) -
+ * the rotors' torque capability computed with the inner allocation's solver, borrowed
+ * before it is set up. */
+static FpStatus derive_shaping_limits(ControllerModel *m, const FpLogger *logger) {
+    CtrlLimitInputs in;
+    CtrlShapingLimits out;
+    CtrlForceSet fs;
+    double tau[3] = {0.0, 0.0, 0.0};
+    int i, need_torque = 0;
+    for (i = 0; i < 3; i++) need_torque |= !(m->ref_att_acc_max[i] > 0.0);
+    if (need_torque &&
+        ctrl_torque_capability(&m->rotors, m->af.mass, m->af.g, &m->alloc, tau) != FP_OK) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "parameters ref_att_acc_max: the rotors' torque capability at the hover trim "
+               "cannot be computed for this airframe; give every element (> 0)");
+        return FP_ERROR;
+    }
+    fs.A = (const double(*)[3])m->set_A, fs.d = m->poly_d, fs.n = m->set_n;
+    fs.fz[0] = m->fz_min, fs.fz[1] = m->fz_max, fs.id = 0;
+    in.fs = &fs;
+    in.mass = m->af.mass, in.g = m->af.g;
+    memcpy(in.inertia, m->af.inertia, sizeof in.inertia);
+    memcpy(in.tau_max, tau, sizeof in.tau_max);
+    in.tilt_max = m->ref_tilt_max, in.bandwidth = m->ref_bandwidth;
+    in.vel_max = m->ref_vel_max, in.acc_max = m->ref_acc_max, in.jerk_max = m->ref_jerk_max;
+    in.att_rate_max_given = m->ref_att_rate_max, in.att_acc_max = m->ref_att_acc_max;
+    ctrl_shaping_limits(&in, &out);
+    memcpy(m->acc_limit, out.acc, sizeof m->acc_limit);
+    memcpy(m->vel_limit, out.vel, sizeof m->vel_limit);
+    memcpy(m->jerk_limit, out.jerk, sizeof m->jerk_limit);
+    memcpy(m->att_rate_limit, out.att_rate, sizeof m->att_rate_limit);
+    memcpy(m->att_acc_limit, out.att_acc, sizeof m->att_acc_limit);
+    m->yaw_rate_limit = out.yaw_rate;
+    memcpy(m->ref_acc_limit, m->acc_limit, sizeof m->ref_acc_limit);
+    memcpy(m->ref_vel_limit, m->vel_limit, sizeof m->ref_vel_limit);
+    memcpy(m->ref_jerk_limit, m->jerk_limit, sizeof m->ref_jerk_limit);
+    memcpy(m->ref_att_rate_limit, m->att_rate_limit, sizeof m->ref_att_rate_limit);
+    memcpy(m->ref_att_acc_limit, m->att_acc_limit, sizeof m->ref_att_acc_limit);
+    return FP_OK;
 }
 
 /* ------------------------------------------------------------------------ */
@@ -410,8 +437,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     if (ctrl_check_parameters(m, controller_vars, N_CTRL_VARS, logger) != 0) return FP_ERROR;
     fp_rotor_set_of(&m->af, &m->rotors); /* (validated: the force sets and samples use it) */
     if (prepare_force_sets(m, logger) != FP_OK) return FP_ERROR;
-    derive_acc_limits(m);
-    memcpy(m->ref_acc_limit, m->acc_limit, sizeof m->ref_acc_limit);
+    if (derive_shaping_limits(m, logger) != FP_OK) return FP_ERROR;
     derive_input_bounds(m);
     if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "initialization: %s", why);
@@ -609,7 +635,9 @@ static FpStatus controller_check_restored(const void *model, int initialized,
         !isfinite(m->inputs_age) ||
         !fp_all_finite(m->roll.twin.mu, 3) || !fp_all_finite(m->roll.twin.f, 3) ||
         !fp_all_finite(m->roll.detect.est, FP_MAX_ROTORS) ||
-        !fp_all_finite(m->acc_limit, 2) ||
+        !fp_all_finite(m->acc_limit, 2) || !fp_all_finite(m->vel_limit, 2) ||
+        !fp_all_finite(m->jerk_limit, 2) || !fp_all_finite(m->att_rate_limit, 3) ||
+        !fp_all_finite(m->att_acc_limit, 3) || !isfinite(m->yaw_rate_limit) ||
         !fp_all_finite(&m->set_A[0][0], sizeof m->set_A / sizeof(double)) ||
         !fp_all_finite(m->set_b, FP_POLYTOPE_MAX_FACETS) ||
         !fp_all_finite(&m->set_fail_A[0][0], sizeof m->set_fail_A / sizeof(double)) ||

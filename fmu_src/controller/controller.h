@@ -119,7 +119,8 @@ typedef struct {
     int32_t rotors_lost, hover_possible, active_polytope;
     double t_step, t_guid, t_alloc;
     double pos_ref_s[3], vel_ref_s[3], acc_ref_s[3], euler_ref_s[3], mu_ff[3], mu_rate_ff[3];
-    double ref_acc_limit[2];
+    double ref_acc_limit[2], ref_vel_limit[2], ref_jerk_limit[2];
+    double ref_att_rate_limit[3], ref_att_acc_limit[3];
     double rotor_eff_est[FP_MAX_ROTORS], indi_residual[6];
     int32_t rotors_detected;
     /* internal state */
@@ -155,7 +156,9 @@ typedef struct {
     FpPreferredSplit pref_split; /* the preferred configuration's geometry, all rotors */
     CtrlDetectParams detect_p;
     double health[FP_MAX_ROTORS]; /* efficiencies in use: rotor_health, or lower if detected */
-    double acc_limit[2]; /* the shaping's acceleration limits in use (ref_acc_max or derived) */
+    /* the shaping's limits in use (as given, or derived: shaping_limits.c) */
+    double acc_limit[2], vel_limit[2], jerk_limit[2], att_rate_limit[3], att_acc_limit[3];
+    double yaw_rate_limit; /* the heading-rate command limit when yaw_rate_max is 0 */
     FpWls guid, alloc, twin_qp;
     int32_t guid_c_rows; /* which force set's rows guid's C holds (build_qp; 0: none yet) */
     int32_t initialized; /* the glue's marker (FpModelInfo.initialized_offset); in padding */

@@ -85,11 +85,11 @@ static CtrlShapingParams shaping_params(const ControllerModel *m) {
     p.enabled = m->ref_shaping != 0;
     p.Ts = m->Ts;
     p.lambda = m->ref_bandwidth;
-    memcpy(p.vel_max, m->ref_vel_max, sizeof p.vel_max);
+    memcpy(p.vel_max, m->vel_limit, sizeof p.vel_max);
     memcpy(p.acc_max, m->acc_limit, sizeof p.acc_max);
-    memcpy(p.jerk_max, m->ref_jerk_max, sizeof p.jerk_max);
-    memcpy(p.att_rate_max, m->ref_att_rate_max, sizeof p.att_rate_max);
-    memcpy(p.att_acc_max, m->ref_att_acc_max, sizeof p.att_acc_max);
+    memcpy(p.jerk_max, m->jerk_limit, sizeof p.jerk_max);
+    memcpy(p.att_rate_max, m->att_rate_limit, sizeof p.att_rate_max);
+    memcpy(p.att_acc_max, m->att_acc_limit, sizeof p.att_acc_max);
     return p;
 }
 
@@ -97,7 +97,7 @@ static CtrlStabilizationParams stabilization_params(const ControllerModel *m) {
     CtrlStabilizationParams p;
     p.K_att = CTRL_BLOCK(m, att);
     p.K_rate = CTRL_BLOCK(m, rate);
-    p.yaw_rate_max = m->yaw_rate_max;
+    p.yaw_rate_max = m->yaw_rate_max > 0.0 ? m->yaw_rate_max : m->yaw_rate_limit;
     p.inertia = (const double(*)[3])m->af.inertia;
     return p;
 }
@@ -162,7 +162,7 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     /* what a sample changes besides its outputs: restored when the sample is discarded */
     CtrlRolled before;
     CtrlDetectOut dout;
-    double residual[6];
+    double residual[6], acc_lead[3];
     int i, n = m->af.n_rotors;
     /* the QPs' memory arrives while the filters, the guidance set-up and B'' compute */
     fp_wls_prefetch(&m->guid);
@@ -227,7 +227,12 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
         }
     }
     /* 2. guidance */
-    gin.acc_ref = r.acc;
+    /* the shaping's acceleration led by the actuators' lag (first order: a force commanded
+     * now arrives tau later), so that a shaped step's jerk does not leave the vehicle behind
+     * its reference; zero at zero shaping error, so a given trajectory is flown as given */
+    for (i = 0; i < 3; i++)
+        acc_lead[i] = r.acc[i] + fmax(m->af.tau_motor, m->af.tau_servo) * r.jerk[i];
+    gin.acc_ref = acc_lead;
     gin.mu_ref = r.mu;
     gin.r_ref = r_ref;
     gst.x_pos = m->roll.blk[BLK_POS];

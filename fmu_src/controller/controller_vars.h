@@ -69,20 +69,20 @@
     X(poly_margin, 564, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_LOPEN(0, 1), "Scale (0, 1] of S(0) about the hover force used by the guidance: reserve for attitude torques") \
     /* parameters: inner allocation (eq. 12-13) */                                                 \
     X(W_nu, 600, REAL, PARAM_TUNABLE, 6, 1, WEIGHT, FP_POSITIVE, "Row weights of [df_b; dtau_b] (torque priority)") \
-    X(yaw_rate_max, 610, REAL, PARAM_TUNABLE, 1, 1, ANGULAR_VELOCITY, FP_POSITIVE, "Limit of the commanded heading rate (yaw authority is the smallest)") \
+    X(yaw_rate_max, 610, REAL, PARAM_TUNABLE, 1, 1, ANGULAR_VELOCITY, FP_NONNEGATIVE, "Limit of the commanded heading rate; 0: 1.25 x the heading-rate limit of the shaping in use (ref_att_rate_limit[3])") \
     X(w_pref, 606, REAL, PARAM_TUNABLE, 1, 1, WEIGHT, FP_POSITIVE, "Weight of the preferred actuator configuration") \
     X(pref_omega_scale, 607, REAL, PARAM_TUNABLE, 1, 1, ROTOR_SPEED, FP_POSITIVE, "Scale of rotor speeds (in rad/s) in the preference term") \
     X(qp_max_iter, 608, INTEGER, PARAM_TUNABLE, 1, 1, NONE, FP_IN(1, 1000), "Iteration cap of both allocation QPs") \
     X(timing, 609, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Measure computation times (t_step, t_guid, t_alloc); off keeps runs bit-reproducible") \
     /* parameters: reference shaping (reference.c) */                                             \
     X(ref_shaping, 640, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Shape the reference: jumps of pos_ref, its derivatives and euler_ref are flown within the limits below (off: the reference as given)") \
-    X(ref_bandwidth, 641, REAL, PARAM_FIXED, 1, 1, ANGULAR_FREQUENCY, FP_POSITIVE, "Poles of the shaping in its linear region (triple for translation, double for the angles)") \
-    X(ref_tilt_max, 642, REAL, PARAM_FIXED, 1, 1, ANGLE, FP_IN_OPEN(0, 1.5), "Tilt the shaped horizontal acceleration may need: ref_acc_max[1] = g tan(ref_tilt_max) where it is 0") \
-    X(ref_vel_max, 643, REAL, PARAM_FIXED, 2, 1, VELOCITY, FP_POSITIVE, "Speed limits of the shaped correction [horizontal, vertical]") \
-    X(ref_acc_max, 645, REAL, PARAM_FIXED, 2, 1, ACCELERATION, FP_NONNEGATIVE, "Acceleration limits of the shaped correction [horizontal, vertical]; 0: derived from ref_tilt_max and the feasible-force set (ref_acc_limit)") \
-    X(ref_jerk_max, 647, REAL, PARAM_FIXED, 2, 1, JERK, FP_POSITIVE, "Jerk limits of the shaped correction [horizontal, vertical]") \
-    X(ref_att_rate_max, 649, REAL, PARAM_FIXED, 3, 1, ANGULAR_VELOCITY, FP_POSITIVE, "Euler-rate limits of the shaped attitude correction [roll, pitch, heading]") \
-    X(ref_att_acc_max, 652, REAL, PARAM_FIXED, 3, 1, ANGULAR_ACCELERATION, FP_POSITIVE, "Euler-acceleration limits of the shaped attitude correction [roll, pitch, heading]") \
+    X(ref_bandwidth, 641, REAL, PARAM_FIXED, 1, 1, ANGULAR_FREQUENCY, FP_POSITIVE, "Poles of the shaping in its linear region (triple for translation, double for the angles); derived jerk limits reach the acceleration limit within 1 / ref_bandwidth") \
+    X(ref_tilt_max, 642, REAL, PARAM_FIXED, 1, 1, ANGLE, FP_IN_OPEN(0, 1.5), "Tilt the shaped horizontal acceleration may need (vehicles whose force follows their attitude: derived ref_acc_max[1] = 0.9 g tan(ref_tilt_max))") \
+    X(ref_vel_max, 643, REAL, PARAM_FIXED, 2, 1, VELOCITY, FP_NONNEGATIVE, "Speed limits of the shaped correction [horizontal, vertical]; 0: derived, the acceleration limit times 1 s (ref_vel_limit)") \
+    X(ref_acc_max, 645, REAL, PARAM_FIXED, 2, 1, ACCELERATION, FP_NONNEGATIVE, "Acceleration limits of the shaped correction [horizontal, vertical]; 0: derived from the feasible-force set and ref_tilt_max (ref_acc_limit, docs/controller.md)") \
+    X(ref_jerk_max, 647, REAL, PARAM_FIXED, 2, 1, JERK, FP_NONNEGATIVE, "Jerk limits of the shaped correction [horizontal, vertical]; 0: derived, the acceleration limit times ref_bandwidth (ref_jerk_limit)") \
+    X(ref_att_rate_max, 649, REAL, PARAM_FIXED, 3, 1, ANGULAR_VELOCITY, FP_NONNEGATIVE, "Euler-rate limits of the shaped attitude correction [roll, pitch, heading]; 0: derived, the acceleration limit times 1 s (ref_att_rate_limit)") \
+    X(ref_att_acc_max, 652, REAL, PARAM_FIXED, 3, 1, ANGULAR_ACCELERATION, FP_NONNEGATIVE, "Euler-acceleration limits of the shaped attitude correction [roll, pitch, heading]; 0: derived, half the torque the rotors give about that axis at hover over the inertia (ref_att_acc_limit)") \
     X(fault_detect, 660, BOOLEAN, PARAM_FIXED, 1, 1, NONE, FP_ANY, "Detect a lost or degraded rotor from the INDI residual without being told, and reconfigure (docs/controller.md)") \
     X(fault_loss_min, 661, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_OPEN(0, 1), "Smallest change of a rotor's efficiency the detector concludes (an event opens at half of it, as an acceleration of that share of the rotor's weight share)") \
     X(fault_fit_max, 662, REAL, PARAM_FIXED, 1, 1, RATIO, FP_IN_OPEN(0, 1), "Share of an event's residual change (beyond sensor noise) a rotor's own wrench may leave unexplained for a fault to be concluded") \
@@ -136,6 +136,10 @@
     X(mu_ff, 2122, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "Feed-forward attitude: the guidance's mu_c for a vehicle exactly on the shaped reference (the shaped mu_ref where that is feasible)") \
     X(mu_rate_ff, 2125, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Euler-rate feed-forward of the attitude loop: the rate of mu_ff") \
     X(ref_acc_limit, 2128, REAL, OUTPUT, 2, 1, ACCELERATION, FP_ANY, "Acceleration limits the shaping uses [horizontal, vertical] (ref_acc_max, or derived)") \
+    X(ref_vel_limit, 2150, REAL, OUTPUT, 2, 1, VELOCITY, FP_ANY, "Speed limits the shaping uses [horizontal, vertical] (ref_vel_max, or derived)") \
+    X(ref_jerk_limit, 2152, REAL, OUTPUT, 2, 1, JERK, FP_ANY, "Jerk limits the shaping uses [horizontal, vertical] (ref_jerk_max, or derived)") \
+    X(ref_att_rate_limit, 2154, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "Euler-rate limits the shaping uses [roll, pitch, heading] (ref_att_rate_max, or derived)") \
+    X(ref_att_acc_limit, 2157, REAL, OUTPUT, 3, 1, ANGULAR_ACCELERATION, FP_ANY, "Euler-acceleration limits the shaping uses [roll, pitch, heading] (ref_att_acc_max, or derived)") \
     X(rotor_eff_est, 2130, REAL, OUTPUT, 8, 1, RATIO, FP_ANY, "Rotor efficiencies the detector estimates (1 until it detects a fault; below 0.15: lost, idled at a probe speed and restored when its thrust shows at 0.3 or more)") \
     X(rotors_detected, 2140, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Rotors the detector found faulty: bit i-1 rotor i") \
     X(indi_residual, 2141, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "INDI residual: measured minus modelled rotor wrench [f_b (N); tau_b (N.m)], body")

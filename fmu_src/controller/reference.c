@@ -27,6 +27,7 @@
 #define JUMP_ATT_ACC 5.0   /* rad/s^2: angular-rate changes faster than this are jumps */
 #define SNAP 1e-9          /* an error state below this is zero: the output is the input */
 #define BUDGET_FLOOR 0.25  /* share of a limit the correction keeps when the input uses it */
+#define BRAKE_SHARE 0.75   /* of the acceleration limit: braking (the rest absorbs the jerk-limited turn) */
 
 /* The velocity that stops from distance d within deceleration decel: linear (gain k) near
  * zero, the square-root braking law beyond, continuous with its slope at the junction. */
@@ -59,11 +60,15 @@ static double budget(double limit, double used) {
 /* One group of translation axes (x and y together, so a jump is flown in a straight line,
  * or z alone): n elements of the error state, driven toward zero for one sample. */
 static void shape_translation(const CtrlShapingParams *p, int group, int n, double *ep,
-                              double *ev, double *ea, const double *v_in, const double *a_in) {
-    double lam = p->lambda, vt[2], at[2], jerk[2], d = norm_n(ep, n);
+                              double *ev, double *ea, const double *v_in, const double *a_in,
+                              double *jerk_out) {
+    /* poles no faster than the jerk limit lets the acceleration follow: a cascade whose
+     * jerk saturates overshoots (a quadrotor's tilt rate bounds its jerk) */
+    double lam = fmin(p->lambda, p->jerk_max[group] / p->acc_max[group]);
+    double vt[2], at[2], jerk[2], d = norm_n(ep, n);
     double v_lim = budget(p->vel_max[group], norm_n(v_in, n));
     double a_lim = budget(p->acc_max[group], norm_n(a_in, n));
-    double speed = d > 0.0 ? fmin(braking_speed(d, lam / 3.0, 0.5 * a_lim), v_lim) : 0.0;
+    double speed = d > 0.0 ? fmin(braking_speed(d, lam / 3.0, BRAKE_SHARE * a_lim), v_lim) : 0.0;
     double ts = p->Ts;
     int i;
     for (i = 0; i < n; i++) vt[i] = d > 0.0 ? -ep[i] / d * speed : 0.0;
@@ -87,6 +92,7 @@ static void shape_translation(const CtrlShapingParams *p, int group, int n, doub
     for (i = 0; i < n; i++) jerk[i] = 3.0 * lam * (at[i] - ea[i]);
     limit_n(jerk, n, p->jerk_max[group]);
     for (i = 0; i < n; i++) {
+        jerk_out[i] = jerk[i];
         ep[i] += ts * (ev[i] + ts * (0.5 * ea[i] + ts * jerk[i] / 6.0));
         ev[i] += ts * (ea[i] + 0.5 * ts * jerk[i]);
         ea[i] += ts * jerk[i];
@@ -124,6 +130,7 @@ void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *i
         memcpy(out->acc, in->acc, sizeof out->acc);
         memcpy(out->mu, in->mu, sizeof out->mu);
         memcpy(out->mu_rate, in->mu_rate, sizeof out->mu_rate);
+        memset(out->jerk, 0, sizeof out->jerk);
         return;
     }
     if (x->started) {
@@ -166,8 +173,8 @@ void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *i
     }
     /* the error state at the next sample */
     shape_translation(p, 0, 2, &x->e_pos[0], &x->e_vel[0], &x->e_acc[0], &in->vel[0],
-                      &in->acc[0]);
+                      &in->acc[0], &out->jerk[0]);
     shape_translation(p, 1, 1, &x->e_pos[2], &x->e_vel[2], &x->e_acc[2], &in->vel[2],
-                      &in->acc[2]);
+                      &in->acc[2], &out->jerk[2]);
     for (i = 0; i < 3; i++) shape_angle(p, i, &x->e_mu[i], &x->e_rate[i], in->mu_rate[i]);
 }

@@ -78,6 +78,7 @@ typedef struct {
 
 typedef struct {
     double pos[3], vel[3], acc[3], mu[3], mu_rate[3];
+    double jerk[3]; /* the correction's jerk from this sample to the next (0 at zero error) */
 } CtrlShapedRef;
 
 /* One sample of the shaped reference; x carries the error state. */
@@ -202,6 +203,35 @@ void ctrl_rotor_losses(int n_rotors, const double rotor_health[], int32_t detect
 
 /* Say which force set a change of losses leaves the guidance with. */
 void ctrl_log_losses(const CtrlLosses *l, const FpLogger *logger);
+
+/* ------------------------------------------------------------------------ */
+/* shaping_limits.c: the shaping's limits from the airframe (initialization)  */
+
+/* The level acceleration the force set fs leaves after the hover force [0, 0, -m g]: the
+ * least over azimuths of the horizontal force reachable at that f_z, over m. */
+double ctrl_level_acceleration(const CtrlForceSet *fs, double mass, double g);
+
+/* The torque the rotors give about each body axis at the hover trim while holding the
+ * other five wrench components (linearised: B'' at trim, the actuators' ranges), the
+ * smaller of the two directions; w is a solver borrowed for it (set up and reset here). */
+FpStatus ctrl_torque_capability(const FpRotorSet *rs, double mass, double g, FpWls *w,
+                                double tau_max[3]);
+
+typedef struct {
+    const CtrlForceSet *fs; /* the nominal force set (margin-scaled offsets) */
+    double mass, g, inertia[3][3], tau_max[3];
+    double tilt_max, bandwidth;       /* ref_tilt_max, ref_bandwidth */
+    const double *vel_max, *acc_max, *jerk_max;       /* [h, v] as given (0: derive) */
+    const double *att_rate_max_given, *att_acc_max;   /* per Euler angle (0: derive) */
+} CtrlLimitInputs;
+
+typedef struct {
+    double vel[2], acc[2], jerk[2], att_rate[3], att_acc[3];
+    double yaw_rate; /* the stabilization's heading-rate command limit that goes with it */
+    double a_level;  /* m/s^2: the level acceleration of the force set (diagnostic) */
+} CtrlShapingLimits;
+
+void ctrl_shaping_limits(const CtrlLimitInputs *in, CtrlShapingLimits *out);
 
 /* ------------------------------------------------------------------------ */
 /* detect.c                                                                 */

@@ -408,12 +408,14 @@ def test_the_fault_detector_constants_of_a_restored_controller_are_checked(make,
     good = serialize(inst)
     pos = inst.read(inst.signal("rotor_pos")).reshape(-1, 3)[:int(inst.get("n_rotors"))]
     arm = float(np.mean(np.linalg.norm(pos, axis=1)))
-    tail = struct.pack("<dd", 0.3, 0.35)  # fault_loss_min, fault_fit_max (the defaults)
-    found = [i - 8 for i in range(HEADER_SIZE + 8, len(good) - 16)
-             if good[i:i + 16] == tail
-             and struct.unpack_from("<d", good, i - 8)[0] == pytest.approx(arm, rel=1e-12)]
-    assert len(found) == 1, found  # detect_p: mass, inertia, g, arm, loss_min, fit_max, ...
-    at = found[0] if edit == "arm" else found[0] + 32  # arm, or persist after wrench_min
+    # detect_p: mass, inertia, g, Ts, arm, arm I^-1 (9), loss_min, fit_max, wrench_min, onset,
+    # floor2, base_gain, probe_omega, persist, window
+    tail = struct.pack("<dd", 0.1, 0.3)  # fault_loss_min, fault_fit_max (the defaults)
+    found = [i for i in range(HEADER_SIZE, len(good) - 96)
+             if good[i + 80:i + 96] == tail
+             and struct.unpack_from("<d", good, i)[0] == pytest.approx(arm, rel=1e-12)]
+    assert len(found) == 1, found
+    at = found[0] if edit == "arm" else found[0] + 80 + 7 * 8  # arm, or persist
     assert struct.unpack_from("<d" if edit == "arm" else "<i", good, at)[0] > 0
     bad = bytearray(good)
     bad[at:at + (8 if edit == "arm" else 4)] = bytes(8 if edit == "arm" else 4)

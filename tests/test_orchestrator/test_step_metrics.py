@@ -268,7 +268,9 @@ def test_position_step_prints_its_step_line(tmp_path):
     metrics = json.loads((tmp_path / "metrics.json").read_text())["metrics"]
     (s,) = metrics["steps"]
     assert s["kind"] == "position" and s["jump"] == [1.0, 0.0, 0.0]
-    assert 1.0 < s["settle_time"] < 4.0 and s["bound_ratio"] > 1.0
+    # the shaping never asks for more than its acceleration limit (ratio about 1 or more),
+    # and the step reaches 1 cm within twice the bound (issue requirement)
+    assert s["settle_time"] > 0.0 and 0.9 < s["bound_ratio"] <= 2.0
     assert metrics["errors_against"]["position"] == "ctrl.pos_ref_s"
     assert metrics["position_error"]["max"] < 0.01
     lines = res.stdout.splitlines()
