@@ -268,37 +268,44 @@ def _cmd_build_fmus(args: argparse.Namespace) -> int:
     return 0
 
 
-def _cmd_sweep(args: argparse.Namespace) -> int:
-    import time
+def _sweep_defaults(args: argparse.Namespace) -> None:
+    """The options whose default depends on the campaign (--faults): duration, designs and
+    output folder; then the checks of every option."""
+    from orchestrator.sweep import FAULT_DURATION
 
-    from orchestrator.sweep import run_sweep
-    from orchestrator.sweep_report import summarize, write_outputs
-
+    if args.duration is None:
+        args.duration = FAULT_DURATION if args.faults else 6.0
+    if args.designs is None:
+        args.designs = "hinf" if args.faults else "hinf,baseline"
+    if args.out is None:
+        args.out = Path("results") / ("sweep_faults" if args.faults else "sweep")
     if args.cases < 1 or args.duration <= 1.0:
         raise ValueError("sweep needs --cases >= 1 and --duration > 1 s")
     if not (math.isfinite(args.noise) and args.noise >= 0.0):
         raise ValueError(f"sweep --noise must be a finite factor >= 0, got {args.noise}")
-    from orchestrator.sweep import Campaign
-
-    _warn(Campaign(args.scenario, args.airframe, args.duration).base().warnings)
-    t0 = time.perf_counter()
     if not (math.isfinite(args.torque) and args.torque >= 0.0):
         raise ValueError(f"sweep --torque must be a finite amplitude >= 0 N m, got {args.torque}")
+
+
+def _cmd_sweep(args: argparse.Namespace) -> int:
+    import time
+
+    from orchestrator.sweep import Campaign, run_sweep
+
+    _sweep_defaults(args)
+    _warn(Campaign(args.scenario, args.airframe, args.duration).base().warnings)
+    t0 = time.perf_counter()
     rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
                      dask=args.dask, noise=args.noise, torque=args.torque, delay=args.delay,
                      design_set=[d.strip() for d in args.designs.split(",") if d.strip()],
-                     scenario=args.scenario, airframe=args.airframe)
+                     scenario=args.scenario, airframe=args.airframe, faults=args.faults)
     wall = time.perf_counter() - t0
     meta = {"n": args.cases, "seed": args.seed, "duration": args.duration,
             "scenario": args.scenario, "airframe": args.airframe, "noise": args.noise,
-            "torque": args.torque, "delay": args.delay,
+            "torque": args.torque, "delay": args.delay, "faults": args.faults,
             "workers": args.dask or args.workers, "wall_time": wall,
             "throughput": len(rows) / wall}
-    files = write_outputs(rows, args.out, meta)
-    for d, s in summarize(rows).items():
-        print(f"{d:9s} stable {100 * s['stable_fraction']:.0f} %  max err mean "
-              f"{s['max_err_mean']:.4f} m (worst {s['max_err_worst']:.4f})  RMS mean "
-              f"{s['rms_err_mean']:.4f} m  recovery mean {s['recovery_mean']:.2f} s")
+    files = (_print_faults if args.faults else _print_sweep)(rows, args.out, meta)
     rate = f"{len(rows) / wall:.2f} runs/s"
     if not args.dask:  # a Dask cluster's worker count is the cluster's
         per = len(rows) / wall / max(1, args.workers)
@@ -306,6 +313,30 @@ def _cmd_sweep(args: argparse.Namespace) -> int:
     print(f"{len(rows)} runs in {wall:.1f} s ({rate})")
     print(f"wrote               {', '.join(str(f) for f in files)}")
     return 0
+
+
+def _print_sweep(rows: list[dict[str, object]], out: Path,
+                 meta: dict[str, object]) -> list[Path]:
+    """The disturbance campaign's files and per-design lines; the files written."""
+    from orchestrator.sweep_report import summarize, write_outputs
+
+    files = write_outputs(rows, out, meta)
+    for d, s in summarize(rows).items():
+        print(f"{d:9s} stable {100 * s['stable_fraction']:.0f} %  max err mean "
+              f"{s['max_err_mean']:.4f} m (worst {s['max_err_worst']:.4f})  RMS mean "
+              f"{s['rms_err_mean']:.4f} m  recovery mean {s['recovery_mean']:.2f} s")
+    return files
+
+
+def _print_faults(rows: list[dict[str, object]], out: Path,
+                  meta: dict[str, object]) -> list[Path]:
+    """The fault campaign's files and per-design counts; the files written."""
+    from orchestrator.sweep_report import fault_stats, summary_lines, write_fault_outputs
+
+    files = write_fault_outputs(rows, out, meta)
+    for d, s in fault_stats(rows).items():
+        print("\n".join(summary_lines(d, s)))
+    return files
 
 
 GAINS_HELP = "fly with the gains of this file (fullpose design) instead of the shipped ones"
@@ -414,18 +445,25 @@ def build_parser() -> argparse.ArgumentParser:
     fs.add_argument("--plot", type=Path, default=None, help="write the Fig.-3-like plot (PNG)")
     fs.set_defaults(func=_cmd_force_set)
 
-    sw = sub.add_parser("sweep", help="Monte-Carlo robustness campaign: H-infinity vs baseline")
+    sw = sub.add_parser("sweep", help="Monte-Carlo robustness campaign: H-infinity vs baseline "
+                                      "(--faults: the rotor-fault detector's campaign)")
     sw.add_argument("--cases", type=int, default=50, help="sampled cases (default: 50)")
+    sw.add_argument("--faults", action="store_true",
+                    help="the rotor-fault campaign instead: half unknown loads, half partial or "
+                         "total rotor faults, the controller never told; counts false alarms "
+                         "and missed detections (default designs: hinf, duration 4 s, out "
+                         "results/sweep_faults)")
     sw.add_argument("--scenario", default="hover", metavar="NAME_OR_FILE",
                     help="the scenario every case flies, perturbed (default: hover)")
     sw.add_argument("--airframe", default=None, metavar="NAME_OR_FILE",
                     help="fly it on this airframe instead of the scenario's")
     sw.add_argument("--seed", type=int, default=0, help="sampling seed (default: 0)")
-    sw.add_argument("--duration", type=float, default=6.0, help="seconds per run (default: 6)")
-    sw.add_argument("--designs", default="hinf,baseline",
+    sw.add_argument("--duration", type=float, default=None,
+                    help="seconds per run (default: 6; --faults: 4)")
+    sw.add_argument("--designs", default=None,
                     help="comma-separated: hinf, baseline, prototype, and each NAME_matched "
                          "(_matched: the controller knows the perturbed mass and inertia; "
-                         "default: hinf,baseline)")
+                         "default: hinf,baseline; --faults: hinf)")
     sw.add_argument("--noise", type=float, default=1.0,
                     help="factor on the sampled sensor noise, 0 for none (default: 1)")
     sw.add_argument("--torque", type=float, default=0.0,
@@ -436,8 +474,9 @@ def build_parser() -> argparse.ArgumentParser:
     sw.add_argument("--workers", type=int, default=1, help="local processes (default: 1)")
     sw.add_argument("--dask", default=None, metavar="tcp://HOST:PORT",
                     help="run on a Dask cluster at this scheduler address")
-    sw.add_argument("--out", type=Path, default=Path("results") / "sweep",
-                    help="output directory (default: results/sweep)")
+    sw.add_argument("--out", type=Path, default=None,
+                    help="output directory (default: results/sweep; --faults: "
+                         "results/sweep_faults)")
     sw.set_defaults(func=_cmd_sweep)
 
     fmus = sub.add_parser("fmus", help="print where the installed FMUs are")
