@@ -216,9 +216,6 @@ class Context:
         self._text_id = 0
         self._state = self.session.state()
         self._snapshot: Snapshot | None = None
-        inst = self.session.ctrl_inst
-        self._jerk_limit = np.array([float(inst.get("ref_jerk_max[1]")),
-                                     float(inst.get("ref_jerk_max[2]"))])
         self._text_budget: tuple[int, int] = (0, 0)  # (wall second, sent in it)
         self._text_dropped = 0
 
@@ -281,7 +278,7 @@ class Context:
         v = self.vehicle()
         ctrl = self._state["ctrl"]
         pos = stopping_point(ctrl["pos_ref_s"], ctrl["vel_ref_s"], ctrl["acc_ref_s"],
-                             ctrl["ref_acc_limit"], self._jerk_limit)
+                             ctrl["ref_acc_limit"], ctrl["ref_jerk_limit"])
         self.ref = Reference.hold(pos, v.euler)
 
     def hold(self) -> None:

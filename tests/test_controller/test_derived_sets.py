@@ -392,8 +392,9 @@ def test_run_detects_an_undeclared_loss_and_flies_the_vehicles_own_failure_set(a
                                                                                tmp_path):
     """Hover, a 1 m step at 1 s, rotor 1's propeller gone at 5 s without telling the
     controller: it finds the rotor, idles its motor at the probe speed, switches to that
-    vehicle's set after losing rotor 1 (the set holds the hover force: statics of the remaining rotors), and
-    the step is held within the paper's 2 cm before and 5 cm after the loss."""
+    vehicle's set after losing rotor 1 (the set holds the hover force: statics of the
+    remaining rotors), and the step is held within the paper's 2 cm before and 5 cm after
+    the loss."""
     path = tmp_path / "loss.toml"
     path.write_text(f'duration = 8.0\nairframe = "{airframe}"\nfault_detection = "none"\n'
                     '[reference.position]\nx = { type = "steps", times = [1.0], '
