@@ -85,6 +85,11 @@ class Bridge(Context):
         cfg, s = self.config, self.session
         chunk_dt = s.step_size * s.chunk
         self._rx_window = (t0, 0)
+        # one control sample at the start pose before any input is taken: the controller's
+        # reference shaping takes its first sample's reference as given, so a setpoint that
+        # arrived before it would be flown as a raw jump (a 10 m step at full thrust)
+        s.advance(1)
+        self.refresh()
         self._publish(force_heartbeat=True)
         while not self._stop:
             if cfg.duration is not None and s.time >= cfg.duration - 1e-9:

@@ -422,8 +422,6 @@ def test_setpoint_loss_mid_transit_stops_once_and_holds(flight):
     brakes within the shaping's limits and holds where it stops (docs/mavlink.md): it neither
     flies on to the old target nor comes back (the issue: 1.35 m beyond and back)."""
     f = flight
-    while f.bridge.session.time < 0.1:  # a jump at the controller's very first sample is
-        time.sleep(0.01)                # its initial reference, not shaped (issue 33)
     f.command(400, 1, expect=0)
     f.position(10.0, 0.0, -3.0)
     f.offboard(expect=0)
@@ -449,6 +447,49 @@ def test_setpoint_loss_mid_transit_stops_once_and_holds(flight):
     assert final - x_stop < 2.5, info
     assert abs(held - final) < 0.05, info  # holds where it stopped ...
     assert max(xs) - final < 0.1, info  # ... without coming back beyond tracking
+
+
+def test_a_setpoint_before_the_first_chunk_is_shaped():
+    """A ground station whose arm, setpoint and OFFBOARD reach the bridge before its first
+    chunk (queued on its socket before it runs): the 10 m jump is flown within the shaping's
+    limits from the start pose, not as a raw step (the controller's first sample takes its
+    reference as given; the bridge runs that sample at the start pose first)."""
+    port = free_port()
+    bridge = Bridge(BridgeConfig(urls=[f"udpout:127.0.0.1:{port}"], speed=4.0, duration=8.0))
+    sender = mavutil.mavlink_connection(
+        f"udpout:127.0.0.1:{bridge.endpoints[0].sock.getsockname()[1]}", source_system=255,
+        source_component=190)
+    seen: list[tuple[np.ndarray, np.ndarray, float]] = []
+    bridge.on_chunk = lambda b: seen.append((b.session.state()["ctrl"]["pos_ref_s"].copy(),
+                                             b.session.state()["ctrl"]["vel_ref_s"].copy(),
+                                             float(b.session.state()["ctrl"]["ref_vel_limit"][0])))
+    try:
+        sender.mav.heartbeat_send(6, 8, 0, 0, 0)
+        sender.mav.command_long_send(1, 1, 400, 0, 1, 0, 0, 0, 0, 0, 0)  # arm
+        sender.mav.set_position_target_local_ned_send(0, 1, 1, 1, harness.POS_ONLY, 10.0, 0.0,
+                                                      -3.0, 0, 0, 0, 0, 0, 0, 0.0, 0)
+        sender.mav.command_long_send(1, 1, 176, 0, 1, 6, 0, 0, 0, 0, 0)  # OFFBOARD
+        time.sleep(0.2)  # every datagram waits in the bridge's socket
+        runner = threading.Thread(target=bridge.run, daemon=True)
+        runner.start()
+        deadline = time.monotonic() + 10.0
+        while bridge.mode != "OFFBOARD" and time.monotonic() < deadline:
+            time.sleep(0.01)
+        assert bridge.mode == "OFFBOARD"
+        while bridge.session.time < 2.0 and time.monotonic() < deadline:
+            sender.mav.set_position_target_local_ned_send(0, 1, 1, 1, harness.POS_ONLY, 10.0,
+                                                          0.0, -3.0, 0, 0, 0, 0, 0, 0, 0.0, 0)
+            time.sleep(0.02)
+        bridge.stop()
+        runner.join(timeout=10)
+    finally:
+        bridge.close()
+        sender.close()
+    pos = np.array([p for p, _, _ in seen])
+    speed = np.array([np.hypot(v[0], v[1]) for _, v, _ in seen])
+    assert abs(pos[0, 0]) < 0.05, pos[:3]  # the first chunk starts at the start pose
+    assert speed.max() <= seen[-1][2] + 1e-6  # within the shaping's speed limit
+    assert pos[-1, 0] > 1.0  # and on its way to the target
 
 
 def test_a_long_statustext_arrives_whole_in_chunks(flight):
