@@ -195,8 +195,9 @@ void ctrl_detect(const CtrlDetectParams *p, const FpRotorSet *rs, const FpRotorT
         x->s_wr[i] += dot6(w[i], d);
     }
     if (x->n >= p->persist && x->s_rr > 0.0) {
-        /* what each explanation leaves beyond the noise (n samples of noise2 each) */
-        double noise = x->n * noise2, signal = fmax(x->s_rr - noise, 0.0);
+        /* what each explanation leaves beyond the noise measured (n samples of it; the
+         * floor enters the significance below, not this share) */
+        double noise = x->n * x->noise2, signal = fmax(x->s_rr - noise, 0.0);
         double sse_load = fmax(x->s_rr - dot6(x->s_r, x->s_r) / x->n - noise, 0.0);
         double best_sse = INFINITY, best_e = 1.0;
         int best = -1;
