@@ -369,6 +369,24 @@ int ctrl_check_tunables(const ControllerModel *m, const FpVar *vars, size_t n_va
                         const FpLogger *logger);
 
 /* ------------------------------------------------------------------------ */
+/* derive_params.c: what initialization derives from the fixed parameters    */
+
+/* The detector's constants (a pure function of the parameters: a restored state's are
+ * compared with it bit for bit). */
+CtrlDetectParams ctrl_detect_params(const ControllerModel *m);
+
+/* The force sets in use (given or derived from the airframe), validated, with their
+ * margin-scaled offsets, f_bz ranges and hover flags; vars, n_vars: the model's variable
+ * table, for the messages.  FP_ERROR (logged) when a set is invalid or holds no hover. */
+FpStatus ctrl_prepare_force_sets(ControllerModel *m, const FpVar *vars, size_t n_vars,
+                                 const FpLogger *logger);
+
+/* The shaping's limits in use (as given, or derived: shaping_limits.c) into the model and
+ * its ref_*_limit outputs.  FP_ERROR (logged) when the torque capability is needed and
+ * cannot be computed. */
+FpStatus ctrl_derive_shaping_limits(ControllerModel *m, const FpLogger *logger);
+
+/* ------------------------------------------------------------------------ */
 /* controller_sample.c: the sequence of one sample (controller.c runs it)   */
 
 /* The filters' view of the model: the pose as predicted to now (pose_now), the references
