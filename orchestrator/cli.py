@@ -271,7 +271,7 @@ def _cmd_build_fmus(args: argparse.Namespace) -> int:
 def _sweep_defaults(args: argparse.Namespace) -> None:
     """The options whose default depends on the campaign (--faults): duration, designs and
     output folder; then the checks of every option."""
-    from orchestrator.sweep import FAULT_DURATION
+    from orchestrator.sweep_faults import FAULT_DURATION
 
     if args.duration is None:
         args.duration = FAULT_DURATION if args.faults else 6.0
@@ -285,20 +285,29 @@ def _sweep_defaults(args: argparse.Namespace) -> None:
         raise ValueError(f"sweep --noise must be a finite factor >= 0, got {args.noise}")
     if not (math.isfinite(args.torque) and args.torque >= 0.0):
         raise ValueError(f"sweep --torque must be a finite amplitude >= 0 N m, got {args.torque}")
+    if args.faults and (args.torque or args.delay):
+        raise ValueError("the fault campaign takes neither a torque step amplitude nor the "
+                         "delay (its loads are its own)")
 
 
 def _cmd_sweep(args: argparse.Namespace) -> int:
     import time
 
     from orchestrator.sweep import Campaign, run_sweep
+    from orchestrator.sweep_faults import run_fault_sweep
 
     _sweep_defaults(args)
     _warn(Campaign(args.scenario, args.airframe, args.duration).base().warnings)
     t0 = time.perf_counter()
-    rows = run_sweep(args.cases, args.seed, args.duration, workers=args.workers,
-                     dask=args.dask, noise=args.noise, torque=args.torque, delay=args.delay,
-                     design_set=[d.strip() for d in args.designs.split(",") if d.strip()],
-                     scenario=args.scenario, airframe=args.airframe, faults=args.faults)
+    common: dict[str, Any] = {
+        "workers": args.workers, "dask": args.dask, "noise": args.noise,
+        "design_set": [d.strip() for d in args.designs.split(",") if d.strip()],
+        "scenario": args.scenario, "airframe": args.airframe}
+    if args.faults:
+        rows = run_fault_sweep(args.cases, args.seed, args.duration, **common)
+    else:
+        rows = run_sweep(args.cases, args.seed, args.duration, torque=args.torque,
+                         delay=args.delay, **common)
     wall = time.perf_counter() - t0
     meta = {"n": args.cases, "seed": args.seed, "duration": args.duration,
             "scenario": args.scenario, "airframe": args.airframe, "noise": args.noise,
@@ -331,7 +340,7 @@ def _print_sweep(rows: list[dict[str, object]], out: Path,
 def _print_faults(rows: list[dict[str, object]], out: Path,
                   meta: dict[str, object]) -> list[Path]:
     """The fault campaign's files and per-design counts; the files written."""
-    from orchestrator.sweep_report import fault_stats, summary_lines, write_fault_outputs
+    from orchestrator.sweep_faults_report import fault_stats, summary_lines, write_fault_outputs
 
     files = write_fault_outputs(rows, out, meta)
     for d, s in fault_stats(rows).items():

@@ -1,4 +1,4 @@
-"""The rotor-fault campaign (``fullpose sweep --faults``, orchestrator/sweep.py), flown
+"""The rotor-fault campaign (``fullpose sweep --faults``, orchestrator/sweep_faults.py), flown
 through the real FMUs with sensor noise, the controller never told of a fault.
 
 Oracles from physics and the issue's requirements, not from today's output:
@@ -24,17 +24,17 @@ import numpy as np
 import pytest
 
 import plant
-from orchestrator import sweep, sweep_report
+from orchestrator import sweep, sweep_faults, sweep_report
 from orchestrator.cli import main
-from orchestrator.sweep_report import FAULT_FIGURE
+from orchestrator.sweep_faults_report import FAULT_FIGURE
 
 N, DURATION = 10, 4.0
 
 
 @pytest.fixture(scope="module")
 def campaign():
-    return sweep.run_sweep(N, seed=0, duration=DURATION, design_set=("hinf",), faults=True,
-                           progress=False)
+    return sweep_faults.run_fault_sweep(N, seed=0, duration=DURATION, design_set=("hinf",),
+                                        progress=False)
 
 
 def requirements(rows):
@@ -52,32 +52,32 @@ def requirements(rows):
         assert not r["missed"] and r["detected"] == 1 << (int(r["fault_rotor"]) - 1), r
         # within the detector's event window (0.2 s), after which an event is a load
         assert 0.0 < r["detect_time"] < 0.2, r
-        assert abs(r["est"] - r["fault_eff"]) <= sweep.EST_TOL, r
+        assert abs(r["est"] - r["fault_eff"]) <= sweep_faults.EST_TOL, r
 
 
 def test_loads_are_no_faults_and_faults_are_found_and_estimated(campaign):
     requirements(campaign)
     assert any(r["payload_rotor"] and r["torque_amp"] and r["force_amp"] for r in campaign)
     assert any(r["kind"] == "fault" and r["mass_scale"] != 1.0 for r in campaign)
-    s = sweep.summarize_faults(campaign)
+    s = sweep_faults.summarize_faults(campaign)
     assert s["false_alarms"] == s["missed"] == s["est_off"] == 0
-    assert s["est_err_max"] <= sweep.EST_TOL
+    assert s["est_err_max"] <= sweep_faults.EST_TOL
 
 
 def test_the_table_depends_only_on_the_seed(campaign):
     """Two processes fly the same cases to the same rows; another seed draws other cases."""
-    par = sweep.run_sweep(N, seed=0, duration=DURATION, design_set=("hinf",), faults=True,
-                          workers=2, progress=False)
-    cols = sweep.FAULT_COLUMNS
+    par = sweep_faults.run_fault_sweep(N, seed=0, duration=DURATION, design_set=("hinf",),
+                                       workers=2, progress=False)
+    cols = sweep_faults.FAULT_COLUMNS
     assert sweep_report.table_rows(par, columns=cols) == \
         sweep_report.table_rows(campaign, columns=cols)
-    assert sweep.sample_fault_cases(N, 0) == sweep.sample_fault_cases(N, 0)
-    assert sweep.sample_fault_cases(N, 0) != sweep.sample_fault_cases(N, 1)
+    assert sweep_faults.sample_fault_cases(N, 0) == sweep_faults.sample_fault_cases(N, 0)
+    assert sweep_faults.sample_fault_cases(N, 0) != sweep_faults.sample_fault_cases(N, 1)
 
 
 def test_the_draws_are_within_their_ranges_and_leave_the_other_campaign_alone():
     before = sweep.sample_cases(20, 0)
-    cases = sweep.sample_fault_cases(400, 3, n_rotors=8)
+    cases = sweep_faults.sample_fault_cases(400, 3, n_rotors=8)
     assert sweep.sample_cases(20, 0) == before
     assert [c["fault"] for c in cases] == [i % 2 for i in range(400)]
     for c in cases:
@@ -106,15 +106,15 @@ def test_a_payload_at_an_arm_tip_makes_its_weight_and_torque_there():
     """r_i x F by hand: a weight w down at (x, y, z) makes (y w, -x w, 0) level, and at a roll
     phi the body sees the weight as w (0, sin phi, cos phi)."""
     af = plant.load_airframe("paper_hexacopter")
-    case = {**sweep.sample_fault_cases(1, 0)[0], "force_amp": 0.0, "torque_amp": 0.0,
+    case = {**sweep_faults.sample_fault_cases(1, 0)[0], "force_amp": 0.0, "torque_amp": 0.0,
             "payload_share": 0.1, "payload_rotor": 2}
     w = 0.1 * af.mass * af.gravity
     x, y, z = af.positions[1]
-    force, torque = sweep.load_wrench(case, af, af, np.zeros(3))
+    force, torque = sweep_faults.load_wrench(case, af, af, np.zeros(3))
     assert force == pytest.approx([0.0, 0.0, w])
     assert torque == pytest.approx([y * w, -x * w, 0.0])
     phi = 0.3
-    _, torque = sweep.load_wrench(case, af, af, np.array([phi, 0.0, 0.0]))
+    _, torque = sweep_faults.load_wrench(case, af, af, np.array([phi, 0.0, 0.0]))
     f_b = w * np.array([0.0, math.sin(phi), math.cos(phi)])
     assert torque == pytest.approx(np.cross([x, y, z], f_b))
 
@@ -123,19 +123,19 @@ def test_a_non_paper_airframe(tmp_path):
     """The X8: the payload's torque comes from the X8's own rotor positions, and the campaign's
     requirements hold on it (its first 6 cases of seed 0)."""
     x8 = plant.load_airframe("x8_coaxial")
-    base = sweep.Campaign("hover", "x8_coaxial", DURATION, faults=True).base()
-    cases = sweep.sample_fault_cases(6, 0, n_rotors=x8.n_rotors)
+    base = sweep.Campaign("hover", "x8_coaxial", DURATION).base()
+    cases = sweep_faults.sample_fault_cases(6, 0, n_rotors=x8.n_rotors)
     c = next(c for c in cases if c["payload_rotor"])
-    sc = sweep.fault_scenario(base, c, {}, DURATION)
+    sc = sweep_faults.fault_scenario(base, c, {}, DURATION)
     w = c["payload_share"] * sc.true_airframe.mass * x8.gravity
     step = c["torque_amp"] * np.array([c["torque_x"], c["torque_y"], c["torque_z"]])
-    tau = sc.disturbances([0.5, sweep.T_LOAD])["tau_d"]
+    tau = sc.disturbances([0.5, sweep_faults.T_LOAD])["tau_d"]
     assert tau[0].tolist() == [0.0, 0.0, 0.0]
     assert tau[1] == pytest.approx(np.cross(x8.positions[int(c["payload_rotor"]) - 1],
                                             [0.0, 0.0, w]) + step)
     assert sc.fault_detection is None  # the controller is never told
-    rows = sweep.run_sweep(6, seed=0, duration=DURATION, design_set=("hinf",), faults=True,
-                           airframe="x8_coaxial", progress=False)
+    rows = sweep_faults.run_fault_sweep(6, seed=0, duration=DURATION, design_set=("hinf",),
+                                        airframe="x8_coaxial", progress=False)
     requirements(rows)
 
 
@@ -149,7 +149,7 @@ def test_cli_prints_the_counts(tmp_path, capsys):
     for name in ("sweep.csv", "sweep.parquet", "report.md", FAULT_FIGURE):
         assert (tmp_path / name).stat().st_size > 0
     header = (tmp_path / "sweep.csv").read_text().splitlines()[0].split(",")
-    assert header == list(sweep.FAULT_COLUMNS)
+    assert header == list(sweep_faults.FAULT_COLUMNS)
     assert "| hinf | 4 | 0 (0 / 0) |" in (tmp_path / "report.md").read_text()
     assert main(["sweep", "--faults", "--cases", "2", "--torque", "0.2"]) == 2
     assert "torque" in capsys.readouterr().err
