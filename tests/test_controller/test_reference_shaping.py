@@ -16,6 +16,7 @@ derivatives passed through bit for bit.
 
 from __future__ import annotations
 
+import functools
 import math
 from typing import Any
 
@@ -101,6 +102,7 @@ def test_shaped_reference_within_its_limits():
     np.testing.assert_allclose(p[-1], [10.0, -4.0, -5.0], atol=1e-3)
 
 
+@functools.cache
 def level_acceleration(airframe: str) -> float:
     """The least, over 24 azimuths, of the largest horizontal acceleration the airframe's
     feasible-force set S(0) holds at the hover force's f_z (scipy LP on the design tool's
