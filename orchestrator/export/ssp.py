@@ -27,7 +27,10 @@ consistent at t = 0 for a runner that initialises inputs from start values.
 The step size (SSP 1.0 has no element for it) is written twice in the ``DefaultExperiment``,
 next to start and stop time: as the Open Simulation Platform's annotation
 (``com.opensimulationplatform``: ``osp:Algorithm/osp:FixedStepAlgorithm baseStepSize``),
-which libcosim's SSP loader applies, and as our own ``org.fullpose.fixedStepMaster``.
+which libcosim's SSP loader applies, and as our own ``org.fullpose.fixedStepMaster``; and once
+on the system, as OpenModelica's annotation (``org.openmodelica``:
+``oms:Annotations/oms:SimulationInformation/oms:FixedStepMaster stepSize``), which
+OMSimulator's C API and command line need to create the system and take the step from.
 libcosim also applies the ParameterBindings (to parameters and inputs), so it plays the
 archive as written: ``CosimExecution.from_ssp_file(path)`` hovers to ~1e-15 m
 (tests/test_orchestrator/test_ssp.py).
@@ -113,6 +116,12 @@ STEP_ANNOTATION = "org.fullpose.fixedStepMaster"
 # (boost property_tree), so the prefix must be "osp" and the elements exactly these.
 NS_OSP = "http://opensimulationplatform.com/SSP/OSPAnnotations"
 OSP_ANNOTATION = "com.opensimulationplatform"
+# OpenModelica's annotation on the system, which OMSimulator's C API and command line need to
+# create the system at all (without it: "[NewSystem] internal error") and from which they
+# take the fixed step of their master; its reader (pugixml) takes the prefixes literally, so
+# the prefix must be "oms".  OMSimulator's Python API reads the same element.
+NS_OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
+OMS_ANNOTATION = "org.openmodelica"
 
 # fixed zip metadata: the same inputs give the same bytes
 _ZIP_DATE = (1980, 1, 1, 0, 0, 0)
@@ -275,7 +284,8 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
                  step: float, stop_time: float) -> bytes:
     """The SystemStructure.ssd (SSP 1.0) of the components ``mds`` (name -> modelDescription)."""
     root = etree.Element(_q(NS_SSD, "SystemStructureDescription"),
-                         nsmap={"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP}, version="1.0",
+                         nsmap={"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP, "oms": NS_OMS},
+                         version="1.0",
                          name=name,
                          generationTool="fullpose orchestrator.export.ssp")
     system = etree.SubElement(root, _q(NS_SSD, "System"), name=SYSTEM,
@@ -302,6 +312,13 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
     for fc, fv, tc, tv in connections:
         etree.SubElement(links, _q(NS_SSD, "Connection"), startElement=fc, startConnector=fv,
                          endElement=tc, endConnector=tv)
+    oms = etree.SubElement(etree.SubElement(system, _q(NS_SSD, "Annotations")),
+                           _q(NS_SSC, "Annotation"), type=OMS_ANNOTATION)
+    info = etree.SubElement(etree.SubElement(oms, _q(NS_OMS, "Annotations")),
+                            _q(NS_OMS, "SimulationInformation"))
+    # a weakly coupled system whose master steps every component at `step`
+    etree.SubElement(info, _q(NS_OMS, "FixedStepMaster"), description="oms-ma",
+                     stepSize=_num(step), relativeTolerance=_num(1e-4))
     exp = etree.SubElement(root, _q(NS_SSD, "DefaultExperiment"), startTime=_num(0.0),
                            stopTime=_num(stop_time))
     notes = etree.SubElement(exp, _q(NS_SSD, "Annotations"))
