@@ -9,9 +9,10 @@ parameters are mapped by a fixed rule (docs/mavlink.md lists them all):
 own parameters start with ``FPB_``.
 
 Ranges.  A controller parameter's range is the one the FMU declares in its modelDescription
-(``min``/``max``, generated from fmu_src/controller/controller_vars.h; an open bound is
-written in the variable's description as ``range (a, b)``, see fmu_src/tools/mdgen.c
-``write_variable``): read from the installed FMU, never restated here.  Two further rules
+(``min``/``max``, generated from fmu_src/controller/controller_vars.h; FMI's bounds are
+inclusive, so an open bound is declared at the first double inside it and written in the
+variable's description as ``range (a, b)``, see fmu_src/tools/mdgen.c ``write_variable``):
+read from the installed FMU, never restated here.  Two further rules
 refuse values that are inside the FMU's range but absurd for a flight:
 
 * a positive weight or scale (declared range ``(0, inf)``) must stay within ``PLAUSIBLE``
@@ -84,8 +85,10 @@ class Range:
 
 
 def fmu_range(var: Any) -> Range:
-    """The range an fmpy ScalarVariable declares (min/max, open bounds from the description
-    mdgen writes: ``...; range (0, inf)``)."""
+    """The range an fmpy ScalarVariable declares: min/max, and which ends are open from the
+    description mdgen writes (``...; range (0, inf)``).  An open end is declared at the first
+    value inside it (min 4.9e-324 for ``(0, inf)``, FMI's bounds being inclusive): the
+    range's bound is the value just beyond that, the one the FMU refuses (0)."""
     lo = None if getattr(var, "min", None) in (None, "") else float(var.min)
     hi = None if getattr(var, "max", None) in (None, "") else float(var.max)
     desc = str(getattr(var, "description", "") or "")
@@ -93,7 +96,12 @@ def fmu_range(var: Any) -> Range:
     if "; range " in desc:
         text = desc.rsplit("; range ", 1)[1].strip()
         lo_open, hi_open = text.startswith("("), text.endswith(")")
-    return Range(lo, hi, lo_open, hi_open, integer=getattr(var, "type", "Real") == "Integer")
+    integer = getattr(var, "type", "Real") == "Integer"
+    if lo is not None and lo_open:
+        lo = lo - 1 if integer else math.nextafter(lo, -math.inf)
+    if hi is not None and hi_open:
+        hi = hi + 1 if integer else math.nextafter(hi, math.inf)
+    return Range(lo, hi, lo_open, hi_open, integer=integer)
 
 
 @dataclass(frozen=True)

@@ -34,4 +34,8 @@
     X(tau_motor, 112, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time constant of the first-order motor model") \
     X(tau_servo, 113, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Time constant of the first-order servo model")
 
+/* The airframe rows' names, "n_rotors mass ... tau_servo ": FP_AIRFRAME_VARIABLES(FP_AIRFRAME_NAME,
+ * 0), for the InitialUnknowns declarations of the models' tables. */
+#define FP_AIRFRAME_NAME(name, vr, type, kind, rows, cols, dtype, range, desc) #name " "
+
 #endif

@@ -497,7 +497,12 @@ fmi2Status fmi2DoStep(fmi2Component c, fmi2Real currentCommunicationPoint,
     if (s == FP_ERROR) return fail(inst, fmi2Error);
     if (s == FP_DISCARD) return fail(inst, fmi2Discard);
     inst->time = currentCommunicationPoint + communicationStepSize;
-    return to_fmi(s);
+    /* A step that completed returns fmi2OK, also when the model has something to say (a held
+     * command, a communication step longer than the sample time): that is logged with status
+     * fmi2Warning (category logStatusWarning) as it happens, never answered as fmi2Warning,
+     * which some importers take for a failed step (OMSimulator stops the run; fmpy, fmusim and
+     * the Compliance Checker continue either way).  docs/fmus.md, "What doStep returns". */
+    return s == FP_WARNING ? fmi2OK : to_fmi(s);
 }
 
 /* fmi2Get*Status: only StepComplete, StepFailed and Terminated (S_STATUS). */

@@ -76,8 +76,12 @@ const FpDeclaredType *fp_declared_type(FpTypeId id);
 /*
  * The range a variable's value must lie in.  It is both the min/max that modelDescription.xml
  * declares and the bound the model's own checks read (fp_params.h), so the two cannot
- * differ.  FMI's min and max are inclusive: an open bound (mass > 0) is declared at its
- * boundary value (min="0") and the check refuses the boundary itself.
+ * differ.  FMI's min and max are inclusive, so tools/mdgen.c declares an open bound at the
+ * nearest double inside it, the first value the check accepts (mass > 0: the smallest
+ * positive double, min="4.9406564584124654e-324"; K_pos_A in (-1, 1):
+ * max="0.99999999999999989"): the declared [min, max] holds exactly the values
+ * fp_range_contains accepts, and the description ends with the interval as the check states
+ * it ("; range (0, inf)").
  */
 typedef struct {
     double lo, hi;
@@ -97,6 +101,10 @@ typedef struct {
 #define FP_IN_OPEN(a, b) \
     {(a), (b), FP_RANGE_LO | FP_RANGE_HI | FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN} /* (a, b) */
 #define FP_IN_LOPEN(a, b) {(a), (b), FP_RANGE_LO | FP_RANGE_HI | FP_RANGE_LO_OPEN} /* (a, b] */
+
+/* The knowns list of a table's InitialUnknowns declaration (e.g. PLANT_INITIAL_DEPENDENCIES in
+ * plant/plant_vars.h) may name this for every parameter of the model. */
+#define FP_ALL_PARAMETERS "@parameters "
 
 /* 1 if v lies in r (NaN lies in no bounded range).  Inline: the controller checks every
  * input against its range every sample. */

@@ -144,4 +144,31 @@
     X(rotors_detected, 2140, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Rotors the detector found faulty: bit i-1 rotor i") \
     X(indi_residual, 2141, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "INDI residual: measured minus modelled rotor wrench [f_b (N); tau_b (N.m)], body")
 
+/* What each output is a function of at initialization (the format and its rules:
+ * PLANT_INITIAL_DEPENDENCIES in plant/plant_vars.h).  controller.c controller_initialize sets
+ * them; no sample has run. */
+#define CTRL_AIRFRAME FP_AIRFRAME_VARIABLES(FP_AIRFRAME_NAME, 1)
+#define CTRL_FORCE_SET "poly_n poly_A poly_b poly_margin "
+#define CONTROLLER_INITIAL_DEPENDENCIES(D)                                                       \
+    /* the commands hold the measured actuator state; f_b_c, f_b_ref: the force it gives */      \
+    D("omega_cmd alpha_cmd beta_cmd", "n_rotors omega alpha beta")                               \
+    D("f_b_ref f_b_c", CTRL_AIRFRAME "omega alpha beta")                                         \
+    /* the references as given (no jump being shaped; the heading unwrapped from its own) */     \
+    D("mu_c pos_ref_s vel_ref_s acc_ref_s euler_ref_s mu_ff mu_rate_ff",                         \
+      "pos_ref euler_ref vel_ref acc_ref euler_rate_ref")                                        \
+    /* the rotors the importer reports lost, the force sets in use and their hover flags */      \
+    D("rotors_lost active_polytope hover_possible",                                              \
+      CTRL_AIRFRAME CTRL_FORCE_SET "fail_poly_n fail_poly_A fail_poly_b fault_detect "           \
+                                   "rotor_health")                                               \
+    /* the shaping's limits, given or derived: translation from the nominal force set, */        \
+    /* attitude from the rotors' torque at the hover trim (shaping_limits.c) */                  \
+    D("ref_acc_limit ref_vel_limit ref_jerk_limit",                                              \
+      CTRL_AIRFRAME CTRL_FORCE_SET "ref_bandwidth ref_tilt_max ref_vel_max ref_acc_max "         \
+                                   "ref_jerk_max ref_att_rate_max")                              \
+    D("ref_att_rate_limit ref_att_acc_limit", CTRL_AIRFRAME "ref_att_rate_max ref_att_acc_max")  \
+    /* nothing solved or detected yet: feasible, zeros (statuses, counts, times), 1s */          \
+    D("feasible guid_status guid_iter alloc_status alloc_iter sat_flags guid_flags acc_c "       \
+      "rate_c dnu_c alloc_residual t_step t_guid t_alloc rotor_eff_est rotors_detected "         \
+      "indi_residual", "")
+
 #endif

@@ -13,11 +13,12 @@
  * - range: FP_ANY, FP_POSITIVE (> 0), FP_NONNEGATIVE (>= 0), FP_IN(a, b)
  *   [a, b], FP_IN_OPEN(a, b) (a, b), FP_IN_LOPEN(a, b) (a, b].  It is the
  *   declared min/max and the bound the model checks (plant.c validate and
- *   check_inputs, common/fp_params.c), so a changed range changes both; an
- *   open bound is declared at its value (FMI's min is inclusive) and the check
- *   refuses the value itself.  Entries beyond n_rotors are ignored and not
- *   checked.  Commands (omega_cmd, alpha_cmd, beta_cmd) have no range: beyond
- *   the actuator limits they are saturated, which is the hardware's physics.
+ *   check_inputs, common/fp_params.c), so a changed range changes both; FMI's
+ *   min and max are inclusive, so an open bound is declared at the nearest
+ *   double inside it, the first value the check accepts (common/fp_model.h).
+ *   Entries beyond n_rotors are ignored and not checked.  Commands (omega_cmd,
+ *   alpha_cmd, beta_cmd) have no range: beyond the actuator limits they are
+ *   saturated, which is the hardware's physics.
  *
  * Value references are stable: append, never renumber.
  */
@@ -82,5 +83,34 @@
     X(quat_true, 389, REAL, OUTPUT, 4, 1, DIMENSIONLESS, FP_ANY, "True attitude quaternion [w, x, y, z] of R_B^W, w >= 0") \
     X(rate_true, 393, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "True body rates (rate without sensor noise)") \
     X(pose_age, 396, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Age of pos, vel, euler, quat: the time since the state they show (mocap_delay plus the time since their sample; 0 with ideal sensors)")
+
+/*
+ * What each output is a function of at initialization: the dependencies of its entry in the
+ * modelDescription's <InitialUnknowns> (tools/mdgen.c; FMI 2.0 section 2.2.8: the knowns are
+ * the inputs and the parameters, initial="exact").  D(outputs, knowns): row names separated by
+ * spaces, FP_ALL_PARAMETERS for every parameter.  Every output row is in exactly one
+ * declaration (the build fails otherwise); "" declares an output constant at t0.  A list may
+ * be conservative (name a known some of its outputs ignore), never short:
+ * tests/test_fmus/test_model_structure.py perturbs the knowns one by one and fails on any
+ * initial output that moves with a known its declaration leaves out.
+ *
+ * The actuator commands are no known of any output: at t0 they only set the actuators'
+ * derivatives (the state starts at init_trim's hover trim or omega0, alpha0, beta0), so the
+ * plant's initial outputs never wait for the controller's (no algebraic loop for a master).
+ */
+#define PLANT_INITIAL_STATE                                                                      \
+    "pos0 vel0 euler0 rate0 noise_seed noise_pos noise_vel noise_acc noise_att noise_rate "     \
+    "noise_ang_acc mocap_period mocap_delay imu_period "
+#define PLANT_INITIAL_DEPENDENCIES(D)                                                            \
+    /* the initial pose and rates and their measurements (noise, sampling, latency) */          \
+    D("pos vel euler quat rate pos_true vel_true euler_true quat_true rate_true pose_age",       \
+      PLANT_INITIAL_STATE)                                                                       \
+    /* the actuators at init_trim's hover trim for euler0, or at omega0, alpha0, beta0 */        \
+    D("omega alpha beta", FP_AIRFRAME_VARIABLES(FP_AIRFRAME_NAME, 0)                             \
+      "euler0 init_trim omega0 alpha0 beta0")                                                    \
+    /* the rotor wrench (efficiency) and the accelerations it gives with the disturbances */     \
+    D("acc ang_acc f_b tau_b", FP_ALL_PARAMETERS "efficiency f_d tau_d a_d")                     \
+    /* no step yet: no saturation, no timing */                                                  \
+    D("sat_flags t_step", "")
 
 #endif

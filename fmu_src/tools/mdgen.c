@@ -13,14 +13,29 @@
  * reproducible: generationDateAndTime is SOURCE_DATE_EPOCH when the builder
  * sets it (reproducible-builds.org: the tool reads it itself), else the fixed
  * date of the release (RELEASE_DATE), never the clock.
+ *
+ * What importers read first comes first: the ScalarVariables are listed inputs, then outputs,
+ * then parameters, each in table order (importers that look a connector up by name scan the
+ * list from its start, past ~1,470 controller parameters before).  The order is the XML's
+ * alone: value references are the table's, and the GUID hashes the table, not this listing
+ * (fp_model.c).  <ModelStructure> names variables by their 1-based index in this order: the
+ * <Outputs> without dependencies (no direct feedthrough at communication points), the
+ * <InitialUnknowns> with the knowns that the model's table declares for each output
+ * (PLANT_INITIAL_DEPENDENCIES, CONTROLLER_INITIAL_DEPENDENCIES).
  */
 #include <errno.h>
+#include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
 #include <time.h>
 
 #include "fp_model.h"
+
+/* The InitialUnknowns declarations of both models' tables (only these macros are used here;
+ * the tables themselves are the linked model's, through fp_model_info). */
+#include "../controller/controller_vars.h"
+#include "../plant/plant_vars.h"
 
 /* Who the FMUs are from and under which terms (pyproject.toml: license MIT; a test compares
  * them).  RELEASE_DATE is the day of the release VERSION names: set it with the version. */
@@ -129,17 +144,29 @@ static void write_types(FILE *f, const FpModelInfo *info) {
     fputs("  </TypeDefinitions>\n", f);
 }
 
-/* min/max of a row (FMI's are inclusive; an open bound is declared at its value). */
+/* The inclusive bound FMI declares for a bound of a row: the bound itself when the check
+ * accepts it, else (an open bound) the nearest value inside it, which the check accepts and
+ * every value beyond it it refuses (a Real: the adjacent double, so (0, inf) has min
+ * 4.9406564584124654e-324 and (-1, 1) max 0.99999999999999989; an Integer: the next integer). */
+static double declared_bound(const FpVar *v, int upper) {
+    double b = upper ? v->range.hi : v->range.lo;
+    unsigned open = upper ? FP_RANGE_HI_OPEN : FP_RANGE_LO_OPEN;
+    if (!(v->range.flags & open)) return b;
+    if (v->type != FP_REAL) return upper ? b - 1.0 : b + 1.0;
+    return nextafter(b, upper ? -INFINITY : INFINITY);
+}
+
+/* min/max of a row (FMI's are inclusive: declared_bound). */
 static void write_range(FILE *f, const FpVar *v) {
     const char *format = v->type == FP_REAL ? "%s=\"%.17g\"" : "%s=\"%.0f\"";
     if (v->type == FP_BOOLEAN) return;
     if (v->range.flags & FP_RANGE_LO) {
         fputc(' ', f);
-        fprintf(f, format, "min", v->range.lo);
+        fprintf(f, format, "min", declared_bound(v, 0));
     }
     if (v->range.flags & FP_RANGE_HI) {
         fputc(' ', f);
-        fprintf(f, format, "max", v->range.hi);
+        fprintf(f, format, "max", declared_bound(v, 1));
     }
 }
 
@@ -160,7 +187,8 @@ static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model
     fputs(" description=\"", f);
     xml_text(f, v->description);
     if (v->range.flags & (FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN)) {
-        /* min/max cannot say that the bound itself is refused: the description does */
+        /* min/max are the first values accepted inside an open bound: the description states
+         * the interval as the check and its messages do */
         char range[96];
         fputs("; range ", f);
         xml_text(f, fp_range_text(&v->range, v->type != FP_REAL, range, sizeof range));
@@ -266,6 +294,194 @@ static int check_table(const FpModelInfo *info, const void *model) {
     return 0;
 }
 
+/* ------------------------------------------------------------------------ */
+/* The listing order and the ModelStructure                                 */
+
+/* Where a kind comes in the listing: inputs, outputs, then the parameters. */
+static int listing_rank(FpVarKind kind) {
+    return kind == FP_INPUT ? 0 : kind == FP_OUTPUT ? 1 : 2;
+}
+
+/* The ScalarVariable index (1-based, listing order) of element 0 of every row; returns the
+ * number of elements listed, 0 when out of memory. */
+static uint32_t listing_indices(const FpModelInfo *info, uint32_t **first) {
+    uint32_t index = 0;
+    size_t i;
+    int rank;
+    *first = (uint32_t *)calloc(info->n_vars, sizeof **first);
+    if (*first == NULL) return 0;
+    for (rank = 0; rank < 3; rank++)
+        for (i = 0; i < info->n_vars; i++)
+            if (listing_rank(info->vars[i].kind) == rank) {
+                (*first)[i] = index + 1;
+                index += fp_var_count(&info->vars[i]);
+            }
+    return index;
+}
+
+/* A table's InitialUnknowns declaration: the outputs (row names) and the knowns they are
+ * functions of at initialization (row names, FP_ALL_PARAMETERS), plant/plant_vars.h. */
+typedef struct {
+    const char *unknowns, *knowns;
+} InitialDeclaration;
+
+#define DECLARATION_ROW(unknowns, knowns) {unknowns, knowns},
+static const InitialDeclaration plant_declarations[] = {
+    PLANT_INITIAL_DEPENDENCIES(DECLARATION_ROW)};
+static const InitialDeclaration controller_declarations[] = {
+    CONTROLLER_INITIAL_DEPENDENCIES(DECLARATION_ROW)};
+#undef DECLARATION_ROW
+
+static const struct {
+    const char *model;
+    const InitialDeclaration *rows;
+    size_t n;
+} declarations[] = {
+    {"MultirotorPlant", plant_declarations, sizeof plant_declarations / sizeof plant_declarations[0]},
+    {"FullPoseController", controller_declarations,
+     sizeof controller_declarations / sizeof controller_declarations[0]},
+};
+
+/* The next space-separated name of *p into buf: its length, 0 at the end, -1 if too long. */
+static int next_name(const char **p, char *buf, size_t size) {
+    size_t n = 0;
+    while (**p == ' ') (*p)++;
+    while (**p != '\0' && **p != ' ') {
+        if (n + 1 >= size) return -1;
+        buf[n++] = *(*p)++;
+    }
+    buf[n] = '\0';
+    return (int)n;
+}
+
+/* The model's InitialUnknowns, resolved: for every row the declaration it is an unknown of
+ * (-1 for the knowns), for every declaration its dependencies as the attribute's text.  Every
+ * output in exactly one declaration, every name a row of the right kind, or the build fails. */
+typedef struct {
+    int *declaration; /* per row */
+    char **dependencies; /* per declaration */
+    size_t n;
+} InitialUnknowns;
+
+static void free_initial_unknowns(InitialUnknowns *u) {
+    size_t d;
+    for (d = 0; d < u->n && u->dependencies != NULL; d++) free(u->dependencies[d]);
+    free(u->dependencies);
+    free(u->declaration);
+}
+
+/* The dependencies attribute of a set of elements (mask[index], 1-based): ascending indices. */
+static char *dependency_text(const unsigned char *mask, uint32_t n) {
+    char *text = (char *)malloc((size_t)n * 11 + 1), *end;
+    uint32_t i;
+    if (text == NULL) return NULL;
+    end = text;
+    *end = '\0';
+    for (i = 1; i <= n; i++)
+        if (mask[i]) end += sprintf(end, "%s%u", end == text ? "" : " ", (unsigned)i);
+    return text;
+}
+
+/* Marks the elements of the knowns one declaration names; -1 (with a message) on a bad name. */
+static int mark_knowns(const FpModelInfo *info, const uint32_t *first, const char *knowns,
+                       unsigned char *mask) {
+    char name[128];
+    const char *p = knowns;
+    size_t i;
+    uint32_t k;
+    int len;
+    while ((len = next_name(&p, name, sizeof name)) != 0) {
+        int all = strcmp(name, "@parameters") == 0;
+        const FpVar *row = all ? NULL : fp_var_find(info->vars, info->n_vars, name);
+        if (len < 0 || (!all && (row == NULL || row->kind == FP_OUTPUT))) {
+            fprintf(stderr, "mdgen: InitialUnknowns of %s: known %s is no input or parameter\n",
+                    info->model_name, len < 0 ? "(too long)" : name);
+            return -1;
+        }
+        for (i = 0; i < info->n_vars; i++) {
+            const FpVar *v = &info->vars[i];
+            if (all ? listing_rank(v->kind) != 2 : v != row) continue;
+            for (k = 0; k < fp_var_count(v); k++) mask[first[i] + k] = 1;
+        }
+    }
+    return 0;
+}
+
+static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *first, uint32_t n,
+                                    InitialUnknowns *u) {
+    const InitialDeclaration *rows = NULL;
+    unsigned char *mask = NULL;
+    char name[128];
+    size_t d, i;
+    int len;
+    memset(u, 0, sizeof *u);
+    for (d = 0; d < sizeof declarations / sizeof declarations[0]; d++)
+        if (strcmp(declarations[d].model, info->model_name) == 0) {
+            rows = declarations[d].rows;
+            u->n = declarations[d].n;
+        }
+    if (rows == NULL) {
+        fprintf(stderr, "mdgen: no InitialUnknowns declaration for %s\n", info->model_name);
+        return -1;
+    }
+    u->declaration = (int *)malloc(info->n_vars * sizeof *u->declaration);
+    u->dependencies = (char **)calloc(u->n, sizeof *u->dependencies);
+    mask = (unsigned char *)malloc((size_t)n + 1);
+    if (u->declaration == NULL || u->dependencies == NULL || mask == NULL) goto fail;
+    for (i = 0; i < info->n_vars; i++) u->declaration[i] = -1;
+    for (d = 0; d < u->n; d++) {
+        const char *p = rows[d].unknowns;
+        while ((len = next_name(&p, name, sizeof name)) != 0) {
+            const FpVar *row = len < 0 ? NULL : fp_var_find(info->vars, info->n_vars, name);
+            if (row == NULL || row->kind != FP_OUTPUT || u->declaration[row - info->vars] >= 0) {
+                fprintf(stderr, "mdgen: InitialUnknowns of %s: %s is no output, or declared "
+                        "twice\n", info->model_name, len < 0 ? "(too long)" : name);
+                goto fail;
+            }
+            u->declaration[row - info->vars] = (int)d;
+        }
+        memset(mask, 0, (size_t)n + 1);
+        if (mark_knowns(info, first, rows[d].knowns, mask) != 0) goto fail;
+        u->dependencies[d] = dependency_text(mask, n);
+        if (u->dependencies[d] == NULL) goto fail;
+    }
+    for (i = 0; i < info->n_vars; i++)
+        if (info->vars[i].kind == FP_OUTPUT && u->declaration[i] < 0) {
+            fprintf(stderr, "mdgen: InitialUnknowns of %s: output %s is in no declaration\n",
+                    info->model_name, info->vars[i].name);
+            goto fail;
+        }
+    free(mask);
+    return 0;
+fail:
+    free(mask);
+    free_initial_unknowns(u);
+    return -1;
+}
+
+/* <ModelStructure>: every output (listing order) in <Outputs> without dependencies (computed
+ * at the end of a step from the inputs held over it: no direct feedthrough at communication
+ * points, so no algebraic loop for masters) and in <InitialUnknowns> with its declaration's. */
+static void write_model_structure(FILE *f, const FpModelInfo *info, const uint32_t *first,
+                                  const InitialUnknowns *u) {
+    size_t i;
+    uint32_t k;
+    int pass;
+    fputs("  <ModelStructure>\n", f);
+    for (pass = 0; pass < 2; pass++) {
+        fputs(pass == 0 ? "    <Outputs>\n" : "    <InitialUnknowns>\n", f);
+        for (i = 0; i < info->n_vars; i++) {
+            if (info->vars[i].kind != FP_OUTPUT) continue;
+            for (k = 0; k < fp_var_count(&info->vars[i]); k++)
+                fprintf(f, "      <Unknown index=\"%u\" dependencies=\"%s\"/>\n",
+                        (unsigned)(first[i] + k),
+                        pass == 0 ? "" : u->dependencies[u->declaration[i]]);
+        }
+        fputs(pass == 0 ? "    </Outputs>\n" : "    </InitialUnknowns>\n", f);
+    }
+    fputs("  </ModelStructure>\n", f);
+}
+
 /* The FMU's C files: argv[first..argc-1] after "--sources DIR" (none without it). */
 typedef struct {
     const char *dir;
@@ -323,8 +539,9 @@ int main(int argc, char **argv) {
     void *model;
     FILE *f;
     size_t i;
-    uint32_t k, index = 0;
-    int c;
+    uint32_t k, n_listed, *first = NULL;
+    int c, rank;
+    InitialUnknowns unknowns;
     SourceList src = {NULL, NULL, 0};
     if (argc < 3 || (argc > 3 && (strcmp(argv[3], "--sources") != 0 || argc < 6))) {
         fprintf(stderr, "usage: mdgen OUTPUT.xml VERSION [--sources DIR FILE.c ...]\n");
@@ -340,7 +557,10 @@ int main(int argc, char **argv) {
     model = calloc(1, info->model_size);
     if (model == NULL) return 1;
     info->set_defaults(model);
-    if (check_table(info, model) != 0) {
+    n_listed = listing_indices(info, &first);
+    if (check_table(info, model) != 0 || n_listed == 0 ||
+        resolve_initial_unknowns(info, first, n_listed, &unknowns) != 0) {
+        free(first);
         free(model);
         return 1;
     }
@@ -348,6 +568,8 @@ int main(int argc, char **argv) {
     f = fopen(argv[1], "w");
     if (f == NULL) {
         perror(argv[1]);
+        free_initial_unknowns(&unknowns);
+        free(first);
         free(model);
         return 1;
     }
@@ -386,32 +608,24 @@ int main(int argc, char **argv) {
     fprintf(f, "  <DefaultExperiment startTime=\"0\" stopTime=\"%.17g\" stepSize=\"%.17g\"/>\n",
             info->default_stop, info->default_step);
     fputs("  <ModelVariables>\n", f);
-    for (i = 0; i < info->n_vars; i++)
-        for (k = 0; k < fp_var_count(&info->vars[i]); k++)
-            if (write_variable(f, &info->vars[i], k, model) != 0) {
-                fprintf(stderr, "mdgen: name of %s too long\n", info->vars[i].name);
-                fclose(f);
-                free(model);
-                return 1;
-            }
-    /* Outputs are computed at the end of a step from the held inputs: no direct
-     * feedthrough, so no output depends on an input (no algebraic loop for masters). */
-    fputs("  </ModelVariables>\n  <ModelStructure>\n    <Outputs>\n", f);
-    for (i = 0; i < info->n_vars; i++)
-        for (k = 0; k < fp_var_count(&info->vars[i]); k++) {
-            index++;
-            if (info->vars[i].kind == FP_OUTPUT)
-                fprintf(f, "      <Unknown index=\"%u\" dependencies=\"\"/>\n", (unsigned)index);
+    for (rank = 0; rank < 3; rank++)
+        for (i = 0; i < info->n_vars; i++) {
+            if (listing_rank(info->vars[i].kind) != rank) continue;
+            for (k = 0; k < fp_var_count(&info->vars[i]); k++)
+                if (write_variable(f, &info->vars[i], k, model) != 0) {
+                    fprintf(stderr, "mdgen: name of %s too long\n", info->vars[i].name);
+                    fclose(f);
+                    free_initial_unknowns(&unknowns);
+                    free(first);
+                    free(model);
+                    return 1;
+                }
         }
-    fputs("    </Outputs>\n    <InitialUnknowns>\n", f);
-    index = 0;
-    for (i = 0; i < info->n_vars; i++)
-        for (k = 0; k < fp_var_count(&info->vars[i]); k++) {
-            index++;
-            if (info->vars[i].kind == FP_OUTPUT)
-                fprintf(f, "      <Unknown index=\"%u\"/>\n", (unsigned)index);
-        }
-    fputs("    </InitialUnknowns>\n  </ModelStructure>\n</fmiModelDescription>\n", f);
+    fputs("  </ModelVariables>\n", f);
+    write_model_structure(f, info, first, &unknowns);
+    fputs("</fmiModelDescription>\n", f);
+    free_initial_unknowns(&unknowns);
+    free(first);
     free(model);
     return fclose(f) == 0 ? 0 : 1;
 }
