@@ -29,6 +29,7 @@ import sys
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from xml.etree import ElementTree
 
 from orchestrator.export.macho import universal_binary
 
@@ -134,10 +135,23 @@ def werror() -> bool:
     return os.environ.get("FULLPOSE_WERROR", "") not in ("", "0")
 
 
+def source_files(sources: Path) -> list[Path]:
+    """The C files an FMU's ``sources`` folder is compiled from: those its
+    ``buildDescription.xml`` lists (our FMUs': one, ``<model>_all.c``, which includes the
+    others), else every C file in it."""
+    described = sources / "buildDescription.xml"
+    if described.is_file():
+        root = ElementTree.parse(described).getroot()
+        names = [f.get("name", "") for f in root.iter("SourceFile")]
+        if names:
+            return [sources / n for n in names]
+    return sorted(sources.glob("*.c"))
+
+
 def compile_target(target: Target, sources: Path, out: Path, label: str) -> None:
-    """Every C file of ``sources`` into the shared library ``out``, for ``target``, with
-    ``-I sources`` as the only include path."""
-    files = sorted(str(p) for p in sources.glob("*.c"))
+    """The C files of ``sources`` (:func:`source_files`) into the shared library ``out``, for
+    ``target``, with ``-I sources`` as the only include path."""
+    files = [str(p) for p in source_files(sources)]
     if not files:
         raise PlatformBuildError(f"{label}: no C sources in {sources}")
     # a Mach-O names itself (its install name): not after the temporary path it is built at

@@ -2,15 +2,19 @@
 
 ``sources/`` holds exactly the files the binary is compiled from, flat (``-I sources`` is the
 only include path), with the FMI 2 headers; the modelDescription's ``<SourceFiles>`` and
-``sources/buildDescription.xml`` list its C files.  An FMU whose binaries are deleted and
-rebuilt from ``sources/`` alone, with fmpy's platform-binary builder (its own CMakeLists:
-fmpy 0.3.32 reads the FMI 2 ``<SourceFiles>``) and with the one-line ``cc`` command of
-docs/fmus.md, flies a shipped scenario bit-identically to the shipped binaries.
+``sources/buildDescription.xml`` list its one translation unit, ``<model>_all.c``, which
+includes every other C file once.  An FMU whose binaries are deleted and rebuilt from
+``sources/`` alone, with fmpy's platform-binary builder (its own CMakeLists: fmpy 0.3.32
+reads the FMI 2 ``<SourceFiles>``) and with the one-line ``cc`` command of docs/fmus.md,
+flies a shipped scenario bit-identically to the shipped binaries (every route, without the
+project's flags, outside Python and in one static image: test_source_builds.py).
 
 Oracles: fmpy's builder and its FMI 3.0 build-description schema, the system C compiler,
-fmpy's FMI headers, the run of the shipped binaries.
+fmpy's FMI headers and the FMI 2.0.1 standard's ``fmi2Functions.h`` (its SHA-256), the run
+of the shipped binaries.
 """
 
+import hashlib
 import re
 import shutil
 import subprocess
@@ -34,6 +38,9 @@ ROOT = Path(__file__).resolve().parents[2]
 DOC = ROOT / "docs" / "fmus.md"
 FMUS = {"MultirotorPlant": plant.plant_fmu, "FullPoseController": controller.controller_fmu}
 FMI_HEADERS = {"fmi2Functions.h", "fmi2FunctionTypes.h", "fmi2TypesPlatform.h"}
+# SHA-256 of the FMI 2.0.1 standard's headers/fmi2Functions.h with LF line ends (the
+# modelica/fmi-standard repository, tag v2.0.1): what the build makes of fmpy's edited copy
+FMI2_FUNCTIONS_H_2_0_1 = "5315e320046c976b3977bc14eb7e2cb58711fa296e4bdf88ddd2c9c82e2a9958"
 SCENARIO, SECONDS = "full_pose_with_disturbances", 3.0  # disturbances, attitude and position
 _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 
@@ -52,7 +59,11 @@ def test_sources_list_the_c_files_once_and_hold_nothing_else(model):
     c_files = sorted(n for n in files if n.endswith(".c"))
     md = read_model_description(str(fmu))
     listed = md.buildConfigurations[0].sourceFileSets[0].sourceFiles  # FMI 2 <SourceFiles>
-    assert sorted(listed) == c_files and len(set(listed)) == len(listed)
+    assert listed == [f"{model}_all.c"]  # the one translation unit
+    included = _INCLUDE.findall(files[listed[0]].decode())
+    # every other C file, once each (and so: none compiled beside it)
+    assert sorted(n for n in included if n.endswith(".c")) == sorted(set(c_files) - set(listed))
+    assert len(set(included)) == len(included)
     # the FMI 2.0.4 / 3.0 build description, validated against fmpy's FMI 3 schema
     configs = read_build_description(str(fmu), validate=True)
     assert len(configs) == 1 and configs[0].modelIdentifier == md.coSimulation.modelIdentifier
@@ -65,13 +76,16 @@ def test_sources_list_the_c_files_once_and_hold_nothing_else(model):
     assert all("/" not in n for n in files), "sources/ is flat"
     assert {n for n in files if not n.endswith((".c", ".h"))} == {"buildDescription.xml"}
     # neither the build tools nor the Python host API
-    assert not {"mdgen.c", "hover_master.c", "fp_cosim.c", "fp_api.h"} & set(files)
+    assert not {"mdgen.c", "hover_master.c", "static_master.c", "fp_cosim.c", "fp_api.h"} & set(
+        files)
 
 
 @pytest.mark.parametrize("model", FMUS)
 def test_every_header_is_included_and_every_include_is_there(model):
     """The C files' quoted includes, followed transitively, reach every header in sources/
-    and only headers in sources/; the FMI headers are fmpy's own, byte for byte."""
+    and only headers in sources/; the FMI headers are fmpy's own, byte for byte, but for
+    fmi2Functions.h: the FMI 2.0.1 standard's, which honours FMI2_FUNCTION_PREFIX (fmpy's
+    copy ignores it), made from fmpy's by putting back the two blocks it marks as changed."""
     files = sources_of(FMUS[model]())
     seen, todo = set(), [n for n in files if n.endswith(".c")]
     while todo:
@@ -86,8 +100,13 @@ def test_every_header_is_included_and_every_include_is_there(model):
     assert headers <= seen, f"headers no C file includes: {sorted(headers - seen)}"
     assert FMI_HEADERS <= headers
     c_code = Path(fmpy.__file__).parent / "c-code"
-    for h in FMI_HEADERS:
+    for h in FMI_HEADERS - {"fmi2Functions.h"}:
         assert files[h] == (c_code / h).read_bytes()
+    ours, fmpys = files["fmi2Functions.h"].decode(), (c_code / "fmi2Functions.h").read_text()
+    assert hashlib.sha256(ours.encode()).hexdigest() == FMI2_FUNCTIONS_H_2_0_1
+    assert "fmi2FullName(name) fmi2PasteB(FMI2_FUNCTION_PREFIX, name)" in ours
+    # outside the two blocks fmpy marks, fmpy's text: the declarations are the same
+    assert ours[ours.index("/* Version number */"):] == fmpys[fmpys.index("/* Version number */"):]
 
 
 def one_line_command(model):
