@@ -153,7 +153,12 @@ def test_no_false_alarm_over_the_shipped_scenarios(name):
     (scenario 3's steps up to 3 m/s^2) and model mismatch (the inertia corners), none of
     which is a rotor's signature."""
     settings = [f"plant.{k}={v}" for k, v in SENSORS.items()]
-    out = run_scenario(prepare(name, settings=settings), None, timing=False, plots=False)
+    # scenario 3 whole (its disturbance steps up to 3 m/s^2, the servos saturating at 70 s);
+    # the other 100 s scenarios' smooth chirps and attitude sines over their first 30 s
+    full = name == "full_pose_with_disturbances"
+    duration = None if full else min(prepare(name).duration, 30.0)
+    out = run_scenario(prepare(name, duration=duration, settings=settings), None,
+                       timing=False, plots=False)
     assert out.metrics["outcome"] == "completed"
     r = out.result
     assert detected_at(r) is None, name
@@ -210,7 +215,7 @@ def test_an_unknown_load_is_no_rotor_fault(case, sensors):
     (a constant force with a torque): the controller moving its rotors shows they are not
     one rotor's, and no motor is stopped."""
     plant, disturbance = LOADS[case]
-    data: dict[str, Any] = {"duration": 5.0, "disturbance": disturbance, "fault_detection": "none",
+    data: dict[str, Any] = {"duration": 3.5, "disturbance": disturbance, "fault_detection": "none",
                             "plant": {**plant, **(SENSORS if sensors else {})}}
     r = fly(data)
     assert np.abs(r.get("ctrl.indi_residual")).max() > 0.1  # the residual does see it
