@@ -6,6 +6,7 @@ import os
 import subprocess
 import sys
 import sysconfig
+import zipfile
 from pathlib import Path
 from typing import Any
 
@@ -41,3 +42,22 @@ def cli(*args: str, cwd: Path | None = None,
     """Run the CLI of this interpreter's orchestrator (``python -m orchestrator.cli``)."""
     return subprocess.run([sys.executable, "-m", "orchestrator.cli", *args],
                           capture_output=True, text=True, timeout=timeout, cwd=cwd)
+
+
+def rezip(folder: Path, fmu: Path) -> None:
+    """Zip the unpacked FMU `folder` into `fmu` (entries in sorted order, deflated)."""
+    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
+        for p in sorted(folder.rglob("*")):
+            if p.is_file():
+                z.write(p, p.relative_to(folder).as_posix())
+
+
+def omsimulator() -> Path:
+    """The OMSimulator build tests/tools/omsimulator.sh finds (the folder holding
+    bin/OMSimulator); skips the calling test with the script's reason when there is none."""
+    root = Path(__file__).resolve().parents[2]
+    res = subprocess.run(["bash", str(root / "tests" / "tools" / "omsimulator.sh")],
+                         capture_output=True, text=True, check=False)
+    if res.returncode != 0:
+        pytest.skip(res.stderr.strip())
+    return Path(res.stdout.strip())

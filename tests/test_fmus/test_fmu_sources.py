@@ -28,6 +28,7 @@ import pytest
 from fmpy import read_model_description
 from fmpy.build import build_platform_binary
 from fmpy.model_description import read_build_description
+from helpers import rezip
 
 import controller
 import plant
@@ -123,12 +124,6 @@ def unpack_without_binaries(fmu, dest):
     shutil.rmtree(dest / "binaries")
     return dest
 
-
-def rezip(folder, fmu):
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-        for p in sorted(folder.rglob("*")):
-            if p.is_file():
-                z.write(p, p.relative_to(folder).as_posix())
 
 
 def fly(monkeypatch, fmu_dir=None):

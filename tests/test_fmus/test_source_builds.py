@@ -52,6 +52,7 @@ import numpy as np
 import pytest
 from fmpy import read_model_description
 from fmpy.build import build_platform_binary
+from helpers import rezip
 
 import controller
 import plant
@@ -131,12 +132,6 @@ def fresh_copy(unpacked, model, dest):
     shutil.copytree(unpacked[model], dest)
     return dest
 
-
-def rezip(folder, fmu):
-    with zipfile.ZipFile(fmu, "w", zipfile.ZIP_DEFLATED) as z:
-        for p in sorted(folder.rglob("*")):
-            if p.is_file():
-                z.write(p, p.relative_to(folder).as_posix())
 
 
 def one_line_command(model):

@@ -36,11 +36,11 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import omsimulator
 
 from orchestrator.export.ssp import CONTROLLER, PLANT, SYSTEM, export_ssp
 from orchestrator.sim.fmu import FmuInstance, installed_fmu
 
-ROOT = Path(__file__).resolve().parents[2]
 H = 0.002
 OK = 0
 HOLD = "holding the last valid command"
@@ -141,11 +141,7 @@ def test_the_compliance_checker_steps_on_through_a_held_command(tmp_path):
 
 @pytest.fixture(scope="module")
 def oms() -> Path:
-    res = subprocess.run(["bash", str(ROOT / "tests" / "tools" / "omsimulator.sh")],
-                         capture_output=True, text=True, check=False)
-    if res.returncode != 0:
-        pytest.skip(res.stderr.strip())
-    return Path(res.stdout.strip())
+    return omsimulator()
 
 
 @pytest.mark.fmitools

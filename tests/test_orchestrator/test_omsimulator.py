@@ -20,6 +20,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from helpers import omsimulator
 
 from orchestrator.export.ssp import experiment, export_ssp
 from orchestrator.master import run
@@ -27,18 +28,13 @@ from orchestrator.scenario.parser import parse_scenario
 
 pytestmark = pytest.mark.fmitools
 
-ROOT = Path(__file__).resolve().parents[2]
 POS0 = (0.5, -1.0, -3.0)
 SECONDS = 2.0
 
 
 @pytest.fixture(scope="module")
 def oms() -> Path:
-    res = subprocess.run(["bash", str(ROOT / "tests" / "tools" / "omsimulator.sh")],
-                         capture_output=True, text=True, check=False)
-    if res.returncode != 0:
-        pytest.skip(res.stderr.strip())
-    return Path(res.stdout.strip())
+    return omsimulator()
 
 
 @pytest.fixture(scope="module")
