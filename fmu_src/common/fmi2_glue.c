@@ -197,6 +197,7 @@ static void release_instance(Instance *inst) {
     if (inst->model) release(inst->model);
     if (inst->scratch) release(inst->scratch);
     if (inst->vr_map) release(inst->vr_map);
+    if (inst->table.data) release(inst->table.data);
     if (inst->name) release(inst->name);
     inst->magic = INSTANCE_FREED;
     release(inst);
@@ -318,6 +319,10 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         for (k = 0; k < n; k++) inst->vr_map[info->vars[i].vr + k] = (int32_t)i;
     }
     inst->internal_step = find_internal_step(info);
+    if (info->table_resource != NULL && glue_load_table(inst, fmuResourceLocation) != fmi2OK) {
+        release_instance(inst);
+        return NULL;
+    }
     info->set_defaults(inst->model);
     set_initialized(inst, 0);
     inst->dirty = 1;

@@ -13,6 +13,7 @@
 #include "fmi2Functions.h"
 #include "fmu_state.h"
 #include "fp_model.h"
+#include "fp_table.h"
 
 /* The distinct warnings one initialization reports once each (beyond them, repeats show). */
 #define MAX_WARNINGS_SEEN 32
@@ -46,6 +47,7 @@ typedef struct {
     int checking;                            /* the model is validating parameters */
     uint64_t warned[MAX_WARNINGS_SEEN];      /* FNV-1a of the warnings reported */
     int n_warned;
+    FpTable table; /* the model's table from resources/ (FpModelInfo.table_resource) */
 } Instance;
 
 /* fmi2_glue.c: the logging through the importer's callback, the entry checks, and the
@@ -55,6 +57,10 @@ void glue_logf(Instance *inst, FpStatus status, FpLogCategory category, const ch
     __attribute__((format(printf, 4, 5)))
 #endif
     ;
+
+/* fmi2_resources.c: the model's table (FpModelInfo.table_resource) read from the FMU's
+ * resources/ folder at instantiation, or fmi2Error with the file and the reason logged. */
+fmi2Status glue_load_table(Instance *inst, fmi2String location);
 
 /* Entry of every function taking an instance: a live instance in one of `states`. */
 Instance *glue_enter(fmi2Component c, const char *fn, int states);

@@ -160,10 +160,16 @@ typedef enum {
 const char *fp_log_category_name(int category);
 const char *fp_log_category_description(int category);
 
-/* A model logs through this; the FMI layer maps it to the importer's callback. */
+struct FpTable;
+
+/* A model logs through this; the FMI layer maps it to the importer's callback.  It also
+ * carries the one thing a model reads from outside its struct: the table the glue loaded
+ * from the FMU's resources/ (FpModelInfo.table_resource, common/fp_table.h), NULL for a model
+ * without one. */
 typedef struct {
     void (*log)(void *env, FpStatus status, FpLogCategory category, const char *message);
     void *env;
+    const struct FpTable *table;
 } FpLogger;
 
 /* A real number as a message shows it: the shortest of %.15g, %.16g, %.17g that reads back
@@ -218,6 +224,13 @@ typedef struct {
      * never writes it.
      */
     size_t initialized_offset;
+    /*
+     * The file in the FMU's resources/ folder the model plays back (a signal table,
+     * common/fp_table.h), NULL for none.  The glue reads it at instantiation, from
+     * fmuResourceLocation, refusing to instantiate (with the file and the reason logged)
+     * when it is missing or malformed, and hands it to every callback (FpLogger.table).
+     */
+    const char *table_resource;
 } FpModelInfo;
 
 /*

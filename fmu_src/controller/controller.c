@@ -515,6 +515,7 @@ static const FpModelInfo controller_info = {
     controller_tunables_changed,
     controller_check_restored,
     offsetof(ControllerModel, initialized),
+    NULL,
 };
 
 const FpModelInfo *controller_model_info(void) { return &controller_info; }

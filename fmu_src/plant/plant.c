@@ -610,6 +610,7 @@ static const FpModelInfo plant_info = {
     NULL,
     plant_check_restored,
     offsetof(PlantModel, initialized),
+    NULL,
 };
 
 const FpModelInfo *plant_model_info(void) { return &plant_info; }

@@ -21,7 +21,7 @@
  * (fp_model.c).  <ModelStructure> names variables by their 1-based index in this order: the
  * <Outputs> without dependencies (no direct feedthrough at communication points), the
  * <InitialUnknowns> with the knowns that the model's table declares for each output
- * (PLANT_INITIAL_DEPENDENCIES, CONTROLLER_INITIAL_DEPENDENCIES).
+ * (PLANT_INITIAL_DEPENDENCIES, CONTROLLER_INITIAL_DEPENDENCIES, SIGNALS_INITIAL_DEPENDENCIES).
  */
 #include <errno.h>
 #include <math.h>
@@ -36,6 +36,7 @@
  * the tables themselves are the linked model's, through fp_model_info). */
 #include "../controller/controller_vars.h"
 #include "../plant/plant_vars.h"
+#include "../signals/signals_vars.h"
 
 /* Who the FMUs are from and under which terms (pyproject.toml: license MIT; a test compares
  * them).  RELEASE_DATE is the day of the release VERSION names: set it with the version. */
@@ -330,6 +331,8 @@ static const InitialDeclaration plant_declarations[] = {
     PLANT_INITIAL_DEPENDENCIES(DECLARATION_ROW)};
 static const InitialDeclaration controller_declarations[] = {
     CONTROLLER_INITIAL_DEPENDENCIES(DECLARATION_ROW)};
+static const InitialDeclaration signals_declarations[] = {
+    SIGNALS_INITIAL_DEPENDENCIES(DECLARATION_ROW)};
 #undef DECLARATION_ROW
 
 static const struct {
@@ -340,6 +343,8 @@ static const struct {
     {"MultirotorPlant", plant_declarations, sizeof plant_declarations / sizeof plant_declarations[0]},
     {"FullPoseController", controller_declarations,
      sizeof controller_declarations / sizeof controller_declarations[0]},
+    {"ScenarioSignals", signals_declarations,
+     sizeof signals_declarations / sizeof signals_declarations[0]},
 };
 
 /* The next space-separated name of *p into buf: its length, 0 at the end, -1 if too long. */

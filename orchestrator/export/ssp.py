@@ -236,15 +236,25 @@ def component_parameters(airframe: str | Path = "paper_hexacopter",
     for ref in _REFERENCES:
         for i in range(3):
             ctrl[f"{ref}[{i + 1}]"] = held[ref][i] if ref in held else 0.0
+    return consistent_start(plant, ctrl, connections)
+
+
+def consistent_start(plant: Mapping[str, Value], ctrl: Mapping[str, Value],
+                     connections: Iterable[Connection]) -> dict[str, dict[str, Value]]:
+    """Both FMUs' start values made consistent at t = 0 for a runner that initialises
+    connected inputs from start values: the controller's connected measurement inputs get the
+    plant's initial outputs (with ``plant`` set), the plant's connected command inputs the
+    actuator state it initialises to (its trim)."""
     conns = list(connections)
     measured = [fv for fc, fv, _, _ in conns if fc == PLANT]
-    commanded = [tv for _, _, tc, tv in conns if tc == PLANT]
+    commanded = [tv for fc, _, tc, tv in conns if tc == PLANT and fc == CONTROLLER]
     # the plant's trim: its measured actuator states are what the commands must be
     trim_of = {n: n.replace("_cmd[", "[") for n in commanded}
     y0 = _initial_outputs(plant, sorted(set(measured) | set(trim_of.values())))
-    ctrl.update({n: y0[n] for n in measured})
-    plant.update({n: y0[trim_of[n]] for n in commanded})
-    return {PLANT: plant, CONTROLLER: ctrl}
+    plant_out, ctrl_out = dict(plant), dict(ctrl)
+    ctrl_out.update({n: y0[n] for n in measured})
+    plant_out.update({n: y0[trim_of[n]] for n in commanded})
+    return {PLANT: plant_out, CONTROLLER: ctrl_out}
 
 
 # -- XML ---------------------------------------------------------------------------------------
@@ -357,29 +367,45 @@ def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
         raise ValueError(f"step must be positive, got {step}")
     if not (math.isfinite(stop_time) and stop_time > 0):
         raise ValueError(f"stop_time must be positive, got {stop_time}")
-    path = Path(path)
-    if path.suffix != ".ssp":
-        path = path.with_suffix(".ssp")
-    fmus = {PLANT: Path(plant_fmu()), CONTROLLER: Path(controller_fmu())}
-    mds = {comp: read_model_description(str(p)) for comp, p in fmus.items()}
+    fmus = {PLANT: Path(plant_fmu()).read_bytes(), CONTROLLER: Path(controller_fmu()).read_bytes()}
+    mds = {comp: read_model_description(io.BytesIO(data)) for comp, data in fmus.items()}
     connections = connection_table(mds[PLANT], mds[CONTROLLER])
     values = component_parameters(airframe, pos0, connections, euler0)
     af_name = load_airframe(airframe).name
-    ssv_files = {comp: f"resources/{comp}.ssv" for comp in fmus}
+    return write_archive(path, f"fullpose_{af_name}_hover", fmus, mds, connections, values,
+                         step, stop_time, af_name)
+
+
+def write_archive(path: Path, name: str, fmus: Mapping[str, bytes],
+                  mds: Mapping[str, ModelDescription], connections: Sequence[Connection],
+                  values: Mapping[str, Mapping[str, Value]], step: float, stop_time: float,
+                  label: str) -> Path:
+    """Write an SSP archive of the components ``fmus`` (name -> FMU bytes, in SSD order)
+    connected by ``connections``, one SSV per component of ``values`` (named
+    ``"<component> (<label>)"``), the step and stop time in the DefaultExperiment; returns
+    its path (``.ssp`` suffix added when missing).  Deterministic; written whole or not at
+    all (a temporary file renamed into place)."""
+    path = Path(path)
+    if path.suffix != ".ssp":
+        path = path.with_suffix(".ssp")
+    ssv_files = {comp: f"resources/{comp}.ssv" for comp in fmus if comp in values}
     entries: dict[str, tuple[bytes, int]] = {}
-    for comp, md in mds.items():
-        doc = ssv_document(f"{comp} ({af_name})", _typed(md, values[comp]))
-        entries[ssv_files[comp]] = (doc, zipfile.ZIP_DEFLATED)
-        entries[f"resources/{comp}.fmu"] = (fmus[comp].read_bytes(), zipfile.ZIP_STORED)
-    ssd = ssd_document(f"fullpose_{af_name}_hover", mds, connections, ssv_files, step, stop_time)
+    for comp, data in fmus.items():
+        if comp in values:
+            doc = ssv_document(f"{comp} ({label})", _typed(mds[comp], values[comp]))
+            entries[ssv_files[comp]] = (doc, zipfile.ZIP_DEFLATED)
+        entries[f"resources/{comp}.fmu"] = (data, zipfile.ZIP_STORED)
+    ssd = ssd_document(name, mds, connections, ssv_files, step, stop_time)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as zf:
         _add(zf, SSD_NAME, ssd, zipfile.ZIP_DEFLATED)
-        for name in sorted(entries):
-            data, compress = entries[name]
-            _add(zf, name, data, compress)
+        for entry in sorted(entries):
+            data, compress = entries[entry]
+            _add(zf, entry, data, compress)
     path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_bytes(buf.getvalue())
+    part = path.with_name(path.name + ".part")
+    part.write_bytes(buf.getvalue())
+    part.replace(path)
     return path
 
 
