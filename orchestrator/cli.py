@@ -176,12 +176,34 @@ def _cmd_check(args: argparse.Namespace) -> int:
 
 
 def _cmd_export_ssp(args: argparse.Namespace) -> int:
-    from orchestrator.export.ssp import export_ssp
+    if args.scenario is None:
+        from orchestrator.export.ssp import export_ssp
 
-    euler0 = tuple(math.radians(x) for x in args.euler0_deg)
-    path = export_ssp(args.output, airframe=args.airframe, pos0=tuple(args.pos0),
-                      stop_time=args.stop_time, euler0=euler0)
-    print(f"wrote {path}")
+        if args.duration is not None or args.set or args.gains is not None:
+            raise ValueError("--duration, --set and --gains apply to a scenario: give it "
+                             "with --scenario NAME_OR_FILE")
+        euler0 = tuple(math.radians(x) for x in args.euler0_deg or (0.0, 0.0, 0.0))
+        path = export_ssp(args.output, airframe=args.airframe or "paper_hexacopter",
+                          pos0=tuple(args.pos0 or (0.0, 0.0, -3.0)),
+                          stop_time=10.0 if args.stop_time is None else args.stop_time,
+                          euler0=euler0)
+        print(f"wrote {path}")
+        return 0
+    from orchestrator.export.ssp_scenario import export_scenario_ssp
+    from orchestrator.runner import prepare
+
+    if args.pos0 is not None or args.euler0_deg is not None:
+        raise ValueError("--pos0 and --euler0-deg set a hover pose; a scenario starts at its "
+                         "reference's (or its [plant] pos0 / euler0)")
+    if args.stop_time is not None and args.duration is not None:
+        raise ValueError("give --duration or --stop-time, not both")
+    duration = args.duration if args.duration is not None else args.stop_time
+    sc = prepare(args.scenario, duration, args.set, airframe=args.airframe, gains=args.gains)
+    _warn(sc.warnings)
+    path = export_scenario_ssp(args.output, sc)
+    print(f"wrote {path}: {sc.name} ({sc.duration:g} s at {sc.step * 1e3:g} ms, airframe "
+          f"{sc.airframe.name}) as ScenarioSignals, MultirotorPlant and FullPoseController; "
+          "a fixed-step replay matches `fullpose run` with coupling = \"jacobi\"")
     return 0
 
 
@@ -414,16 +436,28 @@ def build_parser() -> argparse.ArgumentParser:
                        help="override a parameter, as for run (repeatable)")
     check.set_defaults(func=_cmd_check)
 
-    ssp = sub.add_parser("export-ssp", help="export the closed loop as an SSP archive")
+    ssp = sub.add_parser("export-ssp", help="export the closed loop, hovering or flying a "
+                                            "scenario, as an SSP archive for other tools")
     ssp.add_argument("output", type=Path, help="archive to write (.ssp)")
-    ssp.add_argument("--airframe", default="paper_hexacopter")
-    ssp.add_argument("--pos0", type=float, nargs=3, default=[0.0, 0.0, -3.0],
-                     metavar=("X", "Y", "Z"), help="hover position (m, NED)")
-    ssp.add_argument("--euler0-deg", type=float, nargs=3, default=[0.0, 0.0, 0.0],
+    ssp.add_argument("--scenario", default=None, metavar="NAME_OR_FILE",
+                     help="the scenario to replay: its references and disturbances become a "
+                          "third component (ScenarioSignals); without it the loop hovers")
+    add_vehicle_options(ssp, "the airframe (shipped name or TOML file; default: the "
+                             "scenario's, or paper_hexacopter for a hover)",
+                        "with the gains of this file, as for run (with --scenario)")
+    ssp.add_argument("--duration", type=float, default=None,
+                     help="with --scenario: replay only this long (s)")
+    ssp.add_argument("--set", action="append", default=[], metavar="FMU.PARAM=VALUE",
+                     help="with --scenario: override a parameter, as for run (repeatable)")
+    ssp.add_argument("--pos0", type=float, nargs=3, default=None,
+                     metavar=("X", "Y", "Z"), help="hover position (m, NED; default 0 0 -3)")
+    ssp.add_argument("--euler0-deg", type=float, nargs=3, default=None,
                      metavar=("ROLL", "PITCH", "YAW"),
                      help="hover attitude (deg), held by the controller: the same pose is "
                           "written to both FMUs")
-    ssp.add_argument("--stop-time", type=float, default=10.0)
+    ssp.add_argument("--stop-time", type=float, default=None,
+                     help="stop time recorded in the archive (s; default 10, or the "
+                          "scenario's duration)")
     ssp.set_defaults(func=_cmd_export_ssp)
 
     hover = sub.add_parser("hover", help="simulate the plant FMU hovering at trim (open loop)")

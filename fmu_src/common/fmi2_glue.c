@@ -319,9 +319,16 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         for (k = 0; k < n; k++) inst->vr_map[info->vars[i].vr + k] = (int32_t)i;
     }
     inst->internal_step = find_internal_step(info);
-    if (info->table_resource != NULL && glue_load_table(inst, fmuResourceLocation) != fmi2OK) {
-        release_instance(inst);
-        return NULL;
+    if (info->table_resource != NULL) {
+        char why[640];
+        if (glue_load_table(inst, fmuResourceLocation, why, sizeof why) != 0) {
+            glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: %s", why);
+            release_instance(inst);
+            return NULL;
+        }
+        glue_logf(inst, FP_OK, FP_LOG_EVENTS, "read resources/%s: %lu rows of %lu signals",
+                  info->table_resource, (unsigned long)inst->table.rows,
+                  (unsigned long)inst->table.cols);
     }
     info->set_defaults(inst->model);
     set_initialized(inst, 0);

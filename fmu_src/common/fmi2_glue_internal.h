@@ -1,5 +1,6 @@
 /*
- * Internal to the FMI 2.0 glue (fmi2_glue.c, fmi2_values.c, fmi2_fmustate.c): the instance,
+ * Internal to the FMI 2.0 glue (fmi2_glue.c, fmi2_values.c, fmi2_fmustate.c,
+ * fmi2_resources.c): the instance,
  * the entry check of every call and the logging the three files share.  Not an API, and
  * like those files it includes the FMI headers (no model code does).  Calls go one way:
  * fmi2_values.c and fmi2_fmustate.c call fmi2_glue.c, never the other way round.
@@ -59,8 +60,9 @@ void glue_logf(Instance *inst, FpStatus status, FpLogCategory category, const ch
     ;
 
 /* fmi2_resources.c: the model's table (FpModelInfo.table_resource) read from the FMU's
- * resources/ folder at instantiation, or fmi2Error with the file and the reason logged. */
-fmi2Status glue_load_table(Instance *inst, fmi2String location);
+ * resources/ folder at instantiation: 0, or -1 with the file and the reason in why (which
+ * the caller logs: fmi2_resources.c calls nothing here). */
+int glue_load_table(Instance *inst, fmi2String location, char *why, size_t why_size);
 
 /* Entry of every function taking an instance: a live instance in one of `states`. */
 Instance *glue_enter(fmi2Component c, const char *fn, int states);

@@ -87,34 +87,30 @@ static void *table_alloc(void *env, size_t n, size_t size) {
     return inst->allocate(n, size);
 }
 
-fmi2Status glue_load_table(Instance *inst, fmi2String location) {
+int glue_load_table(Instance *inst, fmi2String location, char *why, size_t why_size) {
     const char *name = inst->info->table_resource;
-    char path[RESOURCE_PATH_MAX], why[256];
+    char path[RESOURCE_PATH_MAX], reason[256];
     FILE *f;
     FpStatus s;
-    if (resource_path(location, name, path, sizeof path, why, sizeof why) != 0) {
-        glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: %s needs resources/%s: %s",
-                  inst->info->model_name, name, why);
-        return fmi2Error;
+    if (resource_path(location, name, path, sizeof path, reason, sizeof reason) != 0) {
+        snprintf(why, why_size, "%s needs resources/%s: %s", inst->info->model_name, name,
+                 reason);
+        return -1;
     }
     f = fopen(path, "rb");
     if (f == NULL) {
-        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
-                  "fmi2Instantiate: %s cannot open its table %.300s (resources/%s is missing "
-                  "or unreadable)", inst->info->model_name, path, name);
-        return fmi2Error;
+        snprintf(why, why_size, "%s cannot open its table %.300s (resources/%s is missing or "
+                 "unreadable)", inst->info->model_name, path, name);
+        return -1;
     }
-    s = fp_table_read(&inst->table, f, table_alloc, inst, why, sizeof why);
+    s = fp_table_read(&inst->table, f, table_alloc, inst, reason, sizeof reason);
     fclose(f);
     if (s != FP_OK) {
         if (inst->table.data != NULL) inst->release(inst->table.data);
         inst->table.data = NULL;
-        glue_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi2Instantiate: %s: table %.300s: %s",
-                  inst->info->model_name, path, why);
-        return fmi2Error;
+        snprintf(why, why_size, "%s: table %.300s: %s", inst->info->model_name, path, reason);
+        return -1;
     }
     inst->model_logger.table = &inst->table;
-    glue_logf(inst, FP_OK, FP_LOG_EVENTS, "read resources/%s: %lu rows of %lu signals", name,
-              (unsigned long)inst->table.rows, (unsigned long)inst->table.cols);
-    return fmi2OK;
+    return 0;
 }
