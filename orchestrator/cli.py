@@ -189,8 +189,8 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
                           euler0=euler0)
         print(f"wrote {path}")
         return 0
-    from orchestrator.export.ssp_scenario import export_scenario_ssp
     from orchestrator.runner import prepare
+    from orchestrator.scenario_ssp import export_scenario_ssp
 
     if args.pos0 is not None or args.euler0_deg is not None:
         raise ValueError("--pos0 and --euler0-deg set a hover pose; a scenario starts at its "

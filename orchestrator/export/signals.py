@@ -1,18 +1,18 @@
 """The ScenarioSignals FMU and its table: a scenario's references and disturbances as an FMU
 that any FMI 2.0 importer plays.
 
-    table = scenario_table(scenario)                   # SignalTable: times and named columns
-    fmu_bytes = signals_fmu_with(table)                # the FMU with the table in resources/
+    table = signal_table(times, references, disturbances)  # SignalTable: times, named columns
+    fmu_bytes = signals_fmu_with(table)                    # the FMU with the table in resources/
 
 The FMU (``fmu_src/signals/``) has one output per controller reference input and plant
 disturbance input, named like it (``pos_ref[1]`` ... ``euler_rate_ref[3]``,
 ``rotor_health[1..8]``, ``f_d``, ``tau_d``, ``a_d``, ``efficiency[1..8]``), and plays the
 table in ``resources/signals.fptable``: at a communication point t each output holds the
 value of the last row at or before t (rows on the master's grid: exactly row k at t_k).  The
-table is the one the orchestrator's master feeds the FMUs: the scenario's signals sampled
-at t_k = k * step by the same functions (``Scenario.references``, ``Scenario.health``,
-``Scenario.disturbances``), so an importer stepping at the scenario's step gives the
-controller and the plant the same inputs, to the bit.
+table of a scenario (``orchestrator.scenario_ssp``) is the one the orchestrator's master
+feeds the FMUs: the scenario's signals sampled at t_k = k * step by the same functions, so an
+importer stepping at the scenario's step gives the controller and the plant the same inputs,
+to the bit.
 
 The file format (binary, little-endian, so that every double reads back exactly in every
 locale) is documented in ``fmu_src/common/fp_table.h``; :func:`encode_table` writes it and
@@ -27,14 +27,10 @@ import zipfile
 from collections.abc import Mapping
 from dataclasses import dataclass
 from pathlib import Path
-from typing import TYPE_CHECKING
 
 import numpy as np
 
 from plant import find_artifact
-
-if TYPE_CHECKING:
-    from orchestrator.scenario.model import Scenario
 
 SIGNALS_FMU = "ScenarioSignals"
 """Model name of the signal-player FMU (``orchestrator/fmus/ScenarioSignals.fmu``)."""
@@ -98,20 +94,15 @@ def _columns(signals: Mapping[str, np.ndarray], groups: tuple[str, ...]
     return out
 
 
-def scenario_table(scenario: Scenario, stop_time: float | None = None) -> SignalTable:
-    """The scenario's references, rotor health and disturbances at t_k = k * step, k = 0 ..
-    round(stop_time / step) (default: its duration), sampled as the master samples them."""
-    stop = scenario.duration if stop_time is None else stop_time
-    n = round(stop / scenario.step)
-    if not (np.isfinite(stop) and stop > 0 and n >= 1):
-        raise ValueError(f"stop time must be at least one step ({scenario.step} s), got {stop}")
-    times = np.arange(n + 1, dtype=float) * scenario.step
-    refs = scenario.references(times)
-    refs["rotor_health"] = scenario.health(times)
-    cols = {**_columns(refs, REFERENCE_GROUPS),
-            **_columns(scenario.disturbances(times), DISTURBANCE_GROUPS)}
-    assert all(len(v) == len(times) for v in cols.values())
-    return SignalTable(tuple(cols), times, np.column_stack(list(cols.values())))
+def signal_table(times: np.ndarray, references: Mapping[str, np.ndarray],
+                 disturbances: Mapping[str, np.ndarray]) -> SignalTable:
+    """The table of the signals a master feeds at ``times``: ``references`` (the controller's
+    inputs of :data:`REFERENCE_GROUPS`) and ``disturbances`` (the plant's of
+    :data:`DISTURBANCE_GROUPS`), each (len(times), n), one column per element."""
+    cols = {**_columns(references, REFERENCE_GROUPS),
+            **_columns(disturbances, DISTURBANCE_GROUPS)}
+    return SignalTable(tuple(cols), np.asarray(times, dtype=float),
+                       np.column_stack(list(cols.values())))
 
 
 def encode_table(table: SignalTable) -> bytes:
@@ -155,5 +146,5 @@ def signals_fmu_with(table: SignalTable, fmu: Path | None = None) -> bytes:
 
 
 __all__ = ["DISTURBANCE_GROUPS", "REFERENCE_GROUPS", "SIGNALS_FMU",
-           "SignalTable", "decode_table", "encode_table", "scenario_table", "signals_fmu",
+           "SignalTable", "decode_table", "encode_table", "signal_table", "signals_fmu",
            "signals_fmu_with"]

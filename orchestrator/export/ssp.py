@@ -135,8 +135,11 @@ def _variables(md: ModelDescription, causality: str) -> list[tuple[str, str]]:
     return [(v.name, v.type) for v in md.modelVariables if v.causality == causality]
 
 
-def _connect(src: str, src_md: ModelDescription, dst: str,
-             dst_md: ModelDescription) -> tuple[list[Connection], list[str]]:
+def connect_by_name(src: str, src_md: ModelDescription, dst: str,
+                    dst_md: ModelDescription) -> tuple[list[Connection], list[str]]:
+    """(connections from ``src``'s outputs to ``dst``'s inputs of the same names, in
+    ``dst``'s order; ``dst``'s inputs no output of ``src`` is named like); a ValueError when
+    two same-named variables differ in type."""
     outputs = dict(_variables(src_md, "output"))
     made: list[Connection] = []
     loose: list[str] = []
@@ -158,8 +161,8 @@ def connection_table(plant_md: ModelDescription,
     in the order of the receiving FMU's modelDescription.  Inputs without a same-named output
     on the other side are logged (INFO); :func:`unconnected_inputs` returns them.
     """
-    to_ctrl, loose_c = _connect(PLANT, plant_md, CONTROLLER, controller_md)
-    to_plant, loose_p = _connect(CONTROLLER, controller_md, PLANT, plant_md)
+    to_ctrl, loose_c = connect_by_name(PLANT, plant_md, CONTROLLER, controller_md)
+    to_plant, loose_p = connect_by_name(CONTROLLER, controller_md, PLANT, plant_md)
     if loose_c:
         log.info("unconnected %s inputs: %s", CONTROLLER, ", ".join(loose_c))
     if loose_p:
@@ -171,8 +174,8 @@ def unconnected_inputs(plant_md: ModelDescription,
                        controller_md: ModelDescription) -> dict[str, list[str]]:
     """Inputs of each component that :func:`connection_table` leaves unconnected."""
     return {
-        PLANT: _connect(CONTROLLER, controller_md, PLANT, plant_md)[1],
-        CONTROLLER: _connect(PLANT, plant_md, CONTROLLER, controller_md)[1],
+        PLANT: connect_by_name(CONTROLLER, controller_md, PLANT, plant_md)[1],
+        CONTROLLER: connect_by_name(PLANT, plant_md, CONTROLLER, controller_md)[1],
     }
 
 

@@ -150,3 +150,66 @@ def test_the_python_api_plays_it_at_the_archives_step(oms, archive, ours, tmp_pa
     assert pos[-1, 0] == pytest.approx(SECONDS)
     assert np.abs(pos[:, 1:] - POS0).max() < 1e-9
     assert agree(pos, ours) < 1e-9
+
+
+# -- the first paper scenario, exported with its signals (export-ssp --scenario) --------------
+
+S1_SECONDS = 10.0
+
+
+@pytest.fixture(scope="module")
+def s1_archive(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    from dataclasses import replace
+
+    from orchestrator.scenario.catalogue import load_scenario
+    from orchestrator.scenario_ssp import export_scenario_ssp
+
+    sc = replace(load_scenario("hover_varying_orientation"), duration=S1_SECONDS)
+    return export_scenario_ssp(tmp_path_factory.mktemp("oms_s1") / "s1.ssp", sc)
+
+
+@pytest.fixture(scope="module")
+def s1_ours() -> np.ndarray:
+    """`fullpose run hover_varying_orientation` for 10 s with coupling = "jacobi"."""
+    from dataclasses import replace
+
+    from orchestrator.scenario.catalogue import load_scenario
+
+    sc = replace(load_scenario("hover_varying_orientation"), duration=S1_SECONDS,
+                 coupling="jacobi")
+    r = run(sc, progress=False)
+    return np.column_stack([r.time, r.get("plant.pos")])
+
+
+def test_the_command_line_replays_paper_scenario_1(oms, s1_archive, s1_ours, tmp_path):
+    """Three components (ScenarioSignals, plant, controller) from the archive as written: the
+    stop time and the 2 ms step are the archive's."""
+    out = tmp_path / "s1.csv"
+    res = subprocess.run([str(oms / "bin" / "OMSimulator"), f"--resultFile={out}",
+                          f"--stopTime={S1_SECONDS}", "--suppressPath=true", str(s1_archive)],
+                         capture_output=True, text=True, cwd=tmp_path, timeout=600,
+                         check=False)
+    assert res.returncode == 0 and "0 errors" in res.stdout, res.stdout[-2000:]
+    pos = read_positions(out)
+    assert pos[-1, 0] == pytest.approx(S1_SECONDS) and len(pos) == round(S1_SECONDS / 0.002) + 1
+    diff = agree(pos, s1_ours)
+    print(f"\nOMSimulator CLI, paper scenario 1, {S1_SECONDS:g} s: {diff:.3g} m")
+    assert diff < 1e-9
+
+
+def test_the_python_api_replays_paper_scenario_1(oms, s1_archive, s1_ours, tmp_path):
+    out = tmp_path / "s1py.csv"
+    run_python(f"""
+        from OMSimulator import SSP
+        from orchestrator.export.ssp import experiment
+        model = SSP({str(s1_archive)!r}, temp_dir={str(tmp_path / 'tmp')!r}).instantiate()
+        model.setFixedStepSize(experiment({str(s1_archive)!r})[2])
+        model.setResultFile({str(out)!r})
+        model.initialize()
+        model.simulate()
+        model.terminate()
+        model.delete()
+    """, oms, tmp_path)
+    pos = read_positions(out)
+    assert pos[-1, 0] == pytest.approx(S1_SECONDS)
+    assert agree(pos, s1_ours) < 1e-9

@@ -29,13 +29,12 @@ from orchestrator.export.signals import (
     SignalTable,
     decode_table,
     encode_table,
-    scenario_table,
     signals_fmu_with,
 )
 from orchestrator.export.ssp import experiment, fmpy_options
-from orchestrator.export.ssp_scenario import export_scenario_ssp
 from orchestrator.master import run
 from orchestrator.scenario.catalogue import load_scenario
+from orchestrator.scenario_ssp import export_scenario_ssp
 from orchestrator.sim.fmu import FmuError, FmuInstance
 from plant import load_airframe
 
