@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from orchestrator.export.ssp import add_entry
 from plant import find_artifact
 
 SIGNALS_FMU = "ScenarioSignals"
@@ -44,7 +45,6 @@ REFERENCE_GROUPS = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_re
 """The controller inputs the FMU feeds, in the order of its outputs."""
 DISTURBANCE_GROUPS = ("f_d", "tau_d", "a_d", "efficiency")
 """The plant inputs the FMU feeds."""
-_ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 
 
 def signals_fmu() -> Path:
@@ -125,14 +125,6 @@ def decode_table(data: bytes) -> SignalTable:
     return SignalTable(names, body[:, 0].astype(float), body[:, 1:].astype(float))
 
 
-def _add(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> None:
-    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE)
-    info.compress_type = compress
-    info.create_system = 3  # unix, whatever the host
-    info.external_attr = 0o644 << 16
-    zf.writestr(info, data)
-
-
 def signals_fmu_with(table: SignalTable, fmu: Path | None = None) -> bytes:
     """The ScenarioSignals FMU (``fmu``, default the installed one) with ``table`` as its
     ``resources/signals.fptable``: every other entry byte for byte, in its order."""
@@ -140,8 +132,8 @@ def signals_fmu_with(table: SignalTable, fmu: Path | None = None) -> bytes:
     with zipfile.ZipFile(fmu or signals_fmu()) as src, zipfile.ZipFile(buf, "w") as dst:
         for info in src.infolist():
             if not info.is_dir() and info.filename != TABLE_RESOURCE:
-                _add(dst, info.filename, src.read(info), zipfile.ZIP_DEFLATED)
-        _add(dst, TABLE_RESOURCE, encode_table(table), zipfile.ZIP_DEFLATED)
+                add_entry(dst, info.filename, src.read(info), zipfile.ZIP_DEFLATED)
+        add_entry(dst, TABLE_RESOURCE, encode_table(table), zipfile.ZIP_DEFLATED)
     return buf.getvalue()
 
 

@@ -348,7 +348,9 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
 # -- archive -----------------------------------------------------------------------------------
 
 
-def _add(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> None:
+def add_entry(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> None:
+    """Add ``data`` as ``name`` with fixed metadata (1980-01-01, unix, 0644), so the same
+    inputs give the same archive bytes."""
     info = zipfile.ZipInfo(name, date_time=_ZIP_DATE)
     info.compress_type = compress
     info.create_system = 3  # unix, whatever the host
@@ -401,10 +403,10 @@ def write_archive(path: Path, name: str, fmus: Mapping[str, bytes],
     ssd = ssd_document(name, mds, connections, ssv_files, step, stop_time)
     buf = io.BytesIO()
     with zipfile.ZipFile(buf, "w") as zf:
-        _add(zf, SSD_NAME, ssd, zipfile.ZIP_DEFLATED)
+        add_entry(zf, SSD_NAME, ssd, zipfile.ZIP_DEFLATED)
         for entry in sorted(entries):
             data, compress = entries[entry]
-            _add(zf, entry, data, compress)
+            add_entry(zf, entry, data, compress)
     path.parent.mkdir(parents=True, exist_ok=True)
     part = path.with_name(path.name + ".part")
     part.write_bytes(buf.getvalue())
