@@ -186,7 +186,7 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
         path = export_ssp(args.output, airframe=args.airframe or "paper_hexacopter",
                           pos0=tuple(args.pos0 or (0.0, 0.0, -3.0)),
                           stop_time=10.0 if args.stop_time is None else args.stop_time,
-                          euler0=euler0)
+                          euler0=euler0, fmus=args.fmus)
         print(f"wrote {path}")
         return 0
     from orchestrator.runner import prepare
@@ -200,7 +200,7 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
     duration = args.duration if args.duration is not None else args.stop_time
     sc = prepare(args.scenario, duration, args.set, airframe=args.airframe, gains=args.gains)
     _warn(sc.warnings)
-    path = export_scenario_ssp(args.output, sc)
+    path = export_scenario_ssp(args.output, sc, fmus=args.fmus)
     print(f"wrote {path}: {sc.name} ({sc.duration:g} s at {sc.step * 1e3:g} ms, airframe "
           f"{sc.airframe.name}) as ScenarioSignals, MultirotorPlant and FullPoseController; "
           "a fixed-step replay matches `fullpose run` with coupling = \"jacobi\"")
@@ -262,9 +262,11 @@ def _cmd_force_set(args: argparse.Namespace) -> int:
 
 def _cmd_fmus(args: argparse.Namespace) -> int:
     from controller import CONTROLLER_FMU, controller_fmu
+    from orchestrator.export.signals import SIGNALS_FMU, signals_fmu
     from plant import PLANT_FMU, plant_fmu
 
-    for name, path in ((PLANT_FMU, plant_fmu), (CONTROLLER_FMU, controller_fmu)):
+    for name, path in ((PLANT_FMU, plant_fmu), (CONTROLLER_FMU, controller_fmu),
+                       (SIGNALS_FMU, signals_fmu)):
         print(f"{name:20s} {path()}")
     return 0
 
@@ -455,6 +457,10 @@ def build_parser() -> argparse.ArgumentParser:
                      metavar=("ROLL", "PITCH", "YAW"),
                      help="hover attitude (deg), held by the controller: the same pose is "
                           "written to both FMUs")
+    ssp.add_argument("--fmus", type=Path, default=None, metavar="DIR",
+                     help="take the FMUs from this folder (e.g. what `fullpose build-fmus "
+                          "--out DIR` wrote: binaries for every platform) instead of the "
+                          "installed ones")
     ssp.add_argument("--stop-time", type=float, default=None,
                      help="stop time recorded in the archive (s; default 10, or the "
                           "scenario's duration)")
@@ -525,12 +531,13 @@ def build_parser() -> argparse.ArgumentParser:
     fmus = sub.add_parser("fmus", help="print where the installed FMUs are")
     fmus.set_defaults(func=_cmd_fmus)
 
-    bf = sub.add_parser("build-fmus", help="build both FMUs with binaries for several platforms "
+    bf = sub.add_parser("build-fmus", help="build the FMUs with binaries for several platforms "
                                            "from their sources (Zig cross compiler)")
     bf.add_argument("--platforms", default="all",
                     help="all, host, or a comma list of x86_64-linux, aarch64-linux, "
                          "x86_64-windows, x86_64-darwin, aarch64-darwin (default: all)")
-    bf.add_argument("--out", type=Path, required=True, help="folder for the two .fmu files")
+    bf.add_argument("--out", type=Path, required=True,
+                    help="folder for the .fmu files (plant, controller, ScenarioSignals)")
     bf.set_defaults(func=_cmd_build_fmus)
     for command in entry_points(group=COMMANDS_GROUP):
         command.load()(sub)

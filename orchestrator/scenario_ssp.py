@@ -39,11 +39,13 @@ def scenario_table(scenario: Scenario, stop_time: float | None = None) -> Signal
     return signal_table(times, refs, scenario.disturbances(times))
 
 
-def export_scenario_ssp(path: Path, scenario: Scenario,
-                        stop_time: float | None = None) -> Path:
+def export_scenario_ssp(path: Path, scenario: Scenario, stop_time: float | None = None,
+                        fmus: Path | None = None) -> Path:
     """Write ``scenario`` (until ``stop_time``, default its duration) as an SSP 1.0 archive
-    whose fixed-step replay is ``fullpose run`` under Jacobi coupling; returns its path."""
+    whose fixed-step replay is ``fullpose run`` under Jacobi coupling; returns its path.
+    ``fmus``: a folder to take the FMUs from (e.g. ``fullpose build-fmus --out``: binaries
+    for every platform), else the installed ones."""
     table = scenario_table(scenario, stop_time)
     start = CoSimulation(scenario).start_values()  # (the same for either coupling)
     return export_signals_ssp(path, f"fullpose_{scenario.name}", table, start.plant,
-                              start.controller, scenario.step, scenario.name)
+                              start.controller, scenario.step, scenario.name, fmus)

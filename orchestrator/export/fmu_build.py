@@ -1,4 +1,5 @@
-"""``fullpose build-fmus``: the two FMUs with binaries for several platforms, compiled by Zig
+"""``fullpose build-fmus``: the FMUs with binaries for several platforms (plant, controller and
+the SSP export's ScenarioSignals), compiled by Zig
 from each FMU's own ``sources/`` (so every cross build also proves the sources complete).
 
 Each archive written holds the installed FMU's ``modelDescription.xml`` and ``sources/``
@@ -39,11 +40,13 @@ class BuildReport:
 
 
 def installed_fmus() -> list[Path]:
-    """The installed plant and controller FMUs, the sources of every build."""
+    """The installed plant and controller FMUs and the scenario player of the SSP export
+    (``orchestrator.export.signals``), the sources of every build."""
     from controller import controller_fmu
+    from orchestrator.export.signals import signals_fmu
     from plant import plant_fmu
 
-    return [plant_fmu(), controller_fmu()]
+    return [plant_fmu(), controller_fmu(), signals_fmu()]
 
 
 def _unpack(fmu: Path, into: Path) -> tuple[str, Path]:

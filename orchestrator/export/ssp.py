@@ -360,25 +360,45 @@ def add_entry(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> Non
 
 def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
                pos0: Sequence[float] = (0.0, 0.0, -3.0), step: float = 0.002,
-               stop_time: float = 10.0, euler0: Sequence[float] = (0.0, 0.0, 0.0)) -> Path:
+               stop_time: float = 10.0, euler0: Sequence[float] = (0.0, 0.0, 0.0),
+               fmus: Path | None = None) -> Path:
     """Write the closed loop hovering at ``pos0``, ``euler0`` as an SSP 1.0 archive.
 
     Returns its path; ``path`` gets the ``.ssp`` suffix if it has another one.  ``step`` and
     ``stop_time`` are recorded in the SSD's DefaultExperiment (libcosim applies both; for
-    fmpy's runner pass :func:`fmpy_options`).  The output is deterministic: the same inputs
-    (and installed FMUs) give identical bytes.
+    fmpy's runner pass :func:`fmpy_options`).  ``fmus``: a folder to take the FMUs from
+    (:func:`fmu_file`), e.g. with binaries for every platform.  The output is deterministic:
+    the same inputs (and FMUs) give identical bytes.
     """
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"step must be positive, got {step}")
     if not (math.isfinite(stop_time) and stop_time > 0):
         raise ValueError(f"stop_time must be positive, got {stop_time}")
-    fmus = {PLANT: Path(plant_fmu()).read_bytes(), CONTROLLER: Path(controller_fmu()).read_bytes()}
-    mds = {comp: read_model_description(io.BytesIO(data)) for comp, data in fmus.items()}
+    data = {PLANT: fmu_file(PLANT, fmus).read_bytes(),
+            CONTROLLER: fmu_file(CONTROLLER, fmus).read_bytes()}
+    mds = {comp: read_model_description(io.BytesIO(b)) for comp, b in data.items()}
     connections = connection_table(mds[PLANT], mds[CONTROLLER])
     values = component_parameters(airframe, pos0, connections, euler0)
     af_name = load_airframe(airframe).name
-    return write_archive(path, f"fullpose_{af_name}_hover", fmus, mds, connections, values,
+    return write_archive(path, f"fullpose_{af_name}_hover", data, mds, connections, values,
                          step, stop_time, af_name)
+
+
+def fmu_file(model: str, folder: Path | None = None) -> Path:
+    """The FMU ``model`` (``MultirotorPlant``, ``FullPoseController``, ``ScenarioSignals``)
+    from ``folder`` (e.g. ``fullpose build-fmus --out`` with binaries for every platform),
+    else the installed one; a missing file is a FileNotFoundError naming it."""
+    if folder is None:
+        from orchestrator.export.signals import SIGNALS_FMU, signals_fmu
+
+        found = {PLANT: plant_fmu, CONTROLLER: controller_fmu, SIGNALS_FMU: signals_fmu}
+        return Path(found[model]())
+    path = Path(folder) / f"{model}.fmu"
+    if not path.is_file():
+        raise FileNotFoundError(f"{path}: no such FMU (--fmus {folder} must hold "
+                                f"{PLANT}.fmu, {CONTROLLER}.fmu and, for a scenario, "
+                                "ScenarioSignals.fmu, as `fullpose build-fmus --out` writes)")
+    return path
 
 
 def write_archive(path: Path, name: str, fmus: Mapping[str, bytes],

@@ -29,7 +29,6 @@ from pathlib import Path
 from fmpy import read_model_description
 from fmpy.model_description import ModelDescription
 
-from controller import controller_fmu
 from orchestrator.export.signals import SIGNALS_FMU, SignalTable, signals_fmu_with
 from orchestrator.export.ssp import (
     CONTROLLER,
@@ -39,9 +38,9 @@ from orchestrator.export.ssp import (
     connect_by_name,
     connection_table,
     consistent_start,
+    fmu_file,
     write_archive,
 )
-from plant import plant_fmu
 
 SIGNALS = SIGNALS_FMU
 
@@ -64,12 +63,14 @@ def signal_connections(mds: Mapping[str, ModelDescription]) -> list[Connection]:
 def export_signals_ssp(path: Path, name: str, table: SignalTable,
                        plant_values: Mapping[str, Value],
                        controller_values: Mapping[str, Value], step: float,
-                       label: str | None = None) -> Path:
+                       label: str | None = None, fmus: Path | None = None) -> Path:
     """Write the loop fed by ``table`` (rows on the grid t_k = k * ``step``) as an SSP 1.0
-    archive whose stop time is the table's last row; returns its path."""
-    fmus = {SIGNALS: signals_fmu_with(table), PLANT: Path(plant_fmu()).read_bytes(),
-            CONTROLLER: Path(controller_fmu()).read_bytes()}
-    mds = {comp: read_model_description(io.BytesIO(data)) for comp, data in fmus.items()}
+    archive whose stop time is the table's last row; returns its path.  ``fmus``: a folder to
+    take the three FMUs from (``orchestrator.export.ssp.fmu_file``), else the installed ones."""
+    data = {SIGNALS: signals_fmu_with(table, fmu_file(SIGNALS, fmus)),
+            PLANT: fmu_file(PLANT, fmus).read_bytes(),
+            CONTROLLER: fmu_file(CONTROLLER, fmus).read_bytes()}
+    mds = {comp: read_model_description(io.BytesIO(b)) for comp, b in data.items()}
     connections = signal_connections(mds)
     at0 = {n: float(table.values[0, i]) for i, n in enumerate(table.names)}
     plant, ctrl = dict(plant_values), dict(controller_values)
@@ -77,5 +78,5 @@ def export_signals_ssp(path: Path, name: str, table: SignalTable,
         if fc == SIGNALS:
             (ctrl if tc == CONTROLLER else plant)[tv] = at0[fv]
     values = consistent_start(plant, ctrl, connections)
-    return write_archive(path, name, fmus, mds, connections, values, step,
+    return write_archive(path, name, data, mds, connections, values, step,
                          float(table.times[-1]), label or name)

@@ -110,7 +110,8 @@ def test_host_build_prints_times_and_sizes_and_is_byte_for_byte_reproducible(tmp
                    for line in text.splitlines())
         assert f"wrote {tmp_path / run / 'FullPoseController.fmu'} (" in text
         archives.append({p.name: p.read_bytes() for p in (tmp_path / run).iterdir()})
-    assert sorted(archives[0]) == ["FullPoseController.fmu", "MultirotorPlant.fmu"]
+    assert sorted(archives[0]) == ["FullPoseController.fmu", "MultirotorPlant.fmu",
+                                   "ScenarioSignals.fmu"]
     assert archives[0] == archives[1]
     with zipfile.ZipFile(tmp_path / "a" / "MultirotorPlant.fmu") as z:
         names = z.namelist()

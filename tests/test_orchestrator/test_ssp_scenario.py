@@ -365,3 +365,36 @@ def test_the_player_from_the_archive_plays_in_the_fmi_tools(s1_archive, tmp_path
     assert t[-1] == pytest.approx(2.0) and len(t) > 500  # (the checker records 500 points)
     # the CSV prints 15-16 significant digits (the checker fewer): within its rounding
     assert np.abs(roll - 0.7 * np.sin(0.2 * t)).max() < 1e-9
+
+
+# -- an archive for every platform: export-ssp --fmus DIR (fullpose build-fmus --out DIR) -----
+
+
+def test_fmus_from_a_folder_that_lacks_one_is_refused(tmp_path):
+    (tmp_path / "dist").mkdir()
+    out = tmp_path / "x.ssp"
+    res = cli("export-ssp", str(out), "--scenario", "hover", "--fmus", str(tmp_path / "dist"))
+    assert res.returncode == 2 and "ScenarioSignals.fmu: no such FMU" in res.stderr
+    assert "Traceback" not in res.stderr and not out.exists()
+
+
+@pytest.mark.platforms
+def test_a_scenario_archive_for_every_platform_replays(dist, tmp_path):
+    """The FMUs of `fullpose build-fmus --platforms all` (ScenarioSignals among them) in a
+    scenario archive: every component carries every platform's binary, and libcosim replays
+    the archive with the cross-built linux64 binaries as the installed ones."""
+    sc = replace(load_scenario("rotor_failure_hover"), duration=3.0,
+                 airframe=load_airframe("y6"))
+    out = tmp_path / "all.ssp"
+    res = cli("export-ssp", str(out), "--scenario", "rotor_failure_hover", "--airframe", "y6",
+              "--duration", "3", "--fmus", str(dist))
+    assert res.returncode == 0, res.stderr
+    with zipfile.ZipFile(out) as ssp:
+        for comp in (SIGNALS, PLANT, "FullPoseController"):
+            with zipfile.ZipFile(io.BytesIO(ssp.read(f"resources/{comp}.fmu"))) as fmu:
+                folders = {n.split("/")[1] for n in fmu.namelist()
+                           if n.startswith("binaries/") and n.count("/") == 2}
+            assert {"linux64", "aarch64-linux", "win64", "darwin64"} <= folders, (comp, folders)
+    _, rows = libcosim_replay(out, 3.0)
+    dpos, datt = difference(rows, ours(sc))
+    assert dpos < 1e-9 and datt < 1e-9
