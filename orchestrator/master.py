@@ -161,19 +161,20 @@ def lost_in(engine: Engine, first: int, last: int, criteria: LostCriteria) -> Lo
     return replace(found, row=found.row + first)
 
 
-_Found = tuple[FmuInstance, tuple[int, bool], Connections]  # (controller, (rotors, truth), ...)
+_Found = tuple[FmuInstance, tuple[int, bool, int], Connections]  # (controller, counts, ...)
 _CONNECTIONS: weakref.WeakKeyDictionary[FmuInstance, _Found] = weakref.WeakKeyDictionary()
 
 
 def connections(plant: FmuInstance, ctrl: FmuInstance, n_rotors: int,
-                truth: bool = False) -> Connections:
-    """``Connections.closed_loop``, found once per pair of instances, rotor count and
-    ``truth`` (a reused pair, as in sweep workers, finds them at its first run only)."""
+                truth: bool = False, n_contacts: int = 0) -> Connections:
+    """``Connections.closed_loop``, found once per pair of instances, rotor count, ``truth``
+    and contact-point count (a reused pair, as in sweep workers, finds them at its first run
+    only)."""
     found = _CONNECTIONS.get(plant)
-    if found is not None and found[0] is ctrl and found[1] == (n_rotors, truth):
+    if found is not None and found[0] is ctrl and found[1] == (n_rotors, truth, n_contacts):
         return found[2]
-    conn = Connections.closed_loop(plant, ctrl, n_rotors, truth)
-    _CONNECTIONS[plant] = (ctrl, (n_rotors, truth), conn)
+    conn = Connections.closed_loop(plant, ctrl, n_rotors, truth, n_contacts)
+    _CONNECTIONS[plant] = (ctrl, (n_rotors, truth, n_contacts), conn)
     return conn
 
 
@@ -258,7 +259,8 @@ class CoSimulation:
         refs0 = sc.references(np.zeros(1))
         refs0["rotor_health"] = sc.health(np.zeros(1))
         start = self.start_values(refs0)
-        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors, sensors_differ(sc))
+        conn = connections(plant_inst, ctrl_inst, sc.airframe.n_rotors, sensors_differ(sc),
+                           int(start.plant.get("n_contacts", 0)))
         planned, columns = planned_rows or rows, sum(conn.widths())
         file = (self.spill if self.spill is not None
                 and planned * 8 * columns > self.spill_above else None)

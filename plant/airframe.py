@@ -22,6 +22,7 @@ import numpy as np
 
 from plant.common.toml_reader import FieldError, TomlTable, read_toml, resolve_file, shipped_names
 from plant.effectiveness import RotorSet
+from plant.landing_gear import NO_GEAR, LandingGear, parse_landing_gear
 from plant.native import multirotor
 
 if sys.version_info >= (3, 11):
@@ -72,6 +73,7 @@ class Airframe:
     gamma: np.ndarray  # (n,)
     alpha_limits: np.ndarray  # (n, 2); equal columns = fixed tilt
     beta_limits: np.ndarray  # (n, 2)
+    gear: LandingGear | None = None  # the landing gear (None: no ground contact)
 
     @property
     def n_rotors(self) -> int:
@@ -155,6 +157,11 @@ class Airframe:
                 p[row.element(k)] = int(v) if row.integer else float(v)
         return p
 
+    def plant_parameters(self) -> dict[str, float | int]:
+        """Start values of the plant FMU's own airframe numbers (beyond the shared table):
+        the landing gear's contact parameters (:mod:`plant.landing_gear`)."""
+        return dict(NO_GEAR) if self.gear is None else self.gear.plant_parameters()
+
     def record(self) -> dict[str, Any]:
         """Every number of the airframe as JSON-ready data (``repr``-exact floats), what a
         results folder stores so that its figures and 3-D view never reload the file."""
@@ -165,7 +172,8 @@ class Airframe:
                 "tau_servo": self.tau_servo, "tilting": self.tilting,
                 "positions": self.positions.tolist(), "spins": self.spins.tolist(),
                 "gamma": self.gamma.tolist(), "alpha_limits": self.alpha_limits.tolist(),
-                "beta_limits": self.beta_limits.tolist()}
+                "beta_limits": self.beta_limits.tolist(),
+                **({} if self.gear is None else {"landing_gear": self.gear.record()})}
 
     def digest(self) -> str:
         """SHA-256 of :meth:`record`'s numbers (name and source excluded)."""
@@ -196,7 +204,9 @@ class Airframe:
                 tau_motor=float(doc["tau_motor"]), tau_servo=float(doc["tau_servo"]),
                 tilting=bool(doc["tilting"]), positions=values["positions"],
                 spins=values["spins"], gamma=values["gamma"],
-                alpha_limits=values["alpha_limits"], beta_limits=values["beta_limits"])
+                alpha_limits=values["alpha_limits"], beta_limits=values["beta_limits"],
+                gear=(LandingGear.from_record(doc["landing_gear"]) if "landing_gear" in doc
+                      else None))
         except (KeyError, TypeError, ValueError) as e:
             raise AirframeError("<airframe record>", "", f"not an airframe record: {e}") from None
 
@@ -482,6 +492,11 @@ def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe
             fixed_alpha.append(math.radians(r.number("alpha_deg", 0.0)))
             fixed_beta.append(math.radians(r.number("beta_deg", 0.0)))
             r.reject_unknown()
+    gear_table = top.table("landing_gear", required=False)
+    gear = None
+    if gear_table is not None:
+        gear = parse_landing_gear(gear_table)
+        gear_table.reject_unknown()
     top.reject_unknown()
 
     n = len(positions)
@@ -518,4 +533,5 @@ def parse_airframe(data: dict[str, Any], source: str = "<airframe>") -> Airframe
         gamma=np.array(gammas, dtype=float),
         alpha_limits=np.asarray(alpha_limits, dtype=float),
         beta_limits=np.asarray(beta_limits, dtype=float),
+        gear=gear,
     )

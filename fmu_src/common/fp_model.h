@@ -50,6 +50,8 @@ typedef enum {
     T(ROTOR_SPEED, "RotorSpeed", "AngularVelocity", "rad/s", 1e2)                           \
     T(FORCE, "Force", "Force", "N", 0.0)                                                    \
     T(TORQUE, "Torque", "Torque", "N.m", 0.0)                                               \
+    T(STIFFNESS, "TranslationalSpringConstant", "TranslationalSpringConstant", "N/m", 1e3)  \
+    T(DAMPING, "TranslationalDampingConstant", "TranslationalDampingConstant", "N.s/m", 0.0) \
     T(THRUST_COEFFICIENT, "ThrustCoefficient", "ThrustCoefficient", "N.s2/rad2", 1e-4)      \
     T(DRAG_COEFFICIENT, "DragTorqueCoefficient", "DragTorqueCoefficient", "N.m.s2/rad2",    \
       1e-6)                                                                                 \

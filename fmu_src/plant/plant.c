@@ -72,6 +72,10 @@ void plant_set_defaults(void *model) {
     m->h_internal = 5e-4;
     m->init_trim = 1;
     m->noise_seed = 1;
+    /* no landing gear (n_contacts 0): the airframe file gives it (docs/plant.md) */
+    m->contact_stiffness = 1e4;
+    m->contact_damping = 100.0;
+    m->contact_friction = 0.5;
     /* Inputs start at hover trim so the FMU hovers when simulated alone. */
     hover_wrench(m, zero, w);
     if (fp_preferred_config(&rs, w, m->alpha_cmd, m->beta_cmd, m->omega_cmd, NULL, 0) != FP_OK) {
@@ -125,17 +129,71 @@ typedef struct {
 } Commands;
 
 /* dx = f(x); also returns the rotor wrench and accelerations when asked. */
+/* The ground contact's parameters as contact.c takes them. */
+static ContactParams contact_params(const PlantModel *m) {
+    ContactParams p;
+    p.n = m->n_contacts;
+    p.pos = &m->contact_pos[0][0];
+    p.ground_z = m->ground_z;
+    p.stiffness = m->contact_stiffness;
+    p.damping = m->contact_damping;
+    p.friction = m->contact_friction;
+    p.mass = m->af.mass;
+    p.inertia_inv = &m->inertia_inv[0][0];
+    p.anchor = &m->contact_anchor[0][0];
+    p.anchored = m->contact_anchored;
+    return p;
+}
+
+/* A start with a contact point deeper under the ground than one point's spring carries the
+ * whole weight at (m g / k) is no pose to start from: the ground would throw the vehicle. */
+static int check_start_above_ground(const PlantModel *m, const FpLogger *logger) {
+    ContactParams cp = contact_params(m);
+    double r[3][3], depth, limit = m->af.mass * fabs(m->af.g) / m->contact_stiffness;
+    int i;
+    rot_from_quat(m->x + X_QUAT, r);
+    i = contact_deepest(&cp, m->x + X_POS, &r[0][0], &depth);
+    if (i < 0 || depth <= limit) return 0;
+    fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+           "parameter pos0 = [%g, %g, %g] m: contact point %d of the landing gear starts %.4g m "
+           "below the ground (ground_z = %g m), deeper than the %.4g m at which it alone would "
+           "carry the weight; start higher (pos0[3] <= %.4g m puts the gear on the ground) or "
+           "set ground_z",
+           m->pos0[0], m->pos0[1], m->pos0[2], i + 1, depth, m->ground_z, limit,
+           m->pos0[2] - depth);
+    return 1;
+}
+
+/* After an internal step: the contact points' anchors at the new state (contact.h). */
+static void update_anchors(PlantModel *m) {
+    ContactParams cp = contact_params(m);
+    double r[3][3];
+    rot_from_quat(m->x + X_QUAT, r);
+    m->contact_anchored =
+        contact_update_anchors(&cp, m->x + X_POS, &r[0][0], &m->contact_anchor[0][0]);
+}
+
+/* dx = f(x, u); the rotor wrench (body) into f_b, tau_b and the contact into contact when
+ * not NULL. */
 static void derivative(const PlantModel *m, const Commands *u, const double *x, double *dx,
-                       double f_b[3], double tau_b[3]) {
+                       double f_b[3], double tau_b[3], ContactWrench *contact) {
     const double *q = x + X_QUAT, *w = x + X_RATE;
     double r[3][3], fw[3], iw[3], gyro[3], tau[3], fb[3], tb[3];
     int i, n = m->af.n_rotors;
+    ContactWrench cw;
     fp_rotor_wrench(&m->rotors, x + X_ALPHA, x + X_BETA, x + X_OMEGA, m->efficiency, fb, tb);
     rot_from_quat(q, r);
     m3_mul_v(&r[0][0], fb, fw);
     for (i = 0; i < 3; i++) {
         dx[X_POS + i] = x[X_VEL + i];
         dx[X_VEL + i] = (fw[i] + m->f_d[i]) / m->af.mass + m->a_d[i];
+    }
+    if (m->n_contacts > 0) { /* (without a ground every sum stays as it was, to the bit) */
+        ContactParams cp = contact_params(m);
+        contact_wrench(&cp, x + X_POS, x + X_VEL, &r[0][0], w, &cw);
+        for (i = 0; i < 3; i++) dx[X_VEL + i] += cw.force_w[i] / m->af.mass;
+    } else {
+        memset(&cw, 0, sizeof cw);
     }
     dx[X_VEL + 2] += m->af.g;
     dx[X_QUAT + 0] = -0.5 * (q[1] * w[0] + q[2] * w[1] + q[3] * w[2]);
@@ -145,6 +203,8 @@ static void derivative(const PlantModel *m, const Commands *u, const double *x, 
     m3_mul_v(&m->af.inertia[0][0], w, iw);
     v3_cross(w, iw, gyro);
     for (i = 0; i < 3; i++) tau[i] = tb[i] + m->tau_d[i] - gyro[i];
+    if (m->n_contacts > 0)
+        for (i = 0; i < 3; i++) tau[i] += cw.torque_b[i];
     m3_mul_v(&m->inertia_inv[0][0], tau, dx + X_RATE);
     for (i = 0; i < FP_MAX_ROTORS; i++) {
         if (i < n) {
@@ -160,18 +220,19 @@ static void derivative(const PlantModel *m, const Commands *u, const double *x, 
             f_b[i] = fb[i];
             tau_b[i] = tb[i];
         }
+    if (contact != NULL) *contact = cw;
 }
 
 static void rk4_step(const PlantModel *m, const Commands *u, double *x, double h) {
     double k1[PLANT_NX], k2[PLANT_NX], k3[PLANT_NX], k4[PLANT_NX], xt[PLANT_NX];
     int i;
-    derivative(m, u, x, k1, NULL, NULL);
+    derivative(m, u, x, k1, NULL, NULL, NULL);
     for (i = 0; i < PLANT_NX; i++) xt[i] = x[i] + 0.5 * h * k1[i];
-    derivative(m, u, xt, k2, NULL, NULL);
+    derivative(m, u, xt, k2, NULL, NULL, NULL);
     for (i = 0; i < PLANT_NX; i++) xt[i] = x[i] + 0.5 * h * k2[i];
-    derivative(m, u, xt, k3, NULL, NULL);
+    derivative(m, u, xt, k3, NULL, NULL, NULL);
     for (i = 0; i < PLANT_NX; i++) xt[i] = x[i] + h * k3[i];
-    derivative(m, u, xt, k4, NULL, NULL);
+    derivative(m, u, xt, k4, NULL, NULL, NULL);
     for (i = 0; i < PLANT_NX; i++) x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
     quat_normalize(x + X_QUAT);
 }
@@ -271,7 +332,11 @@ static FpStatus compute_outputs(PlantModel *m, const Commands *u, double t,
     /* (a sample instant on this point up to the round-off of summed steps is this point) */
     int delayed = m->mocap_delay > 0.0 || fabs(s_pose - t) > 1e-9 * m->mocap_period;
     int i;
-    derivative(m, u, m->x, dx, m->f_b, m->tau_b);
+    ContactWrench cw;
+    derivative(m, u, m->x, dx, m->f_b, m->tau_b, &cw);
+    memcpy(m->contact_force, cw.normal, sizeof m->contact_force);
+    m->contact_flags = cw.flags;
+    m->landed = m->n_contacts > 0 && cw.flags == (int32_t)((1u << m->n_contacts) - 1u);
     for (i = 0; i < 3; i++) {
         m->pos_true[i] = m->x[X_POS + i];
         m->vel_true[i] = m->x[X_VEL + i];
@@ -367,6 +432,26 @@ static void check_initial_actuator(FpCheck *c, const char *name, const double *v
     }
 }
 
+/* The contact's fastest mode within RK4's stability at h_internal (contact.h); needs the
+ * inertia's inverse, so it runs with valid airframe numbers only. */
+static int check_contact_rate(const PlantModel *m, const FpLogger *logger) {
+    ContactParams cp = contact_params(m);
+    double inertia[3][3], inertia_inv[3][3], rate;
+    memcpy(inertia, m->af.inertia, sizeof inertia);
+    if (invert3(inertia, inertia_inv) != 0) return 0; /* (reported by initialization) */
+    cp.inertia_inv = &inertia_inv[0][0];
+    rate = contact_fastest_rate(&cp);
+    if (rate * m->h_internal <= PLANT_CONTACT_RATE_STEP) return 0;
+    fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+           "parameters contact_stiffness = %g N/m and contact_damping = %g N.s/m: the stiffest "
+           "contact mode of the %ld points (rate up to %.4g 1/s) is too fast "
+           "for RK4 at h_internal = %g s (rate x h_internal = %.3g, at most %g); lower them or "
+           "h_internal",
+           m->contact_stiffness, m->contact_damping, (long)m->n_contacts, rate, m->h_internal,
+           rate * m->h_internal, PLANT_CONTACT_RATE_STEP);
+    return 1;
+}
+
 static int validate(const PlantModel *m, const FpLogger *logger) {
     FpCheck c;
     int n = m->af.n_rotors;
@@ -394,6 +479,14 @@ static int validate(const PlantModel *m, const FpLogger *logger) {
     fp_need_param(&c, "mocap_period", &m->mocap_period, 1, NULL);
     fp_need_param(&c, "mocap_delay", &m->mocap_delay, 1, NULL);
     fp_need_param(&c, "imu_period", &m->imu_period, 1, NULL);
+    fp_need_int_param(&c, "n_contacts", &m->n_contacts, 1);
+    if (c.errors != 0) return c.errors; /* (contact_pos is read to n_contacts) */
+    fp_need_param(&c, "ground_z", &m->ground_z, 1, NULL);
+    fp_need_param(&c, "contact_stiffness", &m->contact_stiffness, 1, NULL);
+    fp_need_param(&c, "contact_damping", &m->contact_damping, 1, NULL);
+    fp_need_param(&c, "contact_friction", &m->contact_friction, 1, NULL);
+    fp_need_param(&c, "contact_pos", &m->contact_pos[0][0], 3 * m->n_contacts, NULL);
+    if (c.errors == 0 && m->n_contacts > 0 && check_contact_rate(m, logger) != 0) c.errors++;
     if (c.errors == 0 && m->h_internal > 0.2 * fmin(m->af.tau_motor, m->af.tau_servo))
         fp_check_warning(&c,
                          "parameter h_internal = %g s is coarse against the actuator time "
@@ -481,6 +574,12 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     m->t0 = t0;
     m->hist_count = m->hist_head = 0;
     m->mocap_last = m->imu_last = t0 - 1.0; /* every sensor samples at t0 */
+    m->contact_anchored = 0; /* the points touching at t0 stick where they are */
+    memset(m->contact_anchor, 0, sizeof m->contact_anchor);
+    if (m->n_contacts > 0) {
+        if (check_start_above_ground(m, logger) != 0) return FP_ERROR;
+        update_anchors(m);
+    }
     if (compute_outputs(m, &u, t0, logger) != FP_OK) return FP_ERROR;
     fp_log(logger, FP_OK, FP_LOG_MODEL, "initial state: %d rotors, omega_1 = %g rad/s",
            (int)m->af.n_rotors, m->x[X_OMEGA]);
@@ -533,20 +632,26 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
     Commands u;
     double substeps = fp_steps_to_cover(h, m->h_internal, FP_STEP_TOL * h), hi;
     double t_start = m->timing ? fp_clock_seconds() : 0.0;
-    double x_before[PLANT_NX];
-    int32_t flags_before = m->sat_flags;
+    double x_before[PLANT_NX], anchor_before[PLANT_MAX_CONTACTS][2];
+    int32_t flags_before = m->sat_flags, anchored_before = m->contact_anchored;
     long k, n;
     if (fp_check_step_work(h, substeps, FP_MAX_INTERNAL_STEPS, "RK4 steps of h_internal",
                            logger) != FP_OK)
         return FP_ERROR;
     if (check_inputs(m, logger) != 0) return FP_ERROR;
     memcpy(x_before, m->x, sizeof x_before);
+    memcpy(anchor_before, m->contact_anchor, sizeof anchor_before);
     saturate(m, &u, &m->sat_flags);
     n = (long)substeps;
     hi = h / substeps;
-    for (k = 0; k < n; k++) rk4_step(m, &u, m->x, hi);
+    for (k = 0; k < n; k++) {
+        rk4_step(m, &u, m->x, hi);
+        if (m->n_contacts > 0) update_anchors(m);
+    }
     if (state_outside(m->x, t, logger)) {
         memcpy(m->x, x_before, sizeof x_before);
+        memcpy(m->contact_anchor, anchor_before, sizeof anchor_before);
+        m->contact_anchored = anchored_before;
         m->sat_flags = flags_before;
         return FP_ERROR;
     }
@@ -587,6 +692,7 @@ static FpStatus plant_check_restored(const void *model, int initialized,
         return FP_ERROR;
     }
     if (!fp_all_finite(m->x, PLANT_NX) || !fp_all_finite(&m->inertia_inv[0][0], 9) ||
+        !fp_all_finite(&m->contact_anchor[0][0], 2 * PLANT_MAX_CONTACTS) ||
         !fp_all_finite(m->pos, 3) || !fp_all_finite(m->vel, 3) || !fp_all_finite(m->euler, 3) ||
         !fp_all_finite(m->rate, 3)) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: the vehicle state is not finite");

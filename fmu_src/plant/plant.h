@@ -6,6 +6,7 @@
 #include <stdint.h>
 
 #include "fp_model.h"
+#include "contact.h"
 #include "multirotor.h"
 
 #define PLANT_NX (13 + 3 * FP_MAX_ROTORS) /* p, v, q, Omega, omega, alpha, beta */
@@ -22,6 +23,9 @@ typedef struct {
     double noise_pos, noise_vel, noise_acc, noise_att, noise_rate, noise_ang_acc;
     int32_t timing;
     double mocap_period, mocap_delay, imu_period;
+    int32_t n_contacts;
+    double ground_z, contact_stiffness, contact_damping, contact_friction;
+    double contact_pos[PLANT_MAX_CONTACTS][3];
     /* inputs */
     double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
     double efficiency[FP_MAX_ROTORS];
@@ -35,6 +39,8 @@ typedef struct {
     double t_step;
     double pos_true[3], vel_true[3], euler_true[3], quat_true[4], rate_true[3];
     double pose_age;
+    double contact_force[PLANT_MAX_CONTACTS];
+    int32_t contact_flags, landed;
     /* internal state, derived at initialization */
     double x[PLANT_NX];
     double inertia_inv[3][3];
@@ -46,6 +52,9 @@ typedef struct {
     double hist[PLANT_HISTORY][9]; /* pos, vel, euler */
     int32_t hist_head, hist_count;
     double t0, mocap_last, imu_last;
+    /* ground contact: each touching point's anchor (world x, y; plant/contact.h) */
+    double contact_anchor[PLANT_MAX_CONTACTS][2];
+    int32_t contact_anchored;
 } PlantModel;
 
 /* The plant model; its FMU returns it from fp_model_info(). */

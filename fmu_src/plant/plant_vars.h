@@ -53,6 +53,13 @@
     X(mocap_period, 178, REAL, PARAM_FIXED, 1, 1, TIME, FP_IN(0, 1), "Sample period of the pose measurements pos, vel, euler, quat (motion capture, e.g. 1/120 s); held between samples; 0: every communication point") \
     X(mocap_delay, 179, REAL, PARAM_FIXED, 1, 1, TIME, FP_IN(0, 0.5), "Latency of the pose measurements: each sample shows the state this long before it (linear between communication points)") \
     X(imu_period, 180, REAL, PARAM_FIXED, 1, 1, TIME, FP_IN(0, 1), "Sample period of the inertial measurements acc, rate, ang_acc; held between samples; 0: every communication point") \
+    /* parameters: ground contact of the landing gear (plant/contact.h; n_contacts 0: none) */ \
+    X(n_contacts, 181, INTEGER, PARAM_FIXED, 1, 1, NONE, FP_IN(0, 8), "Contact points of the landing gear in use (0..8; 0: no ground)") \
+    X(ground_z, 182, REAL, PARAM_FIXED, 1, 1, LENGTH, FP_ANY, "World z of the flat ground (NED: the ground is below the vehicle at larger z)") \
+    X(contact_stiffness, 183, REAL, PARAM_FIXED, 1, 1, STIFFNESS, FP_POSITIVE, "Contact stiffness k of each point: normal force k d at penetration d") \
+    X(contact_damping, 184, REAL, PARAM_FIXED, 1, 1, DAMPING, FP_NONNEGATIVE, "Contact damping c of each point: normal force adds c times the downward speed (never pulls)") \
+    X(contact_friction, 185, REAL, PARAM_FIXED, 1, 1, DIMENSIONLESS, FP_NONNEGATIVE, "Coulomb friction coefficient mu of each point against the ground") \
+    X(contact_pos, 400, REAL, PARAM_FIXED, 8, 3, LENGTH, FP_ANY, "Contact points of the landing gear in the body frame FRD (row i = point i)") \
     /* inputs */                                                                                   \
     X(omega_cmd, 200, REAL, INPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Commanded rotor speeds (saturated at the limits, see sat_flags)") \
     X(alpha_cmd, 210, REAL, INPUT, 8, 1, ANGLE, FP_ANY, "Commanded servo angles alpha")            \
@@ -82,7 +89,11 @@
     X(euler_true, 386, REAL, OUTPUT, 3, 1, ANGLE, FP_ANY, "True attitude [phi, theta, psi] (euler without sensor noise)") \
     X(quat_true, 389, REAL, OUTPUT, 4, 1, DIMENSIONLESS, FP_ANY, "True attitude quaternion [w, x, y, z] of R_B^W, w >= 0") \
     X(rate_true, 393, REAL, OUTPUT, 3, 1, ANGULAR_VELOCITY, FP_ANY, "True body rates (rate without sensor noise)") \
-    X(pose_age, 396, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Age of pos, vel, euler, quat: the time since the state they show (mocap_delay plus the time since their sample; 0 with ideal sensors)")
+    X(pose_age, 396, REAL, OUTPUT, 1, 1, TIME, FP_ANY, "Age of pos, vel, euler, quat: the time since the state they show (mocap_delay plus the time since their sample; 0 with ideal sensors)") \
+    /* outputs: ground contact */                                                                  \
+    X(contact_force, 430, REAL, OUTPUT, 8, 1, FORCE, FP_ANY, "Normal force of each contact point on the ground (0: not touching)") \
+    X(contact_flags, 438, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Contact points below the ground surface: bit i-1 point i") \
+    X(landed, 439, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "Every contact point in use touches the ground")
 
 /*
  * What each output is a function of at initialization: the dependencies of its entry in the
@@ -111,6 +122,8 @@
     /* the rotor wrench (efficiency) and the accelerations it gives with the disturbances */     \
     D("acc ang_acc f_b tau_b", FP_ALL_PARAMETERS "efficiency f_d tau_d a_d")                     \
     /* no step yet: no saturation, no timing */                                                  \
-    D("sat_flags t_step", "")
+    D("sat_flags t_step", "")                                                                    \
+    /* the landing gear against the ground at the initial pose and velocity */                  \
+    D("contact_force contact_flags landed", FP_ALL_PARAMETERS)
 
 #endif

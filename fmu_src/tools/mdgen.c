@@ -66,6 +66,8 @@ static const Unit units[] = {
     {"rad/s2", 0, 0, -2, 1, {"deg/s2", NULL}, {57.295779513082323, 0}},
     {"N", 1, 1, -2, 0, {NULL, NULL}, {0, 0}},
     {"N.m", 1, 2, -2, 0, {NULL, NULL}, {0, 0}},
+    {"N/m", 1, 0, -2, 0, {NULL, NULL}, {0, 0}},
+    {"N.s/m", 1, 0, -1, 0, {NULL, NULL}, {0, 0}},
     {"N.s2/rad2", 1, 1, 0, -2, {NULL, NULL}, {0, 0}},
     {"N.m.s2/rad2", 1, 2, 0, -2, {NULL, NULL}, {0, 0}},
     {"1/s", 0, 0, -1, 0, {NULL, NULL}, {0, 0}},

@@ -60,6 +60,20 @@ class RunError(RuntimeError):
         self.row = row  # the recording row whose step failed (-1: not known)
 
 
+MAX_CONTACTS = 8
+CONTACT_SIGNALS = frozenset({"contact_force", "contact_flags"})
+"""The plant's landing-gear outputs: a run records the gear's points only, none without one."""
+
+
+def contact_used(name: str, n_contacts: int) -> bool:
+    """False for a landing-gear output beyond the gear's point count (all of them without a
+    gear)."""
+    base, _, index = name.partition("[")
+    if base not in CONTACT_SIGNALS:
+        return True
+    return n_contacts > 0 and (not index or int(index.rstrip("]")) <= n_contacts)
+
+
 def rotor_used(name: str, n_rotors: int) -> bool:
     """False for the element of a per-rotor vector beyond the airframe's rotor count."""
     base, _, index = name.partition("[")
@@ -73,9 +87,11 @@ noise, sampling or latency, recorded only when ``truth`` is asked for
 columns."""
 
 
-def _outputs(inst: FmuInstance, kind: str, n_rotors: int, truth: bool = True) -> list[str]:
+def _outputs(inst: FmuInstance, kind: str, n_rotors: int, truth: bool = True,
+             n_contacts: int = MAX_CONTACTS) -> list[str]:
     return [v.name for v in inst.md.modelVariables
             if v.causality == "output" and v.type == kind and rotor_used(v.name, n_rotors)
+            and contact_used(v.name, n_contacts)
             and (truth or not v.name.split("[")[0].endswith(TRUTH_SUFFIX))]
 
 
@@ -121,11 +137,14 @@ class Connections:
 
     @staticmethod
     def closed_loop(plant: FmuInstance, ctrl: FmuInstance,
-                    n_rotors: int = MAX_ROTORS, truth: bool = False) -> Connections:
+                    n_rotors: int = MAX_ROTORS, truth: bool = False,
+                    n_contacts: int = MAX_CONTACTS) -> Connections:
         """Plant and controller connected by matching names; every input must be fed.
-        ``truth``: record the plant's true-state outputs too (:data:`TRUTH_SUFFIX`)."""
+        ``truth``: record the plant's true-state outputs too (:data:`TRUTH_SUFFIX`);
+        ``n_contacts``: the landing gear's points (:data:`CONTACT_SIGNALS`)."""
         n = n_rotors
-        p_out, c_out = _outputs(plant, "Real", n, truth), _outputs(ctrl, "Real", n)
+        p_out = _outputs(plant, "Real", n, truth, n_contacts)
+        c_out = _outputs(ctrl, "Real", n)
         c_in, p_in = _inputs(ctrl, n), _inputs(plant, n)
         measured = [v for v in c_in if v in set(p_out)]
         commands = [v for v in p_in if v in set(c_out)]
@@ -142,7 +161,7 @@ class Connections:
             measured=tuple(measured), commands=tuple(commands),
             plant_out=tuple(measured + [v for v in p_out if v not in measured]),
             ctrl_out=tuple(commands + [v for v in c_out if v not in commands]),
-            plant_int=tuple(_outputs(plant, "Integer", n)),
+            plant_int=tuple(_outputs(plant, "Integer", n, n_contacts=n_contacts)),
             ctrl_int=tuple(_outputs(ctrl, "Integer", n)),
             ctrl_bool=tuple(_outputs(ctrl, "Boolean", n)))
 

@@ -60,6 +60,7 @@ def plant_start_values(airframe: Airframe, pose: Pose = Pose(), *,
                        overrides: Mapping[str, Value] | None = None) -> dict[str, Value]:
     """The plant's: the airframe, the initial pose, then ``overrides``."""
     params: dict[str, Value] = dict(airframe.fmu_parameters())
+    params.update(airframe.plant_parameters())
     for i in range(3):
         params[f"pos0[{i + 1}]"] = pose.pos[i]
         params[f"euler0[{i + 1}]"] = pose.euler[i]

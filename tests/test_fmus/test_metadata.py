@@ -173,7 +173,8 @@ def _build_mdgen(tmp: Path) -> Path:
     if cc is None:
         pytest.skip("no C compiler to build mdgen")
     exe = tmp / "plant_mdgen"
-    sources = ["tools/mdgen.c", "plant/plant_fmu.c", "plant/plant.c", "common/fp_model.c",
+    sources = ["tools/mdgen.c", "plant/plant_fmu.c", "plant/plant.c", "plant/contact.c",
+               "common/fp_model.c",
                "common/fp_clock.c", "common/fp_params.c", "common/multirotor.c"]
     subprocess.run([cc, "-std=c99", "-O2", "-I", str(SRC / "common"), "-I", str(SRC / "plant"),
                     *[str(SRC / s) for s in sources], "-o", str(exe), "-lm"],

@@ -159,7 +159,13 @@ def test_model_description(plant_fmu):
     assert "sat_flags" in outputs
     assert variables["t_step"].unit == "s" and "t_step" in outputs  # opt-in self-timing
     assert variables["pose_age"].unit == "s" and "pose_age" in outputs
-    assert len(outputs) == len(expected) + 3
+    # the landing gear: a normal force per point, the points touching, landed
+    expected += [(f"contact_force[{i}]", "N") for i in range(1, 9)]
+    for name in expected[-8:]:
+        assert variables[name[0]].causality == "output" and name[0] in outputs
+    assert variables["contact_flags"].type == "Integer" and "contact_flags" in outputs
+    assert variables["landed"].type == "Boolean" and "landed" in outputs
+    assert len(outputs) == len(expected) + 5
 
     # every unit used is defined; the physical variables all carry one
     for v in md.modelVariables:
