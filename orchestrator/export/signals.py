@@ -30,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-from orchestrator.export.ssp import add_entry
+from orchestrator.export.archive import add_entry
 from plant import find_artifact
 
 SIGNALS_FMU = "ScenarioSignals"

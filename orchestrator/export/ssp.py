@@ -95,6 +95,8 @@ from fmpy.ssp.ssd import Parameter, ParameterSet, System, read_ssd
 from lxml import etree
 
 from controller import CONTROLLER_FMU, controller_fmu
+from orchestrator.export.archive import add_entry
+from orchestrator.export.signals import SIGNALS_FMU, signals_fmu
 from orchestrator.sim.fmu import FmuInstance
 from orchestrator.sim.start_values import Pose, controller_start_values, plant_start_values
 from plant import PLANT_FMU, load_airframe, plant_fmu
@@ -123,8 +125,6 @@ OSP_ANNOTATION = "com.opensimulationplatform"
 NS_OMS = "https://raw.githubusercontent.com/OpenModelica/OMSimulator/master/schema/oms.xsd"
 OMS_ANNOTATION = "org.openmodelica"
 
-# fixed zip metadata: the same inputs give the same bytes
-_ZIP_DATE = (1980, 1, 1, 0, 0, 0)
 _REFERENCES = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref")
 
 Connection = tuple[str, str, str, str]
@@ -348,16 +348,6 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
 # -- archive -----------------------------------------------------------------------------------
 
 
-def add_entry(zf: zipfile.ZipFile, name: str, data: bytes, compress: int) -> None:
-    """Add ``data`` as ``name`` with fixed metadata (1980-01-01, unix, 0644), so the same
-    inputs give the same archive bytes."""
-    info = zipfile.ZipInfo(name, date_time=_ZIP_DATE)
-    info.compress_type = compress
-    info.create_system = 3  # unix, whatever the host
-    info.external_attr = 0o644 << 16
-    zf.writestr(info, data)
-
-
 def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
                pos0: Sequence[float] = (0.0, 0.0, -3.0), step: float = 0.002,
                stop_time: float = 10.0, euler0: Sequence[float] = (0.0, 0.0, 0.0),
@@ -389,8 +379,6 @@ def fmu_file(model: str, folder: Path | None = None) -> Path:
     from ``folder`` (e.g. ``fullpose build-fmus --out`` with binaries for every platform),
     else the installed one; a missing file is a FileNotFoundError naming it."""
     if folder is None:
-        from orchestrator.export.signals import SIGNALS_FMU, signals_fmu
-
         found = {PLANT: plant_fmu, CONTROLLER: controller_fmu, SIGNALS_FMU: signals_fmu}
         return Path(found[model]())
     path = Path(folder) / f"{model}.fmu"

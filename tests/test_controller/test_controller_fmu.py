@@ -42,6 +42,7 @@ def make_ctrl():
         c.close()
 
 
+@pytest.mark.heavy  # (fmpy's schema validation of ~1,500 variables; also in the fmitools tier)
 def test_controller_fmu_validates():
     assert validate_fmu(str(controller_fmu())) == []
 

@@ -85,6 +85,7 @@ def test_derived_failure_sets_agree_with_the_shipped_ones(name):
         _agree(derived, A, b, design.inner_points, design.gap, design.scale)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("kind", ["tilting_quadrotor", "canted_hexarotor"])
 def test_derived_s0_agrees_with_the_design_tool_on_other_kinds(kind, tmp_path):
     af = load_kind(kind, tmp_path)
@@ -94,6 +95,7 @@ def test_derived_s0_agrees_with_the_design_tool_on_other_kinds(kind, tmp_path):
     _agree(derived, design.A, design.b, design.inner_points, design.gap, design.scale)
 
 
+@pytest.mark.heavy
 @pytest.mark.parametrize("kind", ["tilting_octocopter", "heavy_tilting_hexacopter"])
 def test_derived_s0_agrees_with_the_design_tool_on_large_kinds(kind, tmp_path):
     af = load_kind(kind, tmp_path)

@@ -56,11 +56,14 @@ def test_missing_zig_is_said_plainly(tmp_path, capsys, monkeypatch):
 
 
 def fmus_folder(tmp_path, plant_edit=None):
-    """Both installed FMUs copied to a folder FULLPOSE_BUILD_DIR can point at; the plant's
+    """The installed FMUs copied to a folder FULLPOSE_BUILD_DIR can point at; the plant's
     archive rewritten entry by entry through ``plant_edit(name, data) -> data | None``."""
+    from orchestrator.export.signals import signals_fmu
+
     folder = tmp_path / "fmus"
     folder.mkdir()
     shutil.copy(controller.controller_fmu(), folder)
+    shutil.copy(signals_fmu(), folder)
     with zipfile.ZipFile(plant.plant_fmu()) as src, \
             zipfile.ZipFile(folder / "MultirotorPlant.fmu", "w") as dst:
         for name in src.namelist():
