@@ -248,8 +248,15 @@ class CoSimulation:
         if refs0 is None:
             refs0 = sc.references(np.zeros(1))
         pose = Pose.of(refs0["pos_ref"][0], refs0["euler_ref"][0], refs0["vel_ref"][0])
+        plant_overrides = dict(sc.plant_parameters)
+        if sc.start == "ground":  # at rest on the gear, rotors stopped (the overrides last)
+            pos, euler = sc.initial_pose()
+            pose = Pose.of(pos.tolist(), euler.tolist())
+            stopped = {f"{a}0[{i + 1}]": 0.0 for a in ("omega", "alpha", "beta")
+                       for i in range(sc.true_airframe.n_rotors)}
+            plant_overrides = {"init_trim": False, **stopped, **plant_overrides}
         return start_values(sc.airframe, pose, timing=self.timing,
-                            plant_overrides=sc.plant_parameters,
+                            plant_overrides=plant_overrides,
                             controller_overrides=sc.controller_parameters,
                             plant_airframe=sc.plant_airframe)
 

@@ -48,6 +48,13 @@ class LandingGear:
                                                       if i < len(self.points) else 0.0)
         return p
 
+    def rest_height(self, mass: float, gravity: float) -> float:
+        """How far above the ground the centre of gravity rests, level, on the lowest points
+        (each sinking m g / (n k) under the weight shared by the n of them)."""
+        lowest = float(self.points[:, 2].max())
+        n = int(np.sum(self.points[:, 2] >= lowest - 1e-12))
+        return lowest - mass * gravity / (n * self.stiffness)
+
     def record(self) -> dict[str, Any]:
         """JSON-ready numbers (``Airframe.record``)."""
         return {"points": self.points.tolist(), "stiffness": self.stiffness,

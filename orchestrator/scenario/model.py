@@ -64,6 +64,9 @@ class Scenario:
     # the airframe the plant flies when it is not the one the controller is told (a sweep's
     # perturbed vehicle: the model mismatch); None: ``airframe``.  No scenario file field.
     plant_airframe: Airframe | None = None
+    # "air": start at the reference's pose at hover trim; "ground": resting level on the
+    # landing gear below the reference's start, rotors stopped
+    start: str = "air"
 
     @property
     def true_airframe(self) -> Airframe:
@@ -125,10 +128,17 @@ class Scenario:
         return self.efficiency(tt - self.fault_detection)
 
     def initial_pose(self) -> tuple[np.ndarray, np.ndarray]:
-        """(position, Euler angles) to start from: the reference at t = 0, unless the
-        ``[plant]`` overrides set ``pos0[i]`` / ``euler0[i]``."""
+        """(position, Euler angles) to start from: the reference at t = 0 (with ``start =
+        "ground"``: resting level on the landing gear below it, the reference's heading),
+        unless the ``[plant]`` overrides set ``pos0[i]`` / ``euler0[i]``."""
         ref = self.references(np.zeros(1))
         pos, euler = ref["pos_ref"][0], ref["euler_ref"][0]
+        gear = self.true_airframe.gear
+        if self.start == "ground" and gear is not None:
+            ground = float(self.plant_parameters.get("ground_z", 0.0))
+            af = self.true_airframe
+            pos[2] = ground - gear.rest_height(af.mass, af.gravity)
+            euler[:2] = 0.0
         for i in range(3):
             pos[i] = float(self.plant_parameters.get(f"pos0[{i + 1}]", pos[i]))
             euler[i] = float(self.plant_parameters.get(f"euler0[{i + 1}]", euler[i]))
@@ -145,6 +155,7 @@ class Scenario:
             "airframe": self.airframe.name,
             "airframe_source": self.airframe.source,
             "coupling": self.coupling,
+            "start": self.start,
             "faults": [vars(f) for f in self.faults],
             "plant_parameters": dict(self.plant_parameters),
             "controller_parameters": dict(self.controller_parameters),

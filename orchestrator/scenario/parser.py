@@ -21,6 +21,9 @@ Layout (units SI, angles in rad unless the key ends in ``_deg``; world frame NED
     airframe = "paper_hexacopter" # shipped airframe name, or a path to an airframe file
                                   #   (relative paths: from this file's folder)
     coupling = "gauss-seidel"     # optional: "gauss-seidel" (default) or "jacobi"
+    start = "air"                 # optional: "air" (default: at the reference's start, rotors
+                                  #   at hover trim) or "ground" (resting level on the landing
+                                  #   gear below it, rotors stopped)
 
     [reference.position]          # xi_ref, m, world NED; each axis a signal, default 0
     x = { type = "chirp", amplitude = 3.0, omega0 = 0.0, omega1 = 0.5, t1 = 100.0 }
@@ -105,8 +108,9 @@ else:  # pragma: no cover
 
 DEFAULT_STEP = STEP_QUANTUM
 """The communication step of a scenario that names none, s."""
-_TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "reference",
-             "disturbance", "fault", "fault_detection", "lost", "plant", "controller", "origin")
+_TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "start",
+             "reference", "disturbance", "fault", "fault_detection", "lost", "plant",
+             "controller", "origin")
 
 
 def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
@@ -122,6 +126,11 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
     step = top.number("step", DEFAULT_STEP, positive=True)
     airframe = _airframe(top, base_dir)
     coupling = top.string("coupling", "gauss-seidel", choices=COUPLINGS)
+    start = top.string("start", "air", choices=("air", "ground"))
+    if start == "ground" and airframe.gear is None:
+        raise top.fail("start", f"'ground' needs a landing gear, and airframe "
+                       f"{airframe.name} has none ([landing_gear] in its file, "
+                       "docs/airframes.md)")
 
     position: Vec3 = (ZERO, ZERO, ZERO)
     attitude: Vec3 = (ZERO, ZERO, ZERO)
@@ -161,6 +170,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         step=step,
         airframe=airframe,
         coupling=coupling,
+        start=start,
         position=position,
         attitude=attitude,
         faults=faults,
@@ -324,6 +334,10 @@ def _on_airframe(scenario: Scenario, airframe: str | Path | Airframe) -> Scenari
             raise ScenarioError(scenario.source, "fault.rotor",
                                 f"rotor {fault.rotor} does not exist on airframe {af.name!r} "
                                 f"({af.n_rotors} rotors)")
+    if scenario.start == "ground" and af.gear is None:
+        raise ScenarioError(scenario.source, "start", f"'ground' needs a landing gear, and "
+                            f"airframe {af.name} has none ([landing_gear] in its file, "
+                            "docs/airframes.md)")
     return replace(scenario, airframe=af)
 
 
