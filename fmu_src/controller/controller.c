@@ -70,6 +70,7 @@ static void controller_set_defaults(void *model) {
     memset(m, 0, sizeof *m);
     fp_paper_hexacopter(&m->af);
     fp_rotor_set_of(&m->af, &rs);
+    m->armed = 1;
     m->Ts = FP_DESIGN_TS;
     /* H(s) at 80 rad/s, a design variable of the robust synthesis: INDI rejects a torque
      * disturbance (a lost rotor) at the filter's bandwidth, and at 50 rad/s no certified
@@ -274,32 +275,30 @@ static int inputs_valid(ControllerModel *m, const FpLogger *logger) {
 /* ------------------------------------------------------------------------ */
 /* Model callbacks                                                          */
 
-static FpStatus controller_initialize(void *model, double t0, const FpLogger *logger) {
-    ControllerModel *m = (ControllerModel *)model;
+/* The land detector's sample (ground.c) into the outputs landed, ground_support; a negative
+ * ground.carried judges the measurements at once (at initialization). */
+static void ground_sample(ControllerModel *m, CtrlGroundOut *out) {
+    CtrlGroundParams p;
+    CtrlGroundInputs in;
+    double f_b[3], tau_b[3];
+    int now = m->ground.carried < 0;
+    fp_rotor_wrench(&m->rotors, m->alpha, m->beta, m->omega, m->health, f_b, tau_b);
+    p.mass = m->af.mass, p.g = m->af.g, p.Ts = now ? CTRL_LAND_TIME : m->Ts;
+    in.acc = m->acc, in.vel = m->vel, in.euler = m->euler, in.f_b = f_b;
+    in.pos = m->pos, in.pos_ref = m->pos_ref, in.armed = m->armed;
+    if (now) m->ground.carried = 0;
+    ctrl_ground(&p, &in, &m->ground, out);
+    m->landed = out->landed;
+    m->ground_support = out->support;
+}
+
+/* The controller's dynamic state started from the inputs as they are: the filters in steady
+ * state at the measurements, the blocks at rest, the reference as given (no jump being
+ * shaped), the twin at the reference pose, the detector fresh.  At initialization, and every
+ * sample the rotors idle (ground.c), so that nothing winds up on the ground. */
+static void restart_states(ControllerModel *m) {
     CtrlFilterInputs fin;
-    int i, n;
-    char why[160];
-    if (ctrl_check_parameters(m, controller_vars, N_CTRL_VARS, logger) != 0) return FP_ERROR;
-    fp_rotor_set_of(&m->af, &m->rotors); /* (validated: the force sets and samples use it) */
-    if (ctrl_prepare_force_sets(m, controller_vars, N_CTRL_VARS, logger) != FP_OK) return FP_ERROR;
-    if (ctrl_derive_shaping_limits(m, logger) != FP_OK) return FP_ERROR;
-    derive_input_bounds(m);
-    if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
-        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "initialization: %s", why);
-        return FP_ERROR;
-    }
-    m->holding = 0;
-    m->grid_t0 = t0;
-    m->inputs_age = 0.0;
-    m->samples_run = 0;
-    m->warned_coarse = 0;
-    n = m->af.n_rotors;
-    /* what the samples need of the geometry alone, once */
-    memset(&m->rotor_trig, 0, sizeof m->rotor_trig);
-    fp_rotor_trig_mounts(&m->rotors, &m->rotor_trig);
-    fp_preferred_prepare(&m->rotors, &m->pref_split, NULL, 0); /* apply checks its status */
-    ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
-    /* filters start in steady state at the initial measurements */
+    int i;
     ctrl_predict_pose(m->pos, m->vel, m->acc, m->euler, m->rate, m->pose_age, m->pose_now);
     fin = ctrl_filter_inputs(m);
     ctrl_filters_start(&fin, m->roll.filt);
@@ -324,6 +323,34 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     memcpy(m->pos_ref_s, m->pos_ref, sizeof m->pos_ref_s);
     memcpy(m->vel_ref_s, m->vel_ref, sizeof m->vel_ref_s);
     memcpy(m->acc_ref_s, m->acc_ref, sizeof m->acc_ref_s);
+}
+
+static FpStatus controller_initialize(void *model, double t0, const FpLogger *logger) {
+    ControllerModel *m = (ControllerModel *)model;
+    CtrlGroundOut ground;
+    int i, n;
+    char why[160];
+    if (ctrl_check_parameters(m, controller_vars, N_CTRL_VARS, logger) != 0) return FP_ERROR;
+    fp_rotor_set_of(&m->af, &m->rotors); /* (validated: the force sets and samples use it) */
+    if (ctrl_prepare_force_sets(m, controller_vars, N_CTRL_VARS, logger) != FP_OK) return FP_ERROR;
+    if (ctrl_derive_shaping_limits(m, logger) != FP_OK) return FP_ERROR;
+    derive_input_bounds(m);
+    if (!inputs_usable(m, why, sizeof why)) { /* the initial state would be poisoned */
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR, "initialization: %s", why);
+        return FP_ERROR;
+    }
+    m->holding = 0;
+    m->grid_t0 = t0;
+    m->inputs_age = 0.0;
+    m->samples_run = 0;
+    m->warned_coarse = 0;
+    n = m->af.n_rotors;
+    /* what the samples need of the geometry alone, once */
+    memset(&m->rotor_trig, 0, sizeof m->rotor_trig);
+    fp_rotor_trig_mounts(&m->rotors, &m->rotor_trig);
+    fp_preferred_prepare(&m->rotors, &m->pref_split, NULL, 0); /* apply checks its status */
+    ctrl_filter_discretize(m->filt_wn, m->filt_zeta, m->Ts, m->filt_phi, m->filt_gamma);
+    restart_states(m);
     for (i = 0; i < CTRL_N_FILTERS; i++)
         if (!isfinite(m->roll.filt[i][0])) {
             fp_log(logger, FP_ERROR, FP_LOG_ERROR,
@@ -362,7 +389,47 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
     m->active_polytope = 0;
     m->hover_possible = m->hover_ok[0];
     ctrl_update_rotor_losses(m, logger);
+    /* a vehicle that starts resting on the ground has landed already (no time to wait):
+     * its first sample shapes the reference from where it stands */
+    memset(&m->ground, 0, sizeof m->ground);
+    m->ground.carried = -1; /* (ground_sample: the start is judged at once) */
+    ground_sample(m, &ground);
+    m->idle = 0;
+    m->shape_from_pose = m->landed;
     return FP_OK;
+}
+
+/* A sample with the rotors idle (ground.c): stopped when disarmed, at omega_min when armed,
+ * the servos at their neutral position (0, within their limits); the dynamic state restarted
+ * from the measurements, and the next flying sample shapes the reference from the pose. */
+static void idle_sample(ControllerModel *m) {
+    int i, n = m->af.n_rotors;
+    double spin = m->armed ? m->af.omega_min : 0.0;
+    restart_states(m);
+    fp_wls_reset(&m->guid);
+    fp_wls_reset(&m->alloc);
+    fp_wls_reset(&m->twin_qp);
+    for (i = 0; i < FP_MAX_ROTORS; i++) {
+        m->omega_cmd[i] = i < n ? spin : 0.0;
+        m->alpha_cmd[i] = i < n ? fp_clamp(0.0, m->af.alpha_min[i], m->af.alpha_max[i]) : 0.0;
+        m->beta_cmd[i] = i < n ? fp_clamp(0.0, m->af.beta_min[i], m->af.beta_max[i]) : 0.0;
+    }
+    memset(m->acc_c, 0, sizeof m->acc_c);
+    memset(m->rate_c, 0, sizeof m->rate_c);
+    memset(m->dnu_c, 0, sizeof m->dnu_c);
+    m->shape_from_pose = 1;
+}
+
+/* One sample: the land detector, then the cascade or, on the ground, idle rotors. */
+static FpStatus sample(ControllerModel *m, const FpLogger *logger) {
+    CtrlGroundOut ground;
+    ground_sample(m, &ground);
+    m->idle = ground.idle;
+    if (ground.idle) {
+        idle_sample(m);
+        return FP_OK;
+    }
+    return ctrl_sample(m, logger);
 }
 
 static FpStatus controller_tunables_changed(void *model, const FpLogger *logger) {
@@ -411,7 +478,7 @@ static FpStatus controller_step(void *model, double t, double h, const FpLogger 
         /* the sample's instant is on the grid, its inputs are those set at t */
         double age = m->grid_t0 + (double)m->samples_run * m->Ts - t;
         m->inputs_age = age > tol ? age : 0.0;
-        if (!inputs_valid(m, logger) || ctrl_sample(m, logger) != FP_OK) status = FP_WARNING;
+        if (!inputs_valid(m, logger) || sample(m, logger) != FP_OK) status = FP_WARNING;
         m->samples_run++;
     }
     return status;

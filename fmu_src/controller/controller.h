@@ -24,6 +24,12 @@ typedef struct {
     double e_pos[3], e_vel[3], e_acc[3], e_mu[3], e_rate[3];
 } CtrlShaping;
 
+/* The land detector's state (ground.c). */
+typedef struct {
+    int32_t carried; /* consecutive samples the ground has carried the vehicle */
+    int32_t landed;
+} CtrlGroundState;
+
 /* The detector's constants (detect.c), derived from fixed parameters at initialization. */
 typedef struct {
     double mass, inertia[3][3], g, Ts;
@@ -42,6 +48,11 @@ typedef struct {
 
 /* Estimates below this: the rotor cannot produce thrust and is lost (motor idled at the
  * probe speed); a lost rotor's estimate back at or above CTRL_DETECT_RESTORE restores it. */
+/* The land detector (ground.c): at rest below this speed, carried for this long; a reference
+ * no higher than this above the vehicle keeps a landed vehicle's rotors idle. */
+#define CTRL_LAND_SPEED 0.1  /* m/s */
+#define CTRL_LAND_TIME 0.1   /* s */
+#define CTRL_LAND_MARGIN 0.05 /* m */
 #define CTRL_DETECT_LOST 0.15
 #define CTRL_DETECT_RESTORE 0.3
 #define CTRL_PROBE_HALF_PERIOD 0.05 /* s */
@@ -111,6 +122,7 @@ typedef struct {
     double omega[FP_MAX_ROTORS], alpha[FP_MAX_ROTORS], beta[FP_MAX_ROTORS];
     double rotor_health[FP_MAX_ROTORS];
     double pose_age;
+    int32_t armed;
     /* outputs */
     double omega_cmd[FP_MAX_ROTORS], alpha_cmd[FP_MAX_ROTORS], beta_cmd[FP_MAX_ROTORS];
     double mu_c[3], f_b_ref[3], f_b_c[3];
@@ -123,6 +135,8 @@ typedef struct {
     double ref_att_rate_limit[3], ref_att_acc_limit[3];
     double rotor_eff_est[FP_MAX_ROTORS], indi_residual[6];
     int32_t rotors_detected;
+    int32_t landed, idle;
+    double ground_support;
     /* internal state */
     FpRotorSet rotors;
     double filt_phi[2][2], filt_gamma[2]; /* discretized H(s): x+ = Phi x + Gamma u */
@@ -161,6 +175,8 @@ typedef struct {
     double yaw_rate_limit; /* the heading-rate command limit when yaw_rate_max is 0 */
     FpWls guid, alloc, twin_qp;
     int32_t guid_c_rows; /* which force set's rows guid's C holds (build_qp; 0: none yet) */
+    CtrlGroundState ground; /* the land detector (ground.c) */
+    int32_t shape_from_pose; /* the next sample starts the shaping at the vehicle's pose */
     int32_t initialized; /* the glue's marker (FpModelInfo.initialized_offset); in padding */
 } ControllerModel;
 

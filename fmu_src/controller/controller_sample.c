@@ -187,6 +187,8 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     shp = shaping_params(m);
     shin.pos = pos_in, shin.vel = vel_in, shin.acc = m->acc_ref;
     shin.mu = mu_in, shin.mu_rate = m->euler_rate_ref;
+    if (m->shape_from_pose && shp.enabled) /* leaving the ground: from where it stands */
+        ctrl_shaping_start_at(&shin, m->pos, m->vel, m->euler, &m->roll.shaping);
     ctrl_shape_reference(&shp, &shin, &m->roll.shaping, &r);
     fs = force_set_in_use(m);
     gp = guidance_params(m);
@@ -207,6 +209,8 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     fin.psi = ctrl_unwrap(m->pose_now[8], &m->roll.psi_raw, &m->roll.psi_unwrapped);
     fin.pos_ref = r.pos, fin.vel_ref = r.vel;
     fin.mu_ref = mu_ff, fin.psi_ref = mu_ff[2];
+    if (m->shape_from_pose) /* leaving the ground: every filter at rest where it stands */
+        ctrl_filters_start(&fin, m->roll.filt);
     ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->roll.filt);
     ctrl_read_filters((const double(*)[2])m->roll.filt, &m->rotors, &m->rotor_trig, m->health,
                       m->lost_mask, &s);
@@ -279,6 +283,7 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
                "valid command");
         return FP_WARNING;
     }
+    m->shape_from_pose = 0;
     memcpy(m->pos_ref_s, r.pos, sizeof m->pos_ref_s);
     memcpy(m->vel_ref_s, r.vel, sizeof m->vel_ref_s);
     memcpy(m->acc_ref_s, r.acc, sizeof m->acc_ref_s);

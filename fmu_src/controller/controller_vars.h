@@ -104,6 +104,7 @@
     X(beta, 1140, REAL, INPUT, 8, 1, ANGLE, FP_IN(-CTRL_MAX_SERVO, CTRL_MAX_SERVO), "Measured servo angles beta") \
     X(rotor_health, 1150, REAL, INPUT, 8, 1, RATIO, FP_IN(0, 1), "Known rotor efficiency 0..1 (below 0.5: lost; the allocations exclude it)") \
     X(pose_age, 1160, REAL, INPUT, 1, 1, TIME, FP_IN(0, 1), "Age of pos, vel and euler: the time since the state they show (0: current); the controller predicts them to now with acc and rate") \
+    X(armed, 1170, BOOLEAN, INPUT, 1, 1, NONE, FP_ANY, "Armed: the rotors may spin (false: they stop, and the controller restarts from the measurements when armed again)") \
     /* outputs: actuator commands (plant inputs) */                                                \
     X(omega_cmd, 2000, REAL, OUTPUT, 8, 1, ROTOR_SPEED, FP_ANY, "Rotor speed commands")            \
     X(alpha_cmd, 2010, REAL, OUTPUT, 8, 1, ANGLE, FP_ANY, "Servo commands alpha")                  \
@@ -142,7 +143,10 @@
     X(ref_att_acc_limit, 2157, REAL, OUTPUT, 3, 1, ANGULAR_ACCELERATION, FP_ANY, "Euler-acceleration limits the shaping uses [roll, pitch, heading] (ref_att_acc_max, or derived)") \
     X(rotor_eff_est, 2130, REAL, OUTPUT, 8, 1, RATIO, FP_ANY, "Rotor efficiencies the detector estimates (1 until it detects a fault; below 0.15: lost, idled at a probe speed and restored when its thrust shows at 0.3 or more)") \
     X(rotors_detected, 2140, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Rotors the detector found faulty: bit i-1 rotor i") \
-    X(indi_residual, 2141, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "INDI residual: measured minus modelled rotor wrench [f_b (N); tau_b (N.m)], body")
+    X(indi_residual, 2141, REAL, OUTPUT, 6, 1, WRENCH, FP_ANY, "INDI residual: measured minus modelled rotor wrench [f_b (N); tau_b (N.m)], body") \
+    X(landed, 2160, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "On the ground: it carries half the weight or more while the vehicle is at rest (docs/controller.md, \"On the ground\")") \
+    X(idle, 2161, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "The rotors idle: disarmed, or landed with the reference not above the vehicle") \
+    X(ground_support, 2162, REAL, OUTPUT, 1, 1, FORCE, FP_ANY, "Upward force of the ground on the vehicle, estimated: m g + (R f_b)_z - m a_z")
 
 /* What each output is a function of at initialization (the format and its rules:
  * PLANT_INITIAL_DEPENDENCIES in plant/plant_vars.h).  controller.c controller_initialize sets
@@ -169,6 +173,10 @@
     /* nothing solved or detected yet: feasible, zeros (statuses, counts, times), 1s */          \
     D("feasible guid_status guid_iter alloc_status alloc_iter sat_flags guid_flags acc_c "       \
       "rate_c dnu_c alloc_residual t_step t_guid t_alloc rotor_eff_est rotors_detected "         \
-      "indi_residual", "")
+      "indi_residual", "")                                                                      \
+    /* what the ground carries at the start: the measured acceleration against the rotors' */   \
+    /* force; nothing idles before the first sample */                                          \
+    D("landed ground_support", CTRL_AIRFRAME "acc vel euler omega alpha beta rotor_health")      \
+    D("idle", "")
 
 #endif

@@ -178,3 +178,22 @@ void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *i
                       &in->acc[2], &out->jerk[2]);
     for (i = 0; i < 3; i++) shape_angle(p, i, &x->e_mu[i], &x->e_rate[i], in->mu_rate[i]);
 }
+
+void ctrl_shaping_start_at(const CtrlShapingInputs *in, const double pos[3],
+                           const double vel[3], const double mu[3], CtrlShaping *x) {
+    int i;
+    memset(x, 0, sizeof *x);
+    x->started = 1;
+    for (i = 0; i < 3; i++) {
+        x->pos_in[i] = in->pos[i];
+        x->vel_in[i] = in->vel[i];
+        x->acc_in[i] = in->acc[i];
+        x->mu_in[i] = in->mu[i];
+        x->mu_rate_in[i] = in->mu_rate[i];
+        x->e_pos[i] = pos[i] - in->pos[i];
+        x->e_vel[i] = vel[i] - in->vel[i];
+        x->e_acc[i] = -in->acc[i];
+        x->e_mu[i] = ctrl_wrap_pi(mu[i] - in->mu[i]);
+        x->e_rate[i] = -in->mu_rate[i];
+    }
+}

@@ -85,6 +85,38 @@ typedef struct {
 void ctrl_shape_reference(const CtrlShapingParams *p, const CtrlShapingInputs *in,
                           CtrlShaping *x, CtrlShapedRef *out);
 
+/* The shaping started at the vehicle's pose: the reference the inputs give, with the error
+ * state set so that the shaped reference begins at pos, vel (at rest in acceleration) and
+ * the attitude mu; a jump from there to the reference is then shaped as any step (a takeoff
+ * from the ground at the vehicle's pace). */
+void ctrl_shaping_start_at(const CtrlShapingInputs *in, const double pos[3],
+                           const double vel[3], const double mu[3], CtrlShaping *x);
+
+/* ------------------------------------------------------------------------ */
+/* ground.c                                                                 */
+
+typedef struct {
+    double mass, g, Ts;
+} CtrlGroundParams;
+
+typedef struct {
+    const double *acc, *vel, *euler; /* measured, world NED / ZYX angles */
+    const double *f_b;               /* the rotor force at the measured actuators, body */
+    const double *pos, *pos_ref;     /* measured position, the reference as given */
+    int armed;
+} CtrlGroundInputs;
+
+typedef struct {
+    double support; /* the upward force the ground exerts, N: m g + (R f_b)_z - m a_z */
+    int landed;     /* on the ground: it carries half the weight or more, at rest, for
+                     * CTRL_LAND_TIME; off it when it carries under a quarter */
+    int idle;       /* the rotors idle: disarmed, or landed with the reference not above */
+} CtrlGroundOut;
+
+/* One sample of the land detector and the idle decision. */
+void ctrl_ground(const CtrlGroundParams *p, const CtrlGroundInputs *in, CtrlGroundState *x,
+                 CtrlGroundOut *out);
+
 /* ------------------------------------------------------------------------ */
 /* filters.c                                                                */
 

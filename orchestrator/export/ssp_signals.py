@@ -41,6 +41,7 @@ from orchestrator.export.ssp import (
     fmu_file,
     write_archive,
 )
+from orchestrator.sim.engine import HELD_INPUTS
 
 SIGNALS = SIGNALS_FMU
 
@@ -48,13 +49,14 @@ SIGNALS = SIGNALS_FMU
 def signal_connections(mds: Mapping[str, ModelDescription]) -> list[Connection]:
     """Every connection of the three components, matched by name: the signals to the
     controller and the plant, then the loop (:func:`orchestrator.export.ssp.connection_table`).
-    Every input of the controller and the plant is fed, or a ValueError names those left."""
+    Every input of the controller and the plant is fed but the held ones (the controller's
+    ``armed``: its start value, true), or a ValueError names those left."""
     to_ctrl, loose_c = connect_by_name(SIGNALS, mds[SIGNALS], CONTROLLER, mds[CONTROLLER])
     to_plant, loose_p = connect_by_name(SIGNALS, mds[SIGNALS], PLANT, mds[PLANT])
     loop = connection_table(mds[PLANT], mds[CONTROLLER])
     fed = {(tc, tv) for _, _, tc, tv in to_ctrl + to_plant + loop}
     left = [f"{c}.{v}" for c, names in ((CONTROLLER, loose_c), (PLANT, loose_p))
-            for v in names if (c, v) not in fed]
+            for v in names if (c, v) not in fed and v not in HELD_INPUTS]
     if left:
         raise ValueError(f"inputs no component feeds: {', '.join(left)}")
     return to_ctrl + to_plant + loop

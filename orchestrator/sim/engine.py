@@ -45,6 +45,9 @@ ROTOR_SIGNALS = frozenset({"omega_cmd", "alpha_cmd", "beta_cmd", "omega", "alpha
 """Per-rotor vectors (8 elements): a run records and connects only the airframe's rotors."""
 REF_INPUTS = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref", "rotor_health")
 DIST_INPUTS = ("f_d", "tau_d", "a_d", "efficiency")
+HELD_INPUTS = frozenset({"armed"})
+"""Inputs a run holds at their start value instead of feeding them every step (the
+controller's ``armed``: true through a scenario run; the MAVLink bridge drives it)."""
 COUPLINGS = ("gauss-seidel", "jacobi")
 ENGINES = ("native", "python")
 
@@ -97,7 +100,8 @@ def _outputs(inst: FmuInstance, kind: str, n_rotors: int, truth: bool = True,
 
 def _inputs(inst: FmuInstance, n_rotors: int) -> list[str]:
     return [v.name for v in inst.md.modelVariables
-            if v.causality == "input" and rotor_used(v.name, n_rotors)]
+            if v.causality == "input" and rotor_used(v.name, n_rotors)
+            and v.name not in HELD_INPUTS]
 
 
 def _expand(inst: FmuInstance, groups: Sequence[str], n_rotors: int) -> list[list[str]]:

@@ -34,8 +34,9 @@ TILT_MAX = 15.0  # deg, the controller's default ref_tilt_max
 
 def fly(airframe: str, position: dict[str, Any], attitude: dict[str, Any] | None = None,
         duration: float = 14.0, controller: dict[str, Any] | None = None):
+    # (steps from the origin, in free flight: the ground 10 m below it)
     data: dict[str, Any] = {"name": "shaping", "duration": duration, "airframe": airframe,
-                            "reference": {"position": position}}
+                            "reference": {"position": position}, "plant": {"ground_z": 10.0}}
     if attitude is not None:
         data["reference"]["attitude"] = attitude
     if controller:

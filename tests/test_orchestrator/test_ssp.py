@@ -166,6 +166,7 @@ def test_connection_table_is_the_name_match(hover_ssp, mds, caplog):
     refs = {f"{r}[{i}]" for r in ("pos_ref", "euler_ref", "vel_ref", "acc_ref",
                                   "euler_rate_ref") for i in (1, 2, 3)}
     refs |= {f"rotor_health[{i}]" for i in range(1, 9)}  # start value 1: all rotors healthy
+    refs |= {"armed"}  # start value true
     assert set(loose[CONTROLLER]) == refs
     assert set(loose[PLANT]) == ({f"efficiency[{i}]" for i in range(1, 9)}
                                  | {f"{d}[{i}]" for d in ("f_d", "tau_d", "a_d")
