@@ -218,6 +218,7 @@ def test_any_step_samples_the_ts_grid_with_the_inputs_held_since_the_last_point(
         b.close()
 
 
+@pytest.mark.heavy  # (7,143 summed steps and two late starts: 3.4 s)
 def test_the_sample_grid_does_not_drift_over_long_runs_or_at_a_late_start():
     """5 s of 0.7 ms steps whose communication points the importer sums up (fmpy-style
     time += h: 7143 additions), and a start at t0 = 1e5 s where a time carries only ~1e-11 s

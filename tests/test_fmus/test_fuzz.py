@@ -56,7 +56,7 @@ def test_fuzz_use_after_free(fmu):
     ("silent_error", "silent_nonok"),
     ("accept_forbidden", "forbidden_accepted"),
     ("crash", "crash"),
-    ("hang", "hang"),
+    pytest.param("hang", "hang", marks=pytest.mark.heavy),  # (waits out its hang timeout)
 ])
 def test_oracle_finds_planted_bugs(bug, kind):
     """A wrapper that misbehaves (a NaN output with fmi2OK, an error without a message, a

@@ -86,7 +86,7 @@ def test_origin_option_and_scenario_field_reject_bad_values(tmp_path):
     # the CLI takes the scenario's origin; --origin wins over it
     sc_file = tmp_path / "here.toml"
     sc_file.write_text('name = "here"\nairframe = "paper_hexacopter"\nduration = 1.0\n'
-                       'origin = [46.5, 7.5, 1500.0]\n')
+                       'origin = [46.5, 7.5, 1500.0]\n[reference.position]\nz = -3.0\n')
     gcs = f"udpout:127.0.0.1:{free_port()}"
     for extra, want in (([], "46.5000000, 7.5000000, 1500.00 m AMSL"),
                         (["--origin=-33.9,151.2,40"], "-33.9000000, 151.2000000, 40.00 m")):
