@@ -1,7 +1,8 @@
 """A scenario exported as an SSP archive (``fullpose export-ssp OUT --scenario NAME``) replays
-in SSP runners nobody here wrote, libcosim and fmpy, within 1e-9 m of ``fullpose run`` under
-the same (Jacobi) coupling; the ScenarioSignals FMU plays its table exactly and refuses a bad
-one with a message naming what is wrong.  (OMSimulator: test_omsimulator.py.)
+in SSP runners nobody here wrote, libcosim and fmpy (the ``fmitools`` tier, with the other
+tools), within 1e-9 m of ``fullpose run`` under the same (Jacobi) coupling; the
+ScenarioSignals FMU plays its table exactly and refuses a bad one with a message naming what
+is wrong.  (OMSimulator: test_omsimulator.py; FMI4j: test_fmi4j.py.)
 
 Oracles: the scenario's signals in closed form (numpy), our runner's recording of the same
 scenario with ``coupling = "jacobi"``, fmpy's validator; the replay bound 1e-9 m is the
@@ -148,6 +149,7 @@ def test_table_round_trip_is_exact():
 # -- libcosim and fmpy replay paper scenario 1 -----------------------------------------------
 
 
+@pytest.mark.fmitools  # (runners nobody here wrote, with the other tools)
 def test_libcosim_replays_paper_scenario_1(s1_archive, s1_ours):
     step, rows = libcosim_replay(s1_archive, SECONDS)
     assert step == pytest.approx(0.002, abs=1e-12)  # the archive's own step
@@ -159,6 +161,7 @@ def test_libcosim_replays_paper_scenario_1(s1_archive, s1_ours):
     assert np.abs(rows[:, 4]).max() > 0.6
 
 
+@pytest.mark.fmitools  # (runners nobody here wrote, with the other tools)
 def test_fmpy_replays_paper_scenario_1_with_a_consistent_first_step(s1_archive, s1_ours):
     res = simulate_with_fmpy(s1_archive, stop_time=2.0)
     # fmpy records the start of each step beside the values after it
@@ -168,6 +171,7 @@ def test_fmpy_replays_paper_scenario_1_with_a_consistent_first_step(s1_archive, 
     assert dpos < 1e-9 and datt < 1e-9
 
 
+@pytest.mark.fmitools  # (runners nobody here wrote, with the other tools)
 def test_fmpy_as_is_starts_from_zero_inputs(s1_archive, s1_ours):
     """fmpy's own first step (every connected input 0.0: the controller sees the vehicle at
     the origin with its rotors stopped) is the whole difference: docs/fmpy.md."""
@@ -181,6 +185,7 @@ def test_fmpy_as_is_starts_from_zero_inputs(s1_archive, s1_ours):
 # -- any vehicle, faults and disturbances --------------------------------------------------------
 
 
+@pytest.mark.fmitools
 @pytest.mark.parametrize(("name", "airframe", "seconds"), [
     ("rotor_failure_hover", "x8_coaxial", 3.0),      # efficiency and rotor_health columns
     ("full_pose_with_disturbances", "paper_hexacopter", 9.0),  # a_d step at 8 s
