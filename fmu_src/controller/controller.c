@@ -417,6 +417,7 @@ static void idle_sample(ControllerModel *m) {
     memset(m->acc_c, 0, sizeof m->acc_c);
     memset(m->rate_c, 0, sizeof m->rate_c);
     memset(m->dnu_c, 0, sizeof m->dnu_c);
+    m->feasible = 1; /* (nothing is flown, nothing is infeasible) */
     m->shape_from_pose = 1;
 }
 

@@ -1,6 +1,7 @@
 """The moments of a run worth marking on its timeline, from its recording alone: the reference
 pose turning infeasible or feasible again, rotor faults, the controller's detections,
-disturbance steps and reference jumps.  One source for the figures (orchestrator/output/plots.py)
+disturbance steps, reference jumps, and on the ground touchdowns, liftoffs and the rotors
+idling or spinning up.  One source for the figures (orchestrator/output/plots.py)
 and the 3-D view (orchestrator/output/view.py)."""
 
 from __future__ import annotations
@@ -11,7 +12,7 @@ import numpy as np
 
 from orchestrator.output.run_result import RunResult
 
-KINDS = ("feasibility", "fault", "detection", "disturbance", "reference")
+KINDS = ("feasibility", "fault", "detection", "disturbance", "reference", "ground")
 JUMP = 1e-3
 """m: a reference increment beyond what its velocity explains by this much is a jump (a
 trajectory's own error over 2 ms is ~1e-9 m; a waypoint or a step is centimetres or more)."""
@@ -75,4 +76,23 @@ def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
         floor = np.maximum(JUMP, OUTSTANDING * np.median(step, axis=0))
         for i in np.nonzero(np.any(step > floor, axis=1))[0][:MAX_PER_KIND] + 1:
             out.append(Event(float(t[i]), "reference", "reference jump"))
+    if "ground" in kinds:
+        out += ground_events(r, t)
     return sorted(out, key=lambda e: (e.time, e.kind))
+
+
+def ground_events(r: RunResult, t: np.ndarray) -> list[Event]:
+    """Touchdowns and liftoffs (the plant's landing gear: any foot below the ground or none),
+    the controller's land detector, and its rotors idling or spinning up again."""
+    out: list[Event] = []
+    if r.has("plant.contact_flags"):
+        touching = r.get("plant.contact_flags") > 0
+        for i in changes(touching)[:MAX_PER_KIND]:
+            out.append(Event(float(t[i]), "ground", "touchdown" if touching[i] else "liftoff"))
+    for name, on, off in (("ctrl.landed", "landed", "leaving the ground"),
+                          ("ctrl.idle", "rotors idle", "rotors spinning up")):
+        if r.has(name):
+            flag = r.get(name) > 0.5
+            for i in changes(flag)[:MAX_PER_KIND]:
+                out.append(Event(float(t[i]), "ground", on if flag[i] else off))
+    return out

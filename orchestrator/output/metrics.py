@@ -30,7 +30,10 @@ Keys (units in brackets)
     ``ctrl.euler_ref_s`` (a step of the input flown within the shaping's limits; the input
     itself wherever no jump is being shaped), or, in results recorded without them, the
     reference as given, ``ref.pos_ref``, ``ref.euler_ref`` (None when neither is recorded).
-    So a 1 m step is not a 1 m error; what the step did is in ``steps``.
+    So a 1 m step is not a 1 m error; what the step did is in ``steps``.  Rows on the
+    ground are not judged: with a foot of the landing gear touching (``plant.contact_flags``)
+    or the rotors idle (``ctrl.idle``), the vehicle flies no reference (a landing's runs on
+    below the ground).
 ``position_error`` [m]
     e = ``plant.pos_true`` (or ``plant.pos``) - the flown position reference
     (``errors_against["position"]``; world NED).  ``max`` and ``rms`` of the norm |e|; per
@@ -201,22 +204,33 @@ def flown_reference(result: RunResult) -> dict[str, str | None]:
     return out
 
 
+def flying_rows(result: RunResult) -> np.ndarray:
+    """The rows judged by the tracking errors: all but those on the ground, with a foot of
+    the landing gear touching (``plant.contact_flags``) or the rotors idle (``ctrl.idle``)."""
+    flying = np.ones(result.time.size, dtype=bool)
+    for name in ("ctrl.idle", "plant.contact_flags"):
+        flag = result.optional(name)
+        if flag is not None:
+            flying &= ~(flag > 0.5)
+    return flying
+
+
 def _tracking(result: RunResult, pos_name: str, euler_name: str) -> dict[str, Any]:
     """Position and attitude errors of the signals ``pos_name`` and ``euler_name``."""
     out: dict[str, Any] = {}
-    t = result.time
     flown = flown_reference(result)
     pos, euler = result.optional(pos_name), result.optional(euler_name)
     pos_ref = None if flown["position"] is None else result.get(flown["position"])
+    flying = flying_rows(result)
     out["position_error"] = None
-    if pos is not None and pos_ref is not None and t.size:
-        out["position_error"] = _error_stats(pos - pos_ref, POSITION_AXES)
+    if pos is not None and pos_ref is not None and flying.any():
+        out["position_error"] = _error_stats((pos - pos_ref)[flying], POSITION_AXES)
     for key, ref_name in (("attitude_error_vs_mu_c", "ctrl.mu_c"),
                           ("attitude_error_vs_mu_ref", flown["attitude"])):
         ref = None if ref_name is None else result.optional(ref_name)
         out[key] = None
-        if euler is not None and ref is not None and t.size:
-            err = wrap_deg(np.degrees(euler - ref))
+        if euler is not None and ref is not None and flying.any():
+            err = wrap_deg(np.degrees(euler - ref))[flying]
             stats = _error_stats(err, EULER_AXES)
             per_axis = [stats[a]["max"] for a in EULER_AXES]
             stats["max_axis"] = None if None in per_axis else max(per_axis)

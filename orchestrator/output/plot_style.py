@@ -173,13 +173,14 @@ def y_floor(ax: Axes, min_span: float) -> None:
 
 
 EVENT_STYLE = {"fault": ("#d62728", "-"), "detection": ("#9467bd", "--"),
-               "disturbance": ("#8c564b", ":"), "reference": ("#7f7f7f", "-.")}
+               "disturbance": ("#8c564b", ":"), "reference": ("#7f7f7f", "-."),
+               "ground": ("#2ca02c", "--")}
 """Colour and line style of each kind of event marked on the time axes."""
 
 
 def mark_events(ax: Axes, found: list[Event], label: bool = False) -> None:
     """Vertical lines at the events (faults, detections, disturbance steps, reference
-    jumps); ``label``: one legend entry per kind."""
+    jumps, touchdowns and liftoffs); ``label``: one legend entry per kind."""
     seen: set[str] = set()
     for e in found:
         color, ls = EVENT_STYLE[e.kind]

@@ -56,7 +56,7 @@ from matplotlib.figure import Figure
 
 from orchestrator.output.events import events
 from orchestrator.output.figure_names import RUN_FIGURES
-from orchestrator.output.metrics import wrap_deg
+from orchestrator.output.metrics import flying_rows, wrap_deg
 from orchestrator.output.plot_style import (
     AXIS_COLORS,
     CMD_COLOR,
@@ -104,7 +104,7 @@ def tracking_figure(result: RunResult) -> Figure:
     t = result.time
     fig = new_figure(13.0, 10.5, top=0.93, bottom=0.11, hspace=0.12, wspace=0.17)
     axs = fig.subplots(4, 2, sharex=True)
-    marks = events(result, ("fault", "detection", "disturbance", "reference"))
+    marks = events(result, ("fault", "detection", "disturbance", "reference", "ground"))
     # with imperfect sensors the true state is recorded too: it is what is judged, the
     # measured one is drawn faint behind it
     truth = result.has_truth
@@ -159,10 +159,12 @@ def tracking_figure(result: RunResult) -> Figure:
     if pos is not None and pos_ref is not None:
         # against the reference the controller flies (its shaped one: a 10 m step is not a
         # 10 m error), in millimetres
-        err = 1e3 * np.linalg.norm(pos - (shaped if shaped is not None else pos_ref), axis=1)
+        raw = 1e3 * np.linalg.norm(pos - (shaped if shaped is not None else pos_ref), axis=1)
+        # (on the ground no reference is flown: those rows are left out, as in the metrics)
+        err = np.where(flying_rows(result), raw, np.nan)
         draw_line(ax, t, err, color=MEAS_COLOR, lw=1.0)
-        if err.size and np.all(np.isfinite(err)):
-            k = int(np.argmax(err))
+        if raw.size and np.all(np.isfinite(raw)) and np.any(np.isfinite(err)):
+            k = int(np.nanargmax(err))
             ax.plot(t[k], err[k], "v", color=INFEASIBLE_COLOR, ms=5,
                     label=f"max error {err[k]:.1f} mm at {t[k]:.2f} s")
     what = result.judged("plant.pos").removeprefix("plant.")
@@ -219,7 +221,7 @@ def actuators_figure(result: RunResult, airframe: Airframe | None = None) -> Fig
     lims = _limits(result, airframe)
     fig = new_figure(13.0, 9.0, right=0.86, top=0.94, hspace=0.12)
     axs = fig.subplots(3, 1, sharex=True)
-    marks = events(result, ("fault", "detection"))
+    marks = events(result, ("fault", "detection", "ground"))
     groups = (("alpha", "alpha", np.degrees(1.0), "deg", 1.0),
               ("beta", "beta", np.degrees(1.0), "deg", 1.0),
               ("omega", "omega", RPM_PER_RAD_S, "rpm", 20.0))

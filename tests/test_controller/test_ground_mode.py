@@ -103,3 +103,28 @@ def test_waiting_on_the_ground_winds_nothing_up():
     diff = np.abs(late.get("plant.pos")[shift:] - now.get("plant.pos")).max()
     print(f"\nwaiting 3 s on the ground, then taking off: {diff:.2g} m from an instant takeoff")
     assert diff < 1e-4
+
+
+def test_the_shipped_takeoff_and_landing():
+    """takeoff_and_land: its timeline in order (the ground let go, liftoff, touchdown, landed
+    and rotors idle together), the tilted leg flown within the paper's 2 cm at 15 deg of
+    roll, and at the end the vehicle at rest on its gear with the rotors stopped."""
+    from orchestrator.output.events import events
+    from orchestrator.scenario.catalogue import load_scenario
+
+    r = run(load_scenario("takeoff_and_land"), progress=False)
+    assert r.meta["outcome"] == {"outcome": "completed"}
+    timeline = [(e.time, e.text) for e in events(r, ("ground",))]
+    texts = [text for _, text in timeline]
+    assert texts == ["leaving the ground", "liftoff", "touchdown", "landed", "rotors idle"]
+    times = dict((text, time) for time, text in timeline)
+    assert times["leaving the ground"] < times["liftoff"] < 0.5
+    assert times["landed"] == times["rotors idle"]
+    assert 0.0 < times["landed"] - times["touchdown"] < 0.3
+    t = r.time
+    leg = (t > 4.0) & (t < 9.0)
+    assert np.abs(r.get("plant.pos")[leg] - r.get("ctrl.pos_ref_s")[leg]).max() < ACCURACY
+    assert np.degrees(r.get("plant.euler")[(t > 5.0) & (t < 7.0), 0]) == pytest.approx(
+        15.0, abs=0.5)
+    assert r.get("plant.pos")[-1, 2] == pytest.approx(rest_z("paper_hexacopter"), abs=1e-6)
+    assert np.all(r.get("ctrl.omega_cmd")[-1] == 0.0)
