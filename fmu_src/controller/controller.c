@@ -280,16 +280,22 @@ static int inputs_valid(ControllerModel *m, const FpLogger *logger) {
 static void ground_sample(ControllerModel *m, CtrlGroundOut *out) {
     CtrlGroundParams p;
     CtrlGroundInputs in;
-    double f_b[3], tau_b[3];
     int now = m->ground.carried < 0;
-    fp_rotor_wrench(&m->rotors, m->alpha, m->beta, m->omega, m->health, f_b, tau_b);
     p.mass = m->af.mass, p.g = m->af.g, p.Ts = now ? CTRL_LAND_TIME : m->Ts;
-    in.acc = m->acc, in.vel = m->vel, in.euler = m->euler, in.f_b = f_b;
+    in.support = m->ground_support, in.vel = m->vel;
     in.pos = m->pos, in.pos_ref = m->pos_ref, in.armed = m->armed;
     if (now) m->ground.carried = 0;
     ctrl_ground(&p, &in, &m->ground, out);
     m->landed = out->landed;
-    m->ground_support = out->support;
+}
+
+/* The ground's support from the raw measurements (ground.c): at initialization and while
+ * the rotors idle; a flying sample computes it from its filtered signals. */
+static void raw_ground_support(ControllerModel *m) {
+    double f_b[3], tau_b[3], r[9];
+    rot_zyx_jacobian(m->euler, r, NULL, NULL);
+    fp_rotor_wrench(&m->rotors, m->alpha, m->beta, m->omega, m->health, f_b, tau_b);
+    m->ground_support = ctrl_ground_support(m->af.mass, m->af.g, r, f_b, m->acc);
 }
 
 /* The controller's dynamic state started from the inputs as they are: the filters in steady
@@ -393,6 +399,7 @@ static FpStatus controller_initialize(void *model, double t0, const FpLogger *lo
      * its first sample shapes the reference from where it stands */
     memset(&m->ground, 0, sizeof m->ground);
     m->ground.carried = -1; /* (ground_sample: the start is judged at once) */
+    raw_ground_support(m);
     ground_sample(m, &ground);
     m->idle = 0;
     m->shape_from_pose = m->landed;
@@ -419,6 +426,7 @@ static void idle_sample(ControllerModel *m) {
     memset(m->dnu_c, 0, sizeof m->dnu_c);
     m->feasible = 1; /* (nothing is flown, nothing is infeasible) */
     m->shape_from_pose = 1;
+    raw_ground_support(m);
 }
 
 /* One sample: the land detector, then the cascade or, on the ground, idle rotors. */

@@ -214,6 +214,8 @@ FpStatus ctrl_sample(ControllerModel *m, const FpLogger *logger) {
     ctrl_filters_update((const double(*)[2])m->filt_phi, m->filt_gamma, &fin, m->roll.filt);
     ctrl_read_filters((const double(*)[2])m->roll.filt, &m->rotors, &m->rotor_trig, m->health,
                       m->lost_mask, &s);
+    /* what the ground carries, for the next sample's land detector (ground.c) */
+    m->ground_support = ctrl_ground_support(m->af.mass, m->af.g, s.r_m, s.f_b_m, s.acc_m);
     if (m->fault_detect) {
         /* a detection counts from the next sample on (ctrl_update_rotor_losses) */
         CtrlDetectInputs din;

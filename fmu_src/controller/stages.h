@@ -100,18 +100,23 @@ typedef struct {
 } CtrlGroundParams;
 
 typedef struct {
-    const double *acc, *vel, *euler; /* measured, world NED / ZYX angles */
-    const double *f_b;               /* the rotor force at the measured actuators, body */
-    const double *pos, *pos_ref;     /* measured position, the reference as given */
+    double support;              /* ctrl_ground_support of the last sample's signals, N */
+    const double *vel;           /* measured, world NED */
+    const double *pos, *pos_ref; /* measured position, the reference as given */
     int armed;
 } CtrlGroundInputs;
 
 typedef struct {
-    double support; /* the upward force the ground exerts, N: m g + (R f_b)_z - m a_z */
     int landed;     /* on the ground: it carries half the weight or more, at rest, for
                      * CTRL_LAND_TIME; off it when it carries under a quarter */
     int idle;       /* the rotors idle: disarmed, or landed with the reference not above */
 } CtrlGroundOut;
+
+/* The upward force the ground exerts, N: m g + (R f_b)_z - m a_z, from the attitude R
+ * (body to world, row-major), the rotors' force f_b (body) and the acceleration a (world
+ * NED) of one instant. */
+double ctrl_ground_support(double mass, double g, const double r[9], const double f_b[3],
+                           const double acc[3]);
 
 /* One sample of the land detector and the idle decision. */
 void ctrl_ground(const CtrlGroundParams *p, const CtrlGroundInputs *in, CtrlGroundState *x,

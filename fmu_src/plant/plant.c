@@ -145,6 +145,17 @@ static ContactParams contact_params(const PlantModel *m) {
     return p;
 }
 
+/* The farthest contact point's distance from the centre of gravity. */
+static double contact_reach(const PlantModel *m) {
+    double reach = 0.0;
+    int i;
+    for (i = 0; i < m->n_contacts; i++)
+        reach = fmax(reach, sqrt(m->contact_pos[i][0] * m->contact_pos[i][0] +
+                                 m->contact_pos[i][1] * m->contact_pos[i][1] +
+                                 m->contact_pos[i][2] * m->contact_pos[i][2]));
+    return reach;
+}
+
 /* A start with a contact point deeper under the ground than one point's spring carries the
  * whole weight at (m g / k) is no pose to start from: the ground would throw the vehicle. */
 static int check_start_above_ground(const PlantModel *m, const FpLogger *logger) {
@@ -166,8 +177,13 @@ static int check_start_above_ground(const PlantModel *m, const FpLogger *logger)
 
 /* After an internal step: the contact points' anchors at the new state (contact.h). */
 static void update_anchors(PlantModel *m) {
-    ContactParams cp = contact_params(m);
+    ContactParams cp;
     double r[3][3];
+    if (m->x[X_POS + 2] + m->contact_reach <= m->ground_z) { /* out of reach: none touches */
+        m->contact_anchored = 0;
+        return;
+    }
+    cp = contact_params(m);
     rot_from_quat(m->x + X_QUAT, r);
     m->contact_anchored =
         contact_update_anchors(&cp, m->x + X_POS, &r[0][0], &m->contact_anchor[0][0]);
@@ -188,7 +204,10 @@ static void derivative(const PlantModel *m, const Commands *u, const double *x, 
         dx[X_POS + i] = x[X_VEL + i];
         dx[X_VEL + i] = (fw[i] + m->f_d[i]) / m->af.mass + m->a_d[i];
     }
-    if (m->n_contacts > 0) { /* (without a ground every sum stays as it was, to the bit) */
+    /* (no point can touch while the centre of gravity is higher above the ground than the
+     * farthest point reaches: the contact is then not evaluated, as without a ground, and
+     * every sum stays as it was, to the bit) */
+    if (m->n_contacts > 0 && x[X_POS + 2] + m->contact_reach > m->ground_z) {
         ContactParams cp = contact_params(m);
         contact_wrench(&cp, x + X_POS, x + X_VEL, &r[0][0], w, &cw);
         for (i = 0; i < 3; i++) dx[X_VEL + i] += cw.force_w[i] / m->af.mass;
@@ -203,7 +222,7 @@ static void derivative(const PlantModel *m, const Commands *u, const double *x, 
     m3_mul_v(&m->af.inertia[0][0], w, iw);
     v3_cross(w, iw, gyro);
     for (i = 0; i < 3; i++) tau[i] = tb[i] + m->tau_d[i] - gyro[i];
-    if (m->n_contacts > 0)
+    if (cw.flags != 0)
         for (i = 0; i < 3; i++) tau[i] += cw.torque_b[i];
     m3_mul_v(&m->inertia_inv[0][0], tau, dx + X_RATE);
     for (i = 0; i < FP_MAX_ROTORS; i++) {
@@ -574,6 +593,7 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
     m->t0 = t0;
     m->hist_count = m->hist_head = 0;
     m->mocap_last = m->imu_last = t0 - 1.0; /* every sensor samples at t0 */
+    m->contact_reach = contact_reach(m);
     m->contact_anchored = 0; /* the points touching at t0 stick where they are */
     memset(m->contact_anchor, 0, sizeof m->contact_anchor);
     if (m->n_contacts > 0) {
@@ -689,6 +709,12 @@ static FpStatus plant_check_restored(const void *model, int initialized,
     if (!initialized) return FP_OK; /* parameters are checked when initialization ends */
     if (validate(m, logger) != 0) {
         fp_log(logger, FP_ERROR, FP_LOG_ERROR, "restored state: its parameters are invalid");
+        return FP_ERROR;
+    }
+    if (m->contact_reach != contact_reach(m)) { /* (skipping the contact relies on it) */
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "restored state: contact_reach %g m is not the landing gear's %g m",
+               m->contact_reach, contact_reach(m));
         return FP_ERROR;
     }
     if (!fp_all_finite(m->x, PLANT_NX) || !fp_all_finite(&m->inertia_inv[0][0], 9) ||

@@ -55,6 +55,7 @@ typedef struct {
     /* ground contact: each touching point's anchor (world x, y; plant/contact.h) */
     double contact_anchor[PLANT_MAX_CONTACTS][2];
     int32_t contact_anchored;
+    double contact_reach; /* the farthest contact point from the centre of gravity, m */
 } PlantModel;
 
 /* The plant model; its FMU returns it from fp_model_info(). */

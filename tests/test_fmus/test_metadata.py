@@ -71,6 +71,7 @@ def root(model) -> ET.Element:
 # the XML
 
 
+@pytest.mark.heavy  # (fmpy's schema validation: 2.3 s for the controller's ~1,500 variables)
 def test_fmpy_validates_the_fmu_against_the_fmi2_schema(model):
     assert validate_fmu(str(installed_fmu(model))) == []
 
@@ -194,6 +195,7 @@ def _run_mdgen(exe: Path, out: Path, env_epoch: str | None) -> subprocess.Comple
                            str(out.parent), *files], env=env, capture_output=True, text=True)
 
 
+@pytest.mark.heavy  # (mdgen compiled twice: 2.2 s)
 def test_generation_date_is_deterministic(tmp_path):
     """mdgen run now, twice a second apart, writes byte for byte the XML the installed FMU
     was built with (at another time): the date is the release's, not the clock's."""

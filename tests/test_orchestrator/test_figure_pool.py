@@ -91,6 +91,7 @@ def test_workers_draw_the_figures_the_caller_draws(short: tuple[Path, Path]):
     assert not own_handoffs()  # the hand-over is gone
 
 
+@pytest.mark.heavy  # (a worker killed and the figures drawn without it: 3.1 s)
 def test_a_dead_worker_costs_only_the_parallelism(short: tuple[Path, Path]):
     here = short[1]
     result = RunResult.read(here)  # float32 columns: the figures are the reader's own

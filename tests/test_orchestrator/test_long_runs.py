@@ -119,6 +119,7 @@ _MEMORY_PROBE = textwrap.dedent("""
 """)
 
 
+@pytest.mark.heavy  # (a recording larger than memory's share, filed: 3.8 s)
 @pytest.mark.skipif(not sys.platform.startswith("linux"),
                     reason="reads the process's anonymous memory from Linux's /proc")
 def test_a_filed_recording_keeps_memory_bounded(tmp_path):

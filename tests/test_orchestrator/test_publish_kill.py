@@ -166,6 +166,7 @@ def test_a_run_killed_between_the_two_moves_is_undone_by_the_next_run(tmp_path: 
     assert [p.name for p in tmp_path.iterdir() if p.name != "probe"] == ["res"]
 
 
+@pytest.mark.heavy  # (a process killed at every step of the publication: 2.7 s)
 def test_publish_killed_at_every_step_over_previous_results(tmp_path: Path):
     table = kill_at_every_step(tmp_path, previous=True)
     # the moment the issue found: killed between the two moves, the results folder is
@@ -179,6 +180,7 @@ def test_publish_killed_at_every_step_of_a_first_run(tmp_path: Path):
     assert {t[1] for t in table} <= {"none", "new"}
 
 
+@pytest.mark.heavy  # (the recovery killed at every step of its own: 4.5 s)
 def test_recovery_itself_killed_at_every_step(tmp_path: Path):
     """A run killed between the two moves (the previous results aside, the new ones
     written), then the next run's recovery killed at each of its steps: the one after it
