@@ -12,6 +12,7 @@ from collections.abc import Callable, Iterable, Iterator, Mapping
 from contextlib import contextmanager
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 from fmpy import calloc, extract, free
@@ -73,6 +74,26 @@ class Signal:
     names: list[str]
     refs: ctypes.Array[fmi2ValueReference]
     values: np.ndarray = field(repr=False)
+
+
+def set_by_type(slave: Any, variables: Mapping[str, Any],
+                values: Mapping[str, float | int | bool]) -> None:
+    """Sets ``values`` (name -> value) on an fmpy FMU2Slave with one fmi2Set* call per type,
+    by the value references of ``variables`` (name -> fmpy ScalarVariable); an FMU refuses a
+    whole call before it writes anything (FMICallException)."""
+    by_type: dict[str, tuple[list[int], list[float | int | bool]]] = {}
+    for name, value in values.items():
+        v = variables[name]
+        refs, vals = by_type.setdefault(v.type, ([], []))
+        refs.append(int(v.valueReference))
+        vals.append(value)
+    for kind, (refs, vals) in by_type.items():
+        if kind == "Real":
+            slave.setReal(refs, [float(x) for x in vals])
+        elif kind == "Integer":
+            slave.setInteger(refs, [int(x) for x in vals])
+        else:
+            slave.setBoolean(refs, [bool(x) for x in vals])
 
 
 class FmuInstance:
@@ -197,23 +218,12 @@ class FmuInstance:
         """Sets every value: one FMI call per type (an FMU refuses a whole call before it
         writes anything), and when a call is refused, one set per name, so the error names
         the variable."""
-        by_type: dict[str, tuple[list[int], list[float | int | bool]]] = {}
-        for name, value in values.items():
-            v = self.variables.get(name)
-            if v is None:
-                raise KeyError(f"{self.md.modelName} has no variable {name!r}")
-            refs, vals = by_type.setdefault(v.type, ([], []))
-            refs.append(int(v.valueReference))
-            vals.append(value)
+        unknown = [name for name in values if name not in self.variables]
+        if unknown:
+            raise KeyError(f"{self.md.modelName} has no variable {unknown[0]!r}")
         first = len(self.messages)
         try:
-            for kind, (refs, vals) in by_type.items():
-                if kind == "Real":
-                    self.slave.setReal(refs, [float(x) for x in vals])
-                elif kind == "Integer":
-                    self.slave.setInteger(refs, [int(x) for x in vals])
-                else:
-                    self.slave.setBoolean(refs, [bool(x) for x in vals])
+            set_by_type(self.slave, self.variables, values)
         except FMICallException:
             del self.messages[first:]  # the refused call's messages: said again below
             for name, value in values.items():

@@ -42,7 +42,7 @@ from fmpy.fmi2 import (
 )
 
 import plant
-from orchestrator.sim.fmu import installed_fmu
+from orchestrator.sim.fmu import installed_fmu, set_by_type
 from orchestrator.sim.start_values import Pose, start_values
 from plant.airframe import airframe_table
 
@@ -114,19 +114,7 @@ class Probe:
         self.slave.instantiate(callbacks=self.callbacks)
         try:
             self.slave.setupExperiment(startTime=0.0)
-            by_type: dict[str, tuple[list[int], list[Value]]] = {}
-            for name, value in values.items():
-                v = self.variables[name]
-                refs, vals = by_type.setdefault(v.type, ([], []))
-                refs.append(v.valueReference)
-                vals.append(value)
-            for kind, (refs, vals) in by_type.items():
-                if kind == "Real":
-                    self.slave.setReal(refs, [float(x) for x in vals])
-                elif kind == "Integer":
-                    self.slave.setInteger(refs, [int(x) for x in vals])
-                else:
-                    self.slave.setBoolean(refs, [bool(x) for x in vals])
+            set_by_type(self.slave, self.variables, values)
             self.slave.enterInitializationMode()
             self.slave.exitInitializationMode()
             return True

@@ -64,6 +64,24 @@ def run_python(code: str, oms: Path, cwd: Path) -> str:
     return res.stdout
 
 
+def python_api_positions(oms: Path, archive: Path, tmp_path: Path) -> np.ndarray:
+    """The archive played by OMSimulator 3.0's Python API at the archive's step (set with
+    setFixedStepSize from experiment()): its result's plant positions (read_positions)."""
+    out = tmp_path / "py.csv"
+    run_python(f"""
+        from OMSimulator import SSP
+        from orchestrator.export.ssp import experiment
+        model = SSP({str(archive)!r}, temp_dir={str(tmp_path / 'tmp')!r}).instantiate()
+        model.setFixedStepSize(experiment({str(archive)!r})[2])
+        model.setResultFile({str(out)!r})
+        model.initialize()
+        model.simulate()
+        model.terminate()
+        model.delete()
+    """, oms, tmp_path)
+    return read_positions(out)
+
+
 def read_positions(path: Path, component: str = "MultirotorPlant") -> np.ndarray:
     """OMSimulator's CSV result as rows of [time, x, y, z] (the plant's pos; a time that
     appears twice, before and after an event, kept once: the last)."""
@@ -134,19 +152,7 @@ def test_the_python_api_plays_it_at_the_archives_step(oms, archive, ours, tmp_pa
     """OMSimulator 3.0's Python API takes start and stop time from the archive but a step only
     from its solver units, which exist for model-exchange FMUs alone: the step of a system of
     co-simulation FMUs is set with setFixedStepSize, from the archive (experiment())."""
-    out = tmp_path / "py.csv"
-    run_python(f"""
-        from OMSimulator import SSP
-        from orchestrator.export.ssp import experiment
-        model = SSP({str(archive)!r}, temp_dir={str(tmp_path / 'tmp')!r}).instantiate()
-        model.setFixedStepSize(experiment({str(archive)!r})[2])
-        model.setResultFile({str(out)!r})
-        model.initialize()
-        model.simulate()
-        model.terminate()
-        model.delete()
-    """, oms, tmp_path)
-    pos = read_positions(out)
+    pos = python_api_positions(oms, archive, tmp_path)
     assert pos[-1, 0] == pytest.approx(SECONDS)
     assert np.abs(pos[:, 1:] - POS0).max() < 1e-9
     assert agree(pos, ours) < 1e-9
@@ -198,18 +204,6 @@ def test_the_command_line_replays_paper_scenario_1(oms, s1_archive, s1_ours, tmp
 
 
 def test_the_python_api_replays_paper_scenario_1(oms, s1_archive, s1_ours, tmp_path):
-    out = tmp_path / "s1py.csv"
-    run_python(f"""
-        from OMSimulator import SSP
-        from orchestrator.export.ssp import experiment
-        model = SSP({str(s1_archive)!r}, temp_dir={str(tmp_path / 'tmp')!r}).instantiate()
-        model.setFixedStepSize(experiment({str(s1_archive)!r})[2])
-        model.setResultFile({str(out)!r})
-        model.initialize()
-        model.simulate()
-        model.terminate()
-        model.delete()
-    """, oms, tmp_path)
-    pos = read_positions(out)
+    pos = python_api_positions(oms, s1_archive, tmp_path)
     assert pos[-1, 0] == pytest.approx(S1_SECONDS)
     assert agree(pos, s1_ours) < 1e-9
