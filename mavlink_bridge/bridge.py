@@ -26,7 +26,6 @@ from mavlink_bridge import telemetry
 from mavlink_bridge.context import (
     COMPONENT_ID,
     DEFAULT_URLS,
-    SYSTEM_ID,
     BridgeConfig,
     Context,
     PacingStats,
@@ -253,7 +252,7 @@ class Bridge(Context):
         kind = msg.get_type()
         hdr = msg.get_header()
         src = (hdr.srcSystem, hdr.srcComponent)
-        if src == (SYSTEM_ID, COMPONENT_ID):
+        if src == (self.config.system_id, COMPONENT_ID):
             self.stats.ignored += 1  # our own messages looped back
             return
         self.sender = addr
@@ -271,7 +270,7 @@ class Bridge(Context):
             self.stats.ignored += 1
             return
         target = (getattr(msg, "target_system", 0), getattr(msg, "target_component", 0))
-        if target[0] not in (0, SYSTEM_ID) or target[1] not in (0, COMPONENT_ID):
+        if target[0] not in (0, self.config.system_id) or target[1] not in (0, COMPONENT_ID):
             self.stats.ignored += 1
             return
         handler(self, ep, msg, src)

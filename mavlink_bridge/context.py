@@ -30,6 +30,8 @@ from mavlink_bridge.setpoints import (
     VehicleState,
 )
 from mavlink_bridge.telemetry import Snapshot, mav
+from orchestrator.mission import items
+from orchestrator.mission.items import MissionItem
 from orchestrator.sim.live import LiveSession
 from plant import Airframe
 
@@ -108,6 +110,7 @@ class BridgeConfig:
     chunk: int = 5
     limits: Limits = field(default_factory=Limits)
     origin: Origin = field(default_factory=Origin)  # WGS84 point of local NED (0, 0, 0)
+    system_id: int = SYSTEM_ID  # MAVLink system id (PX4 SITL instance i: i + 1)
 
 
 def stopping_point(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, acc_limit: np.ndarray,
@@ -163,6 +166,8 @@ class Context:
             raise ValueError("speed must be positive (math.inf: as fast as possible)")
         if not config.urls:
             raise ValueError("at least one endpoint is needed")
+        if not 1 <= config.system_id <= 255:
+            raise ValueError(f"system id {config.system_id} outside 1..255")
         self.config = config
         self.session = LiveSession(config.airframe, pos0=config.pos0, euler0=config.euler0,
                                    chunk=config.chunk,
@@ -172,7 +177,7 @@ class Context:
         self.endpoints: list[Endpoint] = []
         try:
             for i, url in enumerate(config.urls):
-                self.endpoints.append(Endpoint(url, link_id=i, system=SYSTEM_ID,
+                self.endpoints.append(Endpoint(url, link_id=i, system=config.system_id,
                                                component=COMPONENT_ID))
         except Exception:
             self.close()
@@ -218,6 +223,9 @@ class Context:
         self._snapshot: Snapshot | None = None
         self._text_budget: tuple[int, int] = (0, 0)  # (wall second, sent in it)
         self._text_dropped = 0
+        # the plans held (mission, fence, rally: orchestrator.mission.items), as uploaded
+        self.plans: dict[int, list[MissionItem]] = {k: [] for k in items.MISSION_TYPES}
+        self.mission_current = 0  # the mission item flown or to fly next (MISSION_CURRENT)
 
     @property
     def state(self) -> dict[str, dict[str, np.ndarray]]:
@@ -392,6 +400,29 @@ class Context:
         """Send messages, in order, to one endpoint."""
         for m in messages:
             ep.send(m)
+
+    # -- plans ---------------------------------------------------------------------
+
+    def install_plan(self, kind: int, plan: list[MissionItem]) -> str | None:
+        """A plan uploaded whole (mission, fence or rally): checked, then held in place of the
+        one before; returns why it was refused (None: installed).  A new mission starts at its
+        first item."""
+        why = items.check_plan(plan)
+        if why is not None:
+            return why
+        self.plans[kind] = [it.with_seq(i) for i, it in enumerate(plan)]
+        if kind == items.MISSION:
+            self.mission_current = 0
+        return None
+
+    def set_current_item(self, seq: int) -> str | None:
+        """MISSION_SET_CURRENT / DO_SET_MISSION_CURRENT: the mission goes on from item seq;
+        returns why not (None: done)."""
+        n = len(self.plans[items.MISSION])
+        if not 0 <= seq < n:
+            return f"no mission item {seq} (the mission has {n})"
+        self.mission_current = seq
+        return None
 
     def close(self) -> None:
         """Close the endpoints and the co-simulation."""
