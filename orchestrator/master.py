@@ -46,6 +46,7 @@ from orchestrator.sim.engine import (
     make_engine,
 )
 from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.mission_feed import PERIOD_ROWS, MissionFeed
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
 from orchestrator.sim.start_values import Pose, StartValues, start_values
 from plant import plant_fmu
@@ -293,7 +294,11 @@ class CoSimulation:
             rec.time[a:b] = times
             rec.ref[a:b] = _used_columns(refs, REF_INPUTS, engine.conn.ref)
             rec.dist[a:b] = _used_columns(sc.disturbances(times), DIST_INPUTS, engine.conn.dist)
-        wall, (lost, answered) = self._loop(engine, 0, rows - 1, 0.0, on_chunk)
+        feed = None
+        if sc.mission is not None:
+            pos0, euler0 = sc.initial_pose()
+            feed = MissionFeed(engine, sc.mission, pos0, euler0)
+        wall, (lost, answered) = self._loop(engine, 0, rows - 1, 0.0, on_chunk, feed)
         if lost is None:
             engine.controller_answer(rows - 1, (rows - 1) * h)
         else:
@@ -344,16 +349,19 @@ class CoSimulation:
             "plant_parameters": dict(sc.plant_parameters),
             "controller_parameters": dict(sc.controller_parameters),
         }
+        if feed is not None:
+            meta["mission"] = feed.record()
         return RunResult(columns=columns + rec.int_columns, data=full, meta=meta,
                          integer=frozenset(rec.int_columns))
 
     # -- the loop ------------------------------------------------------------
 
     def _loop(self, engine: Engine, first: int, last: int, t0: float,
-              on_chunk: Callable[[int, int], None] | None
+              on_chunk: Callable[[int, int], None] | None, feed: MissionFeed | None = None
               ) -> tuple[float, tuple[Lost | None, bool]]:
         """Steps first .. last-1 (rows of the recording), checking each chunk of rows for a
-        lost vehicle; returns the wall time and the first lost row (None: completed)."""
+        lost vehicle; returns the wall time and the first lost row (None: completed).  With
+        a mission ``feed`` the chunks are its periods, each one's references written first."""
         criteria = self.scenario.lost
         h = self.scenario.step
         show = self.progress if self.progress is not None else sys.stderr.isatty()
@@ -366,8 +374,11 @@ class CoSimulation:
         lost: Lost | None = None
         answered = True  # whether the controller has answered the lost row
         try:
-            for k in range(first, last, 500):
-                stop = min(k + 500, last)
+            chunk = 500 if feed is None else PERIOD_ROWS
+            for k in range(first, last, chunk):
+                stop = min(k + chunk, last)
+                if feed is not None:
+                    feed.fill(k, stop, h)
                 try:
                     engine.steps(k, stop, t0)
                 except RunError as e:  # a diverged loop may end in an FMU error: say lost

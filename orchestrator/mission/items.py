@@ -123,15 +123,17 @@ class MissionItem:
                            self.z, self.current, self.autocontinue, self.mission_type)
 
     @classmethod
-    def local(cls, seq: int, command: int, pos: Sequence[float] | None = None,
+    def local(cls, seq: int, command: int, pos: Sequence[float] | np.ndarray | None = None,
               params: Sequence[float] = (0.0, 0.0, 0.0, 0.0),
               mission_type: int = MISSION) -> MissionItem:
         """An item at a local NED position (m; None: a command without a position)."""
         p = [float(v) for v in params] + [0.0] * (4 - len(params))
         if pos is None:
-            return cls(seq, FRAME_MISSION, command, *p, mission_type=mission_type)
-        return cls(seq, FRAME_LOCAL_NED, command, *p, round(float(pos[0]) * 1e4),
-                   round(float(pos[1]) * 1e4), float(pos[2]), mission_type=mission_type)
+            return cls(seq, FRAME_MISSION, command, p[0], p[1], p[2], p[3],
+                       mission_type=mission_type)
+        return cls(seq, FRAME_LOCAL_NED, command, p[0], p[1], p[2], p[3],
+                   round(float(pos[0]) * 1e4), round(float(pos[1]) * 1e4), float(pos[2]),
+                   mission_type=mission_type)
 
 
 def float_xy(item: MissionItem) -> tuple[float, float]:
@@ -236,7 +238,7 @@ class Geodetic(Protocol):
 
 
 def target(item: MissionItem, geo: Geodetic | None, home_alt: float,
-           here: Sequence[float]) -> np.ndarray:
+           here: Sequence[float] | np.ndarray) -> np.ndarray:
     """The local NED point an item goes to.  Global frames through the origin ``geo``;
     relative-altitude frames count the altitude above home (``home_alt``, m AMSL).  A
     latitude and longitude both 0 (as QGroundControl and MAVSDK send a takeoff or land

@@ -55,6 +55,11 @@ Keys (units in brackets)
     1 cm / 1 deg for good), ``overshoot``, ``peak_tilt``, ``sag``, ``sag_of``,
     ``acc_limit``, ``bound`` (2 sqrt(L/a_max)) and ``bound_ratio``
     (:mod:`orchestrator.output.step_metrics` defines each); an empty list without steps.
+``mission_legs``
+    A run of a scenario's ``[mission]``: one dict per leg flown (``seq``, ``command``,
+    ``start``, ``reached``, ``end`` [s], ``flying_s``, ``position_error`` {``max``, ``rms``}
+    [m] of the error norm, ``attitude_error`` {``max``, ``rms``} [deg] of the largest axis
+    error, both in the air and against the flown reference); None without a mission.
 ``infeasible_fraction`` [-]
     Fraction of samples where the reference pose was infeasible: 1 - mean(``ctrl.feasible``).
 ``saturation`` [-]
@@ -238,6 +243,45 @@ def _tracking(result: RunResult, pos_name: str, euler_name: str) -> dict[str, An
     return out
 
 
+def mission_legs(result: RunResult) -> list[dict[str, Any]] | None:
+    """Per mission leg (a run of a scenario's ``[mission]``: ``meta["mission"]``), the
+    tracking of the rows it was flown (start to end, in the air): its seq, command, start,
+    reached and end times, and position and attitude errors against the flown reference as
+    the whole run's are; None without a mission.  Do-items (no time of their own) are left
+    out."""
+    record = result.meta.get("mission")
+    if not isinstance(record, Mapping):
+        return None
+    t = result.time
+    flown = flown_reference(result)
+    pos, euler = result.optional(result.judged("plant.pos")), result.optional(
+        result.judged("plant.euler"))
+    pos_ref = None if flown["position"] is None else result.optional(flown["position"])
+    att_ref = None if flown["attitude"] is None else result.optional(flown["attitude"])
+    flying = flying_rows(result)
+    out = []
+    for leg in record.get("legs", []):
+        start = float(leg["start"])
+        end = float(t[-1]) if leg.get("end") is None else float(leg["end"])
+        if end <= start:
+            continue
+        rows = (t >= start - 1e-9) & (t < end - 1e-9) & flying
+        entry: dict[str, Any] = {"seq": leg["seq"], "command": leg["command"],
+                                 "start": _num(start), "reached": leg.get("reached"),
+                                 "end": leg.get("end"), "flying_s": _num(
+                                     float(rows.sum()) * float(t[1] - t[0]) if t.size > 1
+                                     else 0.0),
+                                 "position_error": None, "attitude_error": None}
+        if rows.any() and pos is not None and pos_ref is not None:
+            err = np.linalg.norm((pos - pos_ref)[rows], axis=1)
+            entry["position_error"] = {"max": _num(err.max()), "rms": _num(float(_rms(err)))}
+        if rows.any() and euler is not None and att_ref is not None:
+            err = np.abs(wrap_deg(np.degrees(euler - att_ref)[rows])).max(axis=1)
+            entry["attitude_error"] = {"max": _num(err.max()), "rms": _num(float(_rms(err)))}
+        out.append(entry)
+    return out
+
+
 def _duration(result: RunResult) -> float | None:
     if result.meta.get("duration") is not None:
         return float(result.meta["duration"])
@@ -282,6 +326,7 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
     m.update(_tracking(result, *judged))
     m["measured"] = _tracking(result, "plant.pos", "plant.euler") if truth else None
     m["steps"] = step_metrics(result, *judged)
+    m["mission_legs"] = mission_legs(result)
 
     feasible = result.optional("ctrl.feasible")
     m["infeasible_fraction"] = (None if feasible is None or feasible.size == 0

@@ -11,6 +11,7 @@ from typing import Any
 import numpy as np
 from numpy.typing import ArrayLike
 
+from orchestrator.scenario.mission import ScenarioMission
 from orchestrator.scenario.signals import ZERO, Signal
 from orchestrator.sim.outcome import LostCriteria
 from plant import Airframe
@@ -67,6 +68,9 @@ class Scenario:
     # "air": start at the reference's pose at hover trim; "ground": resting level on the
     # landing gear below the reference's start, rotors stopped
     start: str = "air"
+    # mission items flown by the mission executor instead of reference signals (position
+    # and attitude are then the start pose, held until the executor takes over)
+    mission: ScenarioMission | None = None
 
     @property
     def true_airframe(self) -> Airframe:
@@ -156,6 +160,7 @@ class Scenario:
             "airframe_source": self.airframe.source,
             "coupling": self.coupling,
             "start": self.start,
+            "mission": None if self.mission is None else self.mission.summary(),
             "faults": [vars(f) for f in self.faults],
             "plant_parameters": dict(self.plant_parameters),
             "controller_parameters": dict(self.controller_parameters),

@@ -84,6 +84,7 @@ from typing import Any
 
 from controller import CONTROLLER_FMU
 from orchestrator.scenario.checks import STEP_QUANTUM, check_timing, checked, parameter_values
+from orchestrator.scenario.mission import parse_mission
 from orchestrator.scenario.model import (
     ATTITUDE_AXES,
     DISTURBANCES,
@@ -93,8 +94,8 @@ from orchestrator.scenario.model import (
     Scenario,
     Vec3,
 )
-from orchestrator.scenario.reader import FieldReader, ScenarioError
-from orchestrator.scenario.signals import ZERO, Scaled, Signal, parse_signal
+from orchestrator.scenario.reader import FieldReader, ScenarioError, is_number
+from orchestrator.scenario.signals import ZERO, Constant, Scaled, Signal, parse_signal
 from orchestrator.sim.engine import COUPLINGS
 from orchestrator.sim.outcome import DEFAULT_POSITION_ERROR, DEFAULT_TILT_DEG, LostCriteria
 from plant import PLANT_FMU, Airframe, AirframeError, list_airframes, load_airframe
@@ -110,7 +111,7 @@ DEFAULT_STEP = STEP_QUANTUM
 """The communication step of a scenario that names none, s."""
 _TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "start",
              "reference", "disturbance", "fault", "fault_detection", "lost", "plant",
-             "controller", "origin")
+             "controller", "origin", "mission")
 
 
 def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
@@ -145,6 +146,21 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
                     or attitude)
         reference.reject_unknown(lambda _k: " (expected position, attitude or attitude_deg)")
 
+    mission = None
+    mission_table = top.table("mission")
+    if mission_table is not None:
+        if reference is not None:
+            raise top.fail("mission", "give either [reference] signals or a [mission], "
+                           "not both")
+        plant_ground = top.raw("plant")
+        ground_z = 0.0
+        if isinstance(plant_ground, dict) and is_number(plant_ground.get("ground_z")):
+            ground_z = float(plant_ground["ground_z"])
+        mission = parse_mission(mission_table, ground_z)
+        position = (Constant(mission.start[0]), Constant(mission.start[1]),
+                    Constant(mission.start[2]))
+        attitude = (ZERO, ZERO, Constant(mission.yaw))
+
     dist: dict[str, Vec3] = {}
     disturbance = top.table("disturbance")
     if disturbance is not None:
@@ -171,6 +187,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         airframe=airframe,
         coupling=coupling,
         start=start,
+        mission=mission,
         position=position,
         attitude=attitude,
         faults=faults,
