@@ -1,7 +1,7 @@
 """The small MAVLink services a ground station expects on connect, answered so that it
-moves on at once: MAVLink FTP (a NAK), PING, and the mission protocol for mission, fence
-and rally with empty plans.  Each function takes the received message and the sender
-(system, component) and returns the messages to send back to that sender.
+moves on at once: MAVLink FTP (a NAK) and PING.  Each function takes the received message and
+the sender (system, component) and returns the messages to send back to that sender.  (The
+mission protocol: :mod:`mavlink_bridge.mission_protocol`.)
 """
 
 from __future__ import annotations
@@ -80,43 +80,3 @@ def ping_reply(msg: Any, src: tuple[int, int]) -> list[Any]:
     if int(msg.target_system) != 0 or int(msg.target_component) != 0:
         return []  # a reply to someone's ping, not a request
     return [mav.MAVLink_ping_message(int(msg.time_usec), int(msg.seq), src[0], src[1])]
-
-
-MISSION_TYPES = (mav.MAV_MISSION_TYPE_MISSION, mav.MAV_MISSION_TYPE_FENCE,
-                 mav.MAV_MISSION_TYPE_RALLY)
-
-
-def _mission_type(msg: Any) -> int:
-    return int(getattr(msg, "mission_type", mav.MAV_MISSION_TYPE_MISSION))
-
-
-def mission_request_list(msg: Any, src: tuple[int, int]) -> list[Any]:
-    """Download: every plan (mission, fence, rally) is empty: MISSION_COUNT 0."""
-    kind = _mission_type(msg)
-    if kind not in MISSION_TYPES:
-        return [mav.MAVLink_mission_ack_message(src[0], src[1], mav.MAV_MISSION_UNSUPPORTED,
-                                                kind)]
-    return [mav.MAVLink_mission_count_message(src[0], src[1], 0, kind)]
-
-
-def mission_request_item(msg: Any, src: tuple[int, int]) -> list[Any]:
-    """MISSION_REQUEST(_INT) for an item of an empty plan: no such sequence number."""
-    return [mav.MAVLink_mission_ack_message(src[0], src[1], mav.MAV_MISSION_INVALID_SEQUENCE,
-                                            _mission_type(msg))]
-
-
-def mission_count(msg: Any, src: tuple[int, int]) -> tuple[list[Any], str | None]:
-    """Upload: an empty plan is what we hold (ACCEPTED); anything else is DENIED and
-    the text says why (uploads belong to the ground-and-missions issue)."""
-    kind = _mission_type(msg)
-    if int(msg.count) == 0 and kind in MISSION_TYPES:
-        return [mav.MAVLink_mission_ack_message(src[0], src[1], mav.MAV_MISSION_ACCEPTED,
-                                                kind)], None
-    return ([mav.MAVLink_mission_ack_message(src[0], src[1], mav.MAV_MISSION_DENIED, kind)],
-            "mission upload refused: not supported yet")
-
-
-def mission_clear_all(msg: Any, src: tuple[int, int]) -> list[Any]:
-    """The plans are empty already: ACCEPTED."""
-    return [mav.MAVLink_mission_ack_message(src[0], src[1], mav.MAV_MISSION_ACCEPTED,
-                                            _mission_type(msg))]

@@ -200,9 +200,11 @@ def test_empty_mission_fence_rally_and_refused_upload(ground):
     ack = g.wait("MISSION_ACK", 5.0)
     assert ack.type == mav.MAV_MISSION_INVALID_SEQUENCE
     g.gcs.mav.mission_count_send(1, 1, 3, 0)
+    assert g.wait("MISSION_REQUEST_INT", 5.0).seq == 0
+    g.gcs.mav.mission_item_int_send(1, 1, 0, 2, 34, 0, 1, 5, 1, 0, 0, 0, 0, 0, 0)  # DO_ORBIT
     ack = g.wait("MISSION_ACK", 5.0)
-    assert ack.type == mav.MAV_MISSION_DENIED
-    g.text("mission upload refused")
+    assert ack.type == mav.MAV_MISSION_UNSUPPORTED
+    g.text("mission upload refused: item 0: orbits not supported")
     g.gcs.mav.mission_count_send(1, 1, 0, 1)  # clearing the fence: what we hold
     ack = g.wait("MISSION_ACK", 5.0)
     assert ack.type == mav.MAV_MISSION_ACCEPTED and ack.mission_type == 1
