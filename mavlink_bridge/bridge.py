@@ -22,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from mavlink_bridge import telemetry
+from mavlink_bridge import auto, telemetry
 from mavlink_bridge.context import (
     COMPONENT_ID,
     DEFAULT_URLS,
@@ -30,7 +30,7 @@ from mavlink_bridge.context import (
     Context,
     PacingStats,
 )
-from mavlink_bridge.handlers import HANDLERS, signing
+from mavlink_bridge.handlers import HANDLERS, missions, signing
 from mavlink_bridge.links import Address, Endpoint
 from mavlink_bridge.telemetry import mav
 
@@ -122,11 +122,16 @@ class Bridge(Context):
                 self.ref.integrate(self.pos_sp, self.att_sp, s.step_size * s.chunk)
             elif not self.frozen:
                 self.freeze()
+        elif self.armed:
+            auto.step(self)
         s.set_reference(**self.ref.as_inputs())
         s.advance()
         self.refresh()
         self.battery.update(self.thrust_fraction(), s.step_size * s.chunk)
         self._watch()
+        auto.watch_ground(self)
+        auto.watch_fence(self)
+        missions.tick(self, time.monotonic())  # an upload's item requested again when lost
         self._publish()
 
     @property

@@ -31,6 +31,8 @@ from mavlink_bridge.setpoints import (
 )
 from mavlink_bridge.telemetry import Snapshot, mav
 from orchestrator.mission import items
+from orchestrator.mission.executor import Executor
+from orchestrator.mission.fence import Fence
 from orchestrator.mission.items import MissionItem
 from orchestrator.sim.live import LiveSession
 from plant import Airframe
@@ -111,6 +113,9 @@ class BridgeConfig:
     limits: Limits = field(default_factory=Limits)
     origin: Origin = field(default_factory=Origin)  # WGS84 point of local NED (0, 0, 0)
     system_id: int = SYSTEM_ID  # MAVLink system id (PX4 SITL instance i: i + 1)
+    # "ground": boot landed and disarmed, resting on the landing gear below pos0 (as PX4
+    # SITL); "air": hovering at pos0 from the start, the rotors spinning whatever the arming
+    start: str = "ground"
 
 
 def stopping_point(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, acc_limit: np.ndarray,
@@ -166,6 +171,8 @@ class Context:
             raise ValueError("speed must be positive (math.inf: as fast as possible)")
         if not config.urls:
             raise ValueError("at least one endpoint is needed")
+        if config.start not in ("ground", "air"):
+            raise ValueError(f"start must be 'ground' or 'air', got {config.start!r}")
         if not 1 <= config.system_id <= 255:
             raise ValueError(f"system id {config.system_id} outside 1..255")
         self.config = config
@@ -173,7 +180,7 @@ class Context:
                                    chunk=config.chunk,
                                    plant_parameters=config.plant_parameters,
                                    controller_parameters_=config.controller_parameters,
-                                   coupling=config.coupling)
+                                   coupling=config.coupling, ground=config.start == "ground")
         self.endpoints: list[Endpoint] = []
         try:
             for i, url in enumerate(config.urls):
@@ -205,7 +212,24 @@ class Context:
         self.battery = telemetry.Battery()
         self.mode = "HOLD"
         self.armed = False
-        self.ref = Reference.hold(np.array(config.pos0, float), np.array(config.euler0, float))
+        self.ground_start = config.start == "ground"
+        pos0 = self.session.pos0
+        self.ref = Reference.hold(pos0, np.array(config.euler0, float))
+        if self.ground_start:
+            self.ref.euler[:2] = 0.0
+        self.ground_z = float((config.plant_parameters or {}).get("ground_z", 0.0)) \
+            if self.airframe.gear is not None else None
+        # home (DO_SET_HOME moves it): where the vehicle rests at boot; on an air start the
+        # ground below (the origin's level without a ground)
+        self.home = pos0.copy()
+        if not self.ground_start:
+            self.home[2] = self.ground_z if self.ground_z is not None else 0.0
+        self.auto: Executor | None = None  # the plan an auto mode flies (mavlink_bridge.auto)
+        self.cruise: float | None = None  # a DO_CHANGE_SPEED in force (m/s; None: none)
+        self.flew = False  # airborne since armed (auto-disarm: COM_DISARM_LAND / _PRFLT)
+        self.landed_since = math.inf  # simulated s the vehicle has been landed since
+        self.fence = Fence()
+        self.breached = False
         self.pos_sp: PositionSetpoint | None = None
         self.att_sp: AttitudeSetpoint | None = None
         self.last_setpoint: float = -math.inf  # simulated time of the last accepted one
@@ -289,9 +313,37 @@ class Context:
                              ctrl["ref_acc_limit"], ctrl["ref_jerk_limit"])
         self.ref = Reference.hold(pos, v.euler)
 
+    @property
+    def landed(self) -> bool:
+        """Whether the controller's land detector says landed."""
+        return bool(self._state["ctrl"]["landed"][0] > 0.5)
+
+    @property
+    def home_alt(self) -> float:
+        """Home's altitude (m AMSL): what relative altitudes count from."""
+        return self.origin.to_geodetic(*(float(v) for v in self.home))[2]
+
+    def set_armed(self, armed: bool) -> None:
+        """Arm or disarm: the controller's ``armed`` input follows on a ground start (on an
+        air start the rotors spin from the start, as when armed in flight)."""
+        self.armed = armed
+        self.flew = False
+        self.landed_since = math.inf
+        if self.ground_start:
+            self.session.set_armed(armed)
+
+    def disarm(self) -> None:
+        """Disarm (the rotors stop on a ground start) and hold: the mode becomes HOLD."""
+        self.set_armed(False)
+        self.hold()
+        self.mode = "HOLD"
+        self.heartbeat_now()
+
     def hold(self) -> None:
         """Hold the pose reached and forget the setpoints; after a setpoint loss the pose
-        already held since (:meth:`freeze`) is kept, so the vehicle does not move again."""
+        already held since (:meth:`freeze`) is kept, so the vehicle does not move again.
+        A plan being flown is dropped; on the ground the hold is the pose on the gear."""
+        self.auto = None
         if not self.frozen:
             v = self.vehicle()
             self.ref = Reference.hold(v.pos, v.euler)
@@ -337,13 +389,31 @@ class Context:
                 tilt_limits=np.abs(np.column_stack([af.alpha_limits[:, 1],
                                                     af.beta_limits[:, 1]])),
                 thrust_max=n * af.k_t * af.omega_max ** 2, load=self.busy / wall,
-                origin=self.origin, battery=self.battery, unix_us=int(time.time() * 1e6))
+                origin=self.origin, battery=self.battery, unix_us=int(time.time() * 1e6),
+                home=self.home, landed_state=self.landed_state_now(),
+                mission_seq=self.mission_current,
+                mission_total=len(self.plans[items.MISSION]),
+                mission_active=self.mode == "MISSION")
         return self._snapshot
 
     def fresh_snapshot(self) -> Snapshot:
         """A snapshot made now (after a change of mode or arming within the chunk)."""
         self._snapshot = None
         return self.snapshot()
+
+    def landed_state_now(self) -> int:
+        """EXTENDED_SYS_STATE's landed state now (ON_GROUND, TAKEOFF, IN_AIR, LANDING)."""
+        if self.landed:
+            return int(mav.MAV_LANDED_STATE_ON_GROUND)
+        phase = self.auto.phase if self.auto is not None else ""
+        return int({"takeoff": mav.MAV_LANDED_STATE_TAKEOFF,
+                    "landing": mav.MAV_LANDED_STATE_LANDING}.get(
+                        phase, mav.MAV_LANDED_STATE_IN_AIR))
+
+    def send_all(self, message: Any) -> None:
+        """One message to every endpoint."""
+        for ep in self.endpoints:
+            ep.send(message)
 
     def heartbeat_now(self) -> None:
         """A HEARTBEAT to every endpoint now (a change of mode or arming)."""
@@ -413,6 +483,13 @@ class Context:
         self.plans[kind] = [it.with_seq(i) for i, it in enumerate(plan)]
         if kind == items.MISSION:
             self.mission_current = 0
+            if self.mode == "MISSION":  # the plan flown is gone: hold, as told
+                self.hold()
+                self.set_mode("HOLD")
+                self.statustext(mav.MAV_SEVERITY_WARNING, "mission replaced: holding")
+        if kind == items.FENCE:
+            self.fence = Fence.from_items(self.plans[kind], self.origin, self.home_alt)
+            self.breached = False
         return None
 
     def set_current_item(self, seq: int) -> str | None:
@@ -422,6 +499,11 @@ class Context:
         if not 0 <= seq < n:
             return f"no mission item {seq} (the mission has {n})"
         self.mission_current = seq
+        if self.mode == "MISSION" and self.auto is not None:  # go on from there at once
+            self.auto = Executor(self.plans[items.MISSION], self.auto.settings,
+                                 self.ref.pos.copy(), self.ref.euler.copy(),
+                                 home=self.home.copy(), home_alt=self.home_alt,
+                                 geo=self.origin, start=seq)
         return None
 
     def close(self) -> None:

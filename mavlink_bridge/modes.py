@@ -20,7 +20,6 @@ CUSTOM_MODE_ENABLED = 1  # MAV_MODE_FLAG_CUSTOM_MODE_ENABLED
 SUB_POSCTL_ORBIT = 1  # PX4_CUSTOM_SUB_MODE_POSCTL_ORBIT (POSCTL_POSCTL = 0)
 
 _STICKS = "needs sticks, not simulated"
-_NO_GROUND = "no ground here; use HOLD"
 
 #: PX4 (main, sub) -> (mode name as MAVROS spells it, bridge mode flown or None, reason)
 _TABLE: dict[tuple[int, int], tuple[str, str | None, str]] = {
@@ -31,26 +30,25 @@ _TABLE: dict[tuple[int, int], tuple[str, str | None, str]] = {
     (px4.MAIN_OFFBOARD, 0): ("OFFBOARD", "OFFBOARD", ""),
     (px4.MAIN_STABILIZED, 0): ("STABILIZED", None, _STICKS),
     (px4.MAIN_RATTITUDE, 0): ("RATTITUDE", None, _STICKS),
-    (px4.MAIN_AUTO, px4.SUB_AUTO_READY): ("AUTO.READY", None, _NO_GROUND),
-    (px4.MAIN_AUTO, px4.SUB_AUTO_TAKEOFF): ("AUTO.TAKEOFF", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_READY): ("AUTO.READY", None, "not a mode PX4 flies"),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_TAKEOFF): ("AUTO.TAKEOFF", "TAKEOFF", ""),
     (px4.MAIN_AUTO, px4.SUB_AUTO_LOITER): ("AUTO.LOITER", "HOLD", ""),
-    (px4.MAIN_AUTO, px4.SUB_AUTO_MISSION): ("AUTO.MISSION", None,
-                                            "no mission uploaded"),
-    (px4.MAIN_AUTO, px4.SUB_AUTO_RTL): ("AUTO.RTL", None, _NO_GROUND),
-    (px4.MAIN_AUTO, px4.SUB_AUTO_LAND): ("AUTO.LAND", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_MISSION): ("AUTO.MISSION", "MISSION", ""),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_RTL): ("AUTO.RTL", "RTL", ""),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_LAND): ("AUTO.LAND", "LAND", ""),
     (px4.MAIN_AUTO, px4.SUB_AUTO_RTGS): ("AUTO.RTGS", None, "not simulated"),
     (px4.MAIN_AUTO, px4.SUB_AUTO_FOLLOW_TARGET): ("AUTO.FOLLOW_TARGET", None,
                                                   "not simulated"),
-    (px4.MAIN_AUTO, px4.SUB_AUTO_PRECLAND): ("AUTO.PRECLAND", None, _NO_GROUND),
+    (px4.MAIN_AUTO, px4.SUB_AUTO_PRECLAND): ("AUTO.PRECLAND", None,
+                                             "no landing target: use AUTO.LAND"),
 }
 
 
-#: commands that are the same requests as refused modes (QGroundControl's Takeoff button,
-#: MAVSDK's land / return_to_launch): UNSUPPORTED, with the mode's reason
+#: commands not flown here and why (UNSUPPORTED, the reason told by STATUSTEXT)
 COMMAND_REASONS: dict[int, str] = {
-    20: "return to launch: " + _NO_GROUND,  # MAV_CMD_NAV_RETURN_TO_LAUNCH
-    21: "land: " + _NO_GROUND,  # MAV_CMD_NAV_LAND
-    22: "takeoff: " + _NO_GROUND,  # MAV_CMD_NAV_TAKEOFF
+    34: "orbit not supported: fly the circle as mission legs",  # MAV_CMD_DO_ORBIT
+    84: "VTOL takeoff: not a VTOL",  # MAV_CMD_NAV_VTOL_TAKEOFF
+    85: "VTOL land: not a VTOL",  # MAV_CMD_NAV_VTOL_LAND
 }
 
 

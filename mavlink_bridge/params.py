@@ -135,6 +135,43 @@ BRIDGE_PARAMETERS: tuple[BridgeParam, ...] = (
 )
 
 
+#: the PX4 parameters flight from the ground reads (mavlink_bridge.auto), PX4's names and
+#: meanings so that ground stations set them as they do on PX4 (MAVSDK's
+#: set_takeoff_altitude writes MIS_TAKEOFF_ALT, set_maximum_speed MPC_XY_VEL_MAX,
+#: set_return_to_launch_altitude RTL_RETURN_ALT).  Defaults are PX4's where they suit a
+#: vehicle of a metre flown in a room-sized space, smaller where PX4's are made for fields
+#: (docs/mavlink.md lists both).
+FLIGHT_PARAMETERS: tuple[BridgeParam, ...] = (
+    BridgeParam("MIS_TAKEOFF_ALT", 2.5, Range(0.5, 80.0),
+                "takeoff altitude above home (m; PX4 default 2.5)"),
+    BridgeParam("MPC_XY_CRUISE", 1.0, Range(0.1, 20.0),
+                "horizontal speed of missions, go-to and returns (m/s; PX4 5)"),
+    BridgeParam("MPC_XY_VEL_MAX", 5.0, Range(0.1, 20.0),
+                "largest horizontal speed a speed change may ask for (m/s; PX4 12)"),
+    BridgeParam("MPC_Z_VEL_MAX_UP", 1.0, Range(0.1, 8.0), "climb speed (m/s; PX4 3)"),
+    BridgeParam("MPC_Z_VEL_MAX_DN", 0.7, Range(0.1, 4.0), "descent speed (m/s; PX4 1.5)"),
+    BridgeParam("MPC_LAND_SPEED", 0.5, Range(0.1, 2.0),
+                "landing descent speed (m/s; PX4 0.7)"),
+    BridgeParam("MPC_ACC_HOR", 2.0, Range(0.5, 15.0),
+                "horizontal acceleration of auto flight (m/s^2; PX4 3)"),
+    BridgeParam("MPC_ACC_UP_MAX", 1.5, Range(0.5, 15.0),
+                "vertical acceleration upwards (m/s^2; PX4 4)"),
+    BridgeParam("MPC_ACC_DOWN_MAX", 1.5, Range(0.5, 15.0),
+                "vertical acceleration downwards (m/s^2; PX4 3)"),
+    BridgeParam("NAV_ACC_RAD", 0.1, Range(0.01, 20.0),
+                "acceptance radius of items giving none (m; PX4 10)"),
+    BridgeParam("RTL_RETURN_ALT", 3.0, Range(0.0, 150.0),
+                "altitude above home a return climbs to first (m; PX4 60)"),
+    BridgeParam("COM_DISARM_LAND", 2.0, Range(-1.0, 20.0),
+                "disarm this long after landing (s; <= 0: never; PX4 2)"),
+    BridgeParam("COM_DISARM_PRFLT", 10.0, Range(-1.0, 20.0),
+                "disarm this long after arming without a takeoff (s; <= 0: never; PX4 10)"),
+    BridgeParam("GF_ACTION", 2.0, Range(0.0, 5.0, integer=True),
+                "geofence breach: 0 none, 1 warning, 2 hold, 3 return, 5 land (4 refused: "
+                "no flight termination here; PX4 2)"),
+)
+
+
 def identity_parameters() -> list[BridgeParam]:
     """The PX4 parameters ground stations require (mavlink_bridge.identity), read-only: their
     range is their value."""
@@ -224,7 +261,7 @@ class ParameterTable:
             name = mavlink_name(fmu_name)
             if name is not None and len(name) <= 16:
                 self.items.append(Parameter(name, fmu_name, float(value), rng, float(value)))
-        for bp in (*BRIDGE_PARAMETERS, *identity_parameters()):
+        for bp in (*BRIDGE_PARAMETERS, *FLIGHT_PARAMETERS, *identity_parameters()):
             if bp.name not in {p.name for p in self.items}:
                 self.items.append(Parameter(bp.name, None, bp.default, bp.range, bp.default))
         self._by_name = {p.name: i for i, p in enumerate(self.items)}
@@ -273,6 +310,8 @@ class ParameterTable:
             return "an integer parameter"
         if not p.range.contains(value):
             return f"outside {p.range.text()}"
+        if p.name == "GF_ACTION" and value == 4:
+            return "flight termination is not simulated"
         if p.fmu_name is None:
             return None
         r = p.range

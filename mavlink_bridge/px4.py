@@ -31,6 +31,10 @@ MODES: dict[str, tuple[int, int]] = {
     "HOLD": (MAIN_AUTO, SUB_AUTO_LOITER),  # AUTO.LOITER: hold the current pose
     "POSCTL": (MAIN_POSCTL, 0),  # no sticks here: holds the pose like HOLD
     "OFFBOARD": (MAIN_OFFBOARD, 0),  # follow SET_POSITION_TARGET/SET_ATTITUDE_TARGET
+    "TAKEOFF": (MAIN_AUTO, SUB_AUTO_TAKEOFF),  # climb to MIS_TAKEOFF_ALT (or as commanded)
+    "LAND": (MAIN_AUTO, SUB_AUTO_LAND),  # descend where it is until landed
+    "RTL": (MAIN_AUTO, SUB_AUTO_RTL),  # climb to RTL_RETURN_ALT, home (or a rally point), land
+    "MISSION": (MAIN_AUTO, SUB_AUTO_MISSION),  # fly the uploaded mission
 }
 
 

@@ -40,6 +40,7 @@ DEFAULT_RATES: dict[int, float] = {
     mav.MAVLINK_MSG_ID_ALTITUDE: 1.0,
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: 1.0,
     mav.MAVLINK_MSG_ID_BATTERY_STATUS: 0.5,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: 1.0,  # PX4 streams it at 1 Hz to a GCS as well
 }
 #: messages REQUEST_MESSAGE can produce besides the streamed ones
 ON_REQUEST = (mav.MAVLINK_MSG_ID_AUTOPILOT_VERSION,)
@@ -63,6 +64,11 @@ class Snapshot:
     origin: Origin = field(default_factory=Origin)
     battery: Battery = field(default_factory=lambda: Battery())
     unix_us: int = 0  # wall clock (SYSTEM_TIME), 0: unknown
+    home: np.ndarray = field(default_factory=lambda: np.zeros(3))  # local NED of home
+    landed_state: int = mav.MAV_LANDED_STATE_IN_AIR
+    mission_seq: int = 0  # the mission item flown or next (MISSION_CURRENT)
+    mission_total: int = 0  # items in the mission
+    mission_active: bool = False  # flying it (AUTO.MISSION)
 
 
 @dataclass
@@ -214,7 +220,7 @@ def _global(s: Snapshot) -> tuple[int, int, int, int]:
     """(lat 1e7 deg, lon 1e7 deg, alt mm AMSL, relative alt mm above home)."""
     n, e, d = _f(s.plant["pos"])
     lat, lon, alt = s.origin.to_geodetic(n, e, d)
-    home_alt = s.origin.alt  # home is the origin (local NED 0, 0, 0)
+    home_alt = s.origin.to_geodetic(*_f(s.home))[2]
     return (round(lat * 1e7), round(lon * 1e7), round(alt * 1000),
             round((alt - home_alt) * 1000))
 
@@ -245,21 +251,24 @@ def gps_raw_int(s: Snapshot) -> Any:
                                            70, 110, vel, cog, 10, alt, 900, 1780, 400, 0, 0)
 
 
-def _home_fields(s: Snapshot) -> tuple[int, int, int]:
+def _origin_fields(s: Snapshot) -> tuple[int, int, int]:
     o = s.origin
     return round(o.lat * 1e7), round(o.lon * 1e7), round(o.alt * 1000)
 
 
 def home_position(s: Snapshot) -> Any:
-    """HOME_POSITION: the origin of the local frame as home."""
-    lat, lon, alt = _home_fields(s)
-    return mav.MAVLink_home_position_message(lat, lon, alt, 0.0, 0.0, 0.0,
+    """HOME_POSITION: home (where the vehicle booted, or as DO_SET_HOME moved it), in WGS84
+    and in the local frame."""
+    lat, lon, alt = s.origin.to_geodetic(*_f(s.home))
+    x, y, z = _f(s.home)
+    return mav.MAVLink_home_position_message(round(lat * 1e7), round(lon * 1e7),
+                                             round(alt * 1000), x, y, z,
                                              [1.0, 0.0, 0.0, 0.0], 0.0, 0.0, 0.0, _us(s))
 
 
 def gps_global_origin(s: Snapshot) -> Any:
     """GPS_GLOBAL_ORIGIN: the WGS84 point of the local NED origin."""
-    lat, lon, alt = _home_fields(s)
+    lat, lon, alt = _origin_fields(s)
     return mav.MAVLink_gps_global_origin_message(lat, lon, alt, _us(s))
 
 
@@ -289,10 +298,17 @@ def system_time(s: Snapshot) -> Any:
 
 
 def extended_sys_state(s: Snapshot) -> Any:
-    # the simulated vehicle has no ground: it is always in the air
-    """EXTENDED_SYS_STATE: not a VTOL, in the air."""
+    """EXTENDED_SYS_STATE: not a VTOL; on the ground, taking off, in the air or landing."""
     return mav.MAVLink_extended_sys_state_message(mav.MAV_VTOL_STATE_UNDEFINED,
-                                                  mav.MAV_LANDED_STATE_IN_AIR)
+                                                  s.landed_state)
+
+
+def mission_current(s: Snapshot) -> Any:
+    """MISSION_CURRENT: the item flown or next, of how many, and whether a mission is
+    flown (MISSION_STATE)."""
+    state = (mav.MISSION_STATE_NO_MISSION if s.mission_total == 0 else
+             mav.MISSION_STATE_ACTIVE if s.mission_active else mav.MISSION_STATE_NOT_STARTED)
+    return mav.MAVLink_mission_current_message(s.mission_seq, s.mission_total, state, 0)
 
 
 def actuator_output_status(s: Snapshot) -> Any:
@@ -364,6 +380,7 @@ _BUILDERS = {
     mav.MAVLINK_MSG_ID_ALTITUDE: altitude,
     mav.MAVLINK_MSG_ID_SYSTEM_TIME: system_time,
     mav.MAVLINK_MSG_ID_BATTERY_STATUS: battery_status,
+    mav.MAVLINK_MSG_ID_MISSION_CURRENT: mission_current,
 }
 
 

@@ -48,7 +48,7 @@ from orchestrator.sim.engine import (
 from orchestrator.sim.fmu import FmuInstance
 from orchestrator.sim.mission_feed import PERIOD_ROWS, MissionFeed
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
-from orchestrator.sim.start_values import Pose, StartValues, start_values
+from orchestrator.sim.start_values import Pose, StartValues, resting_on_ground, start_values
 from plant import plant_fmu
 
 if TYPE_CHECKING:
@@ -252,10 +252,9 @@ class CoSimulation:
         plant_overrides = dict(sc.plant_parameters)
         if sc.start == "ground":  # at rest on the gear, rotors stopped (the overrides last)
             pos, euler = sc.initial_pose()
+            _, stopped = resting_on_ground(sc.true_airframe, pos.tolist(), float(euler[2]))
             pose = Pose.of(pos.tolist(), euler.tolist())
-            stopped = {f"{a}0[{i + 1}]": 0.0 for a in ("omega", "alpha", "beta")
-                       for i in range(sc.true_airframe.n_rotors)}
-            plant_overrides = {"init_trim": False, **stopped, **plant_overrides}
+            plant_overrides = {**stopped, **plant_overrides}
         return start_values(sc.airframe, pose, timing=self.timing,
                             plant_overrides=plant_overrides,
                             controller_overrides=sc.controller_parameters,

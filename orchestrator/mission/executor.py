@@ -181,6 +181,17 @@ class Executor:
         self._leg: _Leg | None = None
         self._started = False
 
+    @property
+    def phase(self) -> str:
+        """"takeoff" while a takeoff leg is flown, "landing" while a landing descends, else
+        "" (what EXTENDED_SYS_STATE's landed state tells)."""
+        leg = self._leg
+        if leg is None:
+            return ""
+        if self.plan[self.current].command == mi.NAV_TAKEOFF:
+            return "takeoff"
+        return "landing" if leg.land and leg.descent is not None else ""
+
     # -- the loop ----------------------------------------------------------------
 
     def update(self, t: float, vehicle: Vehicle) -> dict[str, np.ndarray]:

@@ -23,7 +23,7 @@ from orchestrator.sim.engine import (
     make_engine,
 )
 from orchestrator.sim.fmu import FmuInstance
-from orchestrator.sim.start_values import Pose, start_values
+from orchestrator.sim.start_values import Pose, resting_on_ground, start_values
 from plant import Airframe, load_airframe, plant_fmu
 
 
@@ -31,7 +31,9 @@ class LiveSession:
     """``advance()`` runs ``chunk`` steps of ``step`` seconds with the references held.
 
     The vehicle starts hovering at trim at ``pos0``/``euler0`` with the references
-    set to that pose.  ``state()`` returns the latest plant outputs and controller
+    set to that pose; with ``ground``, resting level on its landing gear on the ground below
+    ``pos0`` (heading ``euler0[2]``), rotors stopped, the controller disarmed (``pos0``: the
+    pose it starts at).  ``state()`` returns the latest plant outputs and controller
     outputs by variable name.
     """
 
@@ -41,7 +43,7 @@ class LiveSession:
                  plant_parameters: Mapping[str, float | int | bool] | None = None,
                  controller_parameters_: Mapping[str, float | int | bool] | None = None,
                  coupling: str = "gauss-seidel", engine: str = "native",
-                 timing: bool = False) -> None:
+                 timing: bool = False, ground: bool = False) -> None:
         if coupling not in COUPLINGS or engine not in ENGINES:
             raise ValueError(f"coupling must be one of {COUPLINGS}, engine one of {ENGINES}")
         if chunk < 1:
@@ -53,9 +55,19 @@ class LiveSession:
         self.plant_inst = FmuInstance(plant_fmu(), "plant")
         self.ctrl_inst = FmuInstance(controller_fmu(), "controller")
         try:
-            start = start_values(self.airframe, Pose.of(pos0, euler0), timing=timing,
-                                 plant_overrides=plant_parameters,
-                                 controller_overrides=controller_parameters_)
+            pose = Pose.of(pos0, euler0)
+            plant_over: dict[str, float | int | bool] = {}
+            ctrl_over: dict[str, float | int | bool] = {}
+            if ground:  # resting on the gear below pos0, rotors stopped, disarmed
+                ground_z = float((plant_parameters or {}).get("ground_z", 0.0))
+                pose, plant_over = resting_on_ground(self.airframe, pos0, euler0[2], ground_z)
+                ctrl_over["armed"] = False
+            pos0, euler0 = pose.pos, pose.euler
+            self.pos0 = np.array(pos0, float)
+            start = start_values(self.airframe, pose, timing=timing,
+                                 plant_overrides={**plant_over, **(plant_parameters or {})},
+                                 controller_overrides={**ctrl_over,
+                                                       **(controller_parameters_ or {})})
             conn = Connections.closed_loop(self.plant_inst, self.ctrl_inst)
             self.rec = Recording(conn, chunk + 1)
             self.engine = make_engine(engine, self.plant_inst, self.ctrl_inst, conn, self.rec,
@@ -103,6 +115,11 @@ class LiveSession:
         if var is None or var.causality != "parameter" or var.variability != "tunable":
             raise KeyError(f"{name!r} is not a tunable parameter of the controller")
         self.ctrl_inst.set(name, value)
+
+    def set_armed(self, armed: bool) -> None:
+        """The controller's ``armed`` input from the next step on (disarmed: the rotors
+        stop; armed: they may spin, idling while landed with the reference not above)."""
+        self.ctrl_inst.set("armed", bool(armed))
 
     # -- stepping ------------------------------------------------------------
 

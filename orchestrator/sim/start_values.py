@@ -98,3 +98,19 @@ def start_values(airframe: Airframe, pose: Pose = Pose(), *,
         controller=controller_start_values(airframe, design=design,
                                            overrides={"timing": timing,
                                                       **(controller_overrides or {})}))
+
+
+def resting_on_ground(airframe: Airframe, pos: Sequence[float], yaw: float,
+                      ground_z: float = 0.0) -> tuple[Pose, dict[str, Value]]:
+    """The pose of a vehicle resting level on its landing gear on the ground at ``ground_z``
+    below the point ``pos`` (its heading ``yaw``), and the plant overrides that start it
+    there: no hover trim, every rotor stopped and its tilt at zero."""
+    gear = airframe.gear
+    if gear is None:
+        raise ValueError(f"airframe {airframe.name} has no landing gear to rest on "
+                         "([landing_gear] in its file, docs/airframes.md)")
+    z = ground_z - gear.rest_height(airframe.mass, airframe.gravity)
+    stopped: dict[str, Value] = {f"{a}0[{i + 1}]": 0.0 for a in ("omega", "alpha", "beta")
+                                 for i in range(airframe.n_rotors)}
+    return (Pose.of((float(pos[0]), float(pos[1]), z), (0.0, 0.0, float(yaw))),
+            {"init_trim": False, **stopped})

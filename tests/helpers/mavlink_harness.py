@@ -80,7 +80,7 @@ def mavsdk_session(**config: Any) -> Iterator[tuple[Bridge, Any, list[Any]]]:
     from mavsdk import ComponentType, Configuration, ConnectionResult, Mavsdk
 
     port = free_port()
-    config = {"speed": 2.0, "duration": 120.0, **config}
+    config = {"speed": 2.0, "duration": 120.0, "start": "air", **config}
     bridge = Bridge(BridgeConfig(urls=[f"udpout:127.0.0.1:{port}"], **config))
     thread = threading.Thread(target=bridge.run, daemon=True)
     thread.start()
@@ -128,6 +128,7 @@ class Flight:
         self._chunks: dict[int, dict[int, str]] = {}
         url = f"udpout:127.0.0.1:{self.port}"
         config.setdefault("duration", 120.0)
+        config.setdefault("start", "air")  # hovering at pos0 (ground flights say "ground")
         self.bridge = Bridge(BridgeConfig(urls=[url], speed=speed, **config))
         self.thread = threading.Thread(target=self.bridge.run, daemon=True)
         self.thread.start()

@@ -29,6 +29,8 @@ HOLD = (4 << 16) | (3 << 24)  # AUTO.LOITER
 MANUAL = 1 << 16
 RTL = (4 << 16) | (5 << 24)
 LAND = (4 << 16) | (6 << 24)
+PRECLAND = (4 << 16) | (9 << 24)
+FOLLOW = (4 << 16) | (8 << 24)  # AUTO.FOLLOW_TARGET
 FTP_HEADER = struct.Struct("<HBBBBBBI")
 
 
@@ -113,8 +115,8 @@ def test_set_mode_offboard_hold_and_refusals(ground):
     ack, hb = g.set_mode(HOLD)
     assert ack.result == mav.MAV_RESULT_ACCEPTED and g.bridge.mode == "HOLD"
     for custom, name in ((MANUAL, "MANUAL refused: needs sticks"),
-                         (LAND, "AUTO.LAND refused: no ground"),
-                         (RTL, "AUTO.RTL refused: no ground")):
+                         (PRECLAND, "AUTO.PRECLAND refused: no landing target"),
+                         (FOLLOW, "AUTO.FOLLOW_TARGET refused: not simulated")):
         ack, _ = g.set_mode(custom)
         assert ack.result == mav.MAV_RESULT_DENIED
         g.text(name)
@@ -275,8 +277,10 @@ def qgc_sequence(g):
         listed[m.mode_index] = m
     assert sorted(listed) == list(range(1, total + 1))  # done at mode_index == number_modes
     selectable = {m.custom_mode for m in listed.values() if not m.properties & 2}
-    assert selectable == {HOLD, 3 << 16, OFFBOARD}  # the modes flown here
-    assert {MANUAL, RTL, LAND} <= {m.custom_mode for m in listed.values()}  # not selectable
+    takeoff, mission = (4 << 16) | (2 << 24), (4 << 16) | (4 << 24)
+    # the modes flown here
+    assert selectable == {HOLD, 3 << 16, OFFBOARD, takeoff, LAND, RTL, mission}
+    assert {MANUAL, PRECLAND} <= {m.custom_mode for m in listed.values()}  # not selectable
     g.command(512, 435, total + 1, expect=mav.MAV_RESULT_DENIED)
     g.command(512, 436, expect=0)
     assert g.wait("CURRENT_MODE", 5.0).custom_mode == HOLD
@@ -297,14 +301,16 @@ def qgc_sequence(g):
         g.gcs.mav.mission_ack_send(1, 1, 0, kind)
     ack, hb = g.set_mode(HOLD)  # "Hold" from the menu
     assert ack.result == 0 and hb is not None
-    for custom, text in ((RTL, "AUTO.RTL refused"), (LAND, "AUTO.LAND refused")):
+    for custom, text in ((RTL, "AUTO.RTL refused: disarmed"),
+                         (LAND, "AUTO.LAND refused: disarmed")):
         ack, _ = g.set_mode(custom)
         assert ack.result == mav.MAV_RESULT_DENIED
         g.text(text)
-    # the Takeoff button (PX4FirmwarePlugin::guidedModeTakeoff): NAV_TAKEOFF, NaN yaw/lat/lon
+    # the Takeoff button (PX4FirmwarePlugin::guidedModeTakeoff): NAV_TAKEOFF, NaN yaw/lat/lon;
+    # disarmed it is refused with the reason (flown from the ground: test_mavlink_ground.py)
     nan = math.nan
-    g.command(22, -1, 0, 0, nan, nan, nan, 500.0, expect=mav.MAV_RESULT_UNSUPPORTED)
-    g.text("takeoff: no ground here")
+    g.command(22, -1, 0, 0, nan, nan, nan, 500.0, expect=mav.MAV_RESULT_DENIED)
+    g.text("takeoff refused: disarmed")
     assert g.thread.is_alive() and g.bridge.stats.ignored == 0
 
 
@@ -383,6 +389,6 @@ def test_mavsdk_downloads_empty_plans_and_changes_mode():
         while telemetry.flight_mode() != FlightMode.HOLD and time.monotonic() < deadline:
             time.sleep(0.05)
         assert telemetry.flight_mode() == FlightMode.HOLD
-        with pytest.raises(ActionError):  # MAVSDK sends DO_SET_MODE AUTO.RTL: refused
+        with pytest.raises(ActionError):  # MAVSDK sends DO_SET_MODE AUTO.RTL: disarmed
             action.return_to_launch()
-        assert any("AUTO.RTL refused: no ground" in t for t in bridge.events), bridge.events
+        assert any("AUTO.RTL refused: disarmed" in t for t in bridge.events), bridge.events
