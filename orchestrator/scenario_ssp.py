@@ -28,6 +28,11 @@ from orchestrator.scenario.model import Scenario
 def scenario_table(scenario: Scenario, stop_time: float | None = None) -> SignalTable:
     """The scenario's references, rotor health and disturbances at t_k = k * step, k = 0 ..
     round(stop_time / step) (default: its duration), as the master samples them."""
+    if scenario.mission is not None:
+        raise ValueError(f"scenario {scenario.name} flies a [mission]: its references depend "
+                         "on the flight (each leg waits for the vehicle), so they cannot be "
+                         "a table played by a ScenarioSignals FMU; export a scenario with "
+                         "[reference] signals")
     stop = scenario.duration if stop_time is None else float(stop_time)
     n = round(stop / scenario.step) if math.isfinite(stop) else 0
     if not (stop > 0 and n >= 1):

@@ -189,7 +189,8 @@ def test_shipped_scenarios_listed_and_valid():
                             "rotor_failure_hover", "rotor_failure_no_reconfiguration",
                             "rotor_failure_detected",
                             "robustness_inertia_corner",
-                            "robustness_inertia_corner_prototype", "takeoff_and_land"])
+                            "robustness_inertia_corner_prototype", "takeoff_and_land",
+                            "mission_full_pose"])
     loaded = list_scenarios()
     assert [s.name for s in loaded] == names
     for sc in loaded:
