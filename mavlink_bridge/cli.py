@@ -10,6 +10,7 @@ import sys
 from pathlib import Path
 from typing import Any
 
+from mavlink_bridge.fleet import MAX_VEHICLES, SPACING
 from orchestrator.cli import add_vehicle_options
 
 
@@ -22,7 +23,15 @@ def register(sub: Any) -> None:
                              "else paper_hexacopter)")
     fly.add_argument("--gcs", action="append", default=[], metavar="URL",
                      help="MAVLink endpoint, udpout:HOST:PORT or udpin:HOST:PORT (repeatable; "
-                          "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540)")
+                          "default udpout:127.0.0.1:14550 and udpout:127.0.0.1:14540+i); "
+                          "a port written PORT+i is PORT + the vehicle's instance number i "
+                          "(0-based), any other URL is every vehicle's")
+    fly.add_argument("-n", "--count", type=int, default=1, metavar="N",
+                     help=f"fly N vehicles (1..{MAX_VEHICLES}), as PX4's "
+                          "sitl_multiple_run.sh -n N: instance i has system id i+1, sends to "
+                          "the shared ground-station port 14550 and to its own API port "
+                          f"14540+i, and starts {SPACING:g}*i m east of the first "
+                          "(default: 1)")
     fly.add_argument("--speed", default="1", metavar="X",
                      help="simulated seconds per wall second, or 'max' (default: 1)")
     fly.add_argument("--signing-key", default=None, metavar="FILE",
@@ -49,17 +58,24 @@ def register(sub: Any) -> None:
 
 
 def _fly(args: argparse.Namespace) -> int:
-    from mavlink_bridge.bridge import DEFAULT_URLS, Bridge, BridgeConfig  # pymavlink: lazily
+    from mavlink_bridge.bridge import Bridge, BridgeConfig  # pymavlink: lazily
+    from mavlink_bridge.fleet import DEFAULT_URLS, instance_urls
     from mavlink_bridge.links import load_key
 
+    if not 1 <= args.count <= MAX_VEHICLES:
+        raise ValueError(f"--count {args.count}: fly 1 to {MAX_VEHICLES} vehicles")
+    if args.count > 1 and (args.view or args.save is not None):
+        raise ValueError("--view and --save show one vehicle: not with --count above 1")
     speed = math.inf if args.speed.lower() == "max" else float(args.speed)
     if not speed > 0:
         raise ValueError("--speed must be positive or 'max'")
     if args.duration is not None and not args.duration > 0:
         raise ValueError("--duration must be positive")
-    urls = list(args.gcs or DEFAULT_URLS)
-    config = BridgeConfig(urls=urls, speed=speed, duration=args.duration,
-                          bridge_parameters=_limits(args.limit))
+    # the first vehicle's endpoints; with --count N the others' are derived from the same
+    # templates (mavlink_bridge.fleet.fleet_configs)
+    templates = list(args.gcs or DEFAULT_URLS)
+    config = BridgeConfig(urls=instance_urls(templates, 0), speed=speed,
+                          duration=args.duration, bridge_parameters=_limits(args.limit))
     if args.scenario is not None:
         from orchestrator.runner import prepare
 
@@ -98,6 +114,8 @@ def _fly(args: argparse.Namespace) -> int:
                 setattr(config, option, load_key(path))
             except (OSError, UnicodeDecodeError) as e:
                 raise ValueError(f"--{option.replace('_', '-')}: {e}") from None
+    if args.count > 1:
+        return _fly_fleet(config, templates, args)
     if args.view:  # before the sockets open: a viewer that cannot show is said at once
         from orchestrator.output.view import check_viewer
 
@@ -127,6 +145,43 @@ def _fly(args: argparse.Namespace) -> int:
             print(f"3-D view            {view.logged} moments logged in {view.seconds:.2f} s "
                   f"({100 * share:.1f} % of the wall time)"
                   + (f", wrote {args.save}" if args.save is not None else ""))
+    return 0
+
+
+def _fly_fleet(config: Any, templates: list[str], args: argparse.Namespace) -> int:
+    """``fly --count N``: N vehicles derived from the single vehicle's configuration
+    (mavlink_bridge.fleet), each line of a vehicle prefixed by its system id."""
+    from mavlink_bridge.fleet import Fleet, FleetError, fleet_configs
+
+    configs = fleet_configs(config, args.count, templates)
+    width = len(str(configs[-1].system_id))
+    error: FleetError | None = None
+    with Fleet(configs) as fleet:
+        af = fleet.bridges[0].airframe
+        print(f"flying {len(configs)} x {af.name} from {tuple(float(x) for x in config.pos0)} "
+              f"in each one's local frame (speed {args.speed}, signing "
+              f"{'on' if config.signing_key else 'off'})")
+        for bridge in fleet.bridges:
+            tag = f"[sys {bridge.config.system_id:>{width}}] "
+            o = bridge.config.origin
+            print(f"{tag}origin              {o.lat:.7f}, {o.lon:.7f}, {o.alt:.2f} m AMSL "
+                  "(local NED 0)")
+            for ep in bridge.endpoints:
+                print(f"{tag}mavlink endpoint    {ep.url} (local {ep.sock.getsockname()[0]}:"
+                      f"{ep.sock.getsockname()[1]})")
+        sys.stdout.flush()
+        try:
+            fleet.run()
+        except KeyboardInterrupt:
+            pass  # Ctrl-C ends the flight, as for one vehicle: run() stopped them all
+        except FleetError as e:
+            error = e  # said after every vehicle's summary
+        for bridge in fleet.bridges:
+            tag = f"[sys {bridge.config.system_id:>{width}}] "
+            for line in bridge.stats.lines():
+                print(tag + line)
+    if error is not None:
+        raise error
     return 0
 
 
