@@ -32,6 +32,10 @@ def register(sub: Any) -> None:
                           "the shared ground-station port 14550 and to its own API port "
                           f"14540+i, and starts {SPACING:g}*i m east of the first "
                           "(default: 1)")
+    fly.add_argument("--start", choices=("ground", "air"), default=None,
+                     help="boot landed and disarmed on the landing gear (ground, as PX4 SITL) "
+                          "or hovering (air); default: the scenario's, else ground for an "
+                          "airframe with a landing gear, air without one")
     fly.add_argument("--speed", default="1", metavar="X",
                      help="simulated seconds per wall second, or 'max' (default: 1)")
     fly.add_argument("--signing-key", default=None, metavar="FILE",
@@ -87,6 +91,11 @@ def _fly(args: argparse.Namespace) -> int:
         config.plant_parameters = sc.plant_parameters
         config.controller_parameters = sc.controller_parameters
         config.coupling = sc.coupling
+        config.start = sc.start
+        if sc.mission is not None:  # held as the uploaded mission: arm and start it
+            config.mission = sc.mission.items
+            config.bridge_parameters = {**mission_parameters(sc.mission.settings),
+                                        **(config.bridge_parameters or {})}
         if sc.origin is not None:
             from mavlink_bridge.geodesy import Origin
 
@@ -97,12 +106,19 @@ def _fly(args: argparse.Namespace) -> int:
 
         af = load_airframe(args.airframe or "paper_hexacopter")
         config.airframe = af
+        if af.gear is None:
+            config.start = "air"
+            if args.start == "ground":
+                raise ValueError(f"--start ground: airframe {af.name} has no landing gear "
+                                 "([landing_gear] in its file, docs/airframes.md)")
         gains = read_gains(args.gains) if args.gains is not None else None
         if gains is not None:
             config.controller_parameters = gains.controller_parameters()
         lag_note = lag_warning(af, gains)
         if lag_note is not None:
             print(f"fullpose: warning: {lag_note}", file=sys.stderr)
+    if args.start is not None:
+        config.start = args.start
     if args.origin is not None:
         from mavlink_bridge.geodesy import parse_origin
 
@@ -123,7 +139,9 @@ def _fly(args: argparse.Namespace) -> int:
     with Bridge(config) as bridge:
         af = bridge.airframe
         view = _live_view(bridge, args) if args.view or args.save is not None else None
-        print(f"flying {af.name} from {tuple(float(x) for x in config.pos0)} "
+        where = "resting on the ground, disarmed," if bridge.ground_start else "hovering"
+        print(f"flying {af.name} {where} at "
+              f"{tuple(round(float(x), 3) for x in bridge.session.pos0)} "
               f"(speed {args.speed}, signing {'on' if config.signing_key else 'off'})")
         o = config.origin
         print(f"origin              {o.lat:.7f}, {o.lon:.7f}, {o.alt:.2f} m AMSL (local NED 0)")
@@ -158,7 +176,10 @@ def _fly_fleet(config: Any, templates: list[str], args: argparse.Namespace) -> i
     error: FleetError | None = None
     with Fleet(configs) as fleet:
         af = fleet.bridges[0].airframe
-        print(f"flying {len(configs)} x {af.name} from {tuple(float(x) for x in config.pos0)} "
+        pos = fleet.bridges[0].session.pos0
+        where = "resting on the ground, disarmed," if config.start == "ground" else "hovering"
+        print(f"flying {len(configs)} x {af.name} {where} at "
+              f"{tuple(round(float(x), 3) for x in pos)} "
               f"in each one's local frame (speed {args.speed}, signing "
               f"{'on' if config.signing_key else 'off'})")
         for bridge in fleet.bridges:
@@ -183,6 +204,14 @@ def _fly_fleet(config: Any, templates: list[str], args: argparse.Namespace) -> i
     if error is not None:
         raise error
     return 0
+
+
+def mission_parameters(settings: Any) -> dict[str, float]:
+    """A scenario mission's speeds and radii as the PX4 parameters the bridge flies with."""
+    return {"MPC_XY_CRUISE": settings.cruise, "MPC_Z_VEL_MAX_UP": settings.climb,
+            "MPC_Z_VEL_MAX_DN": settings.descent, "MPC_LAND_SPEED": settings.land,
+            "MPC_ACC_HOR": settings.acc_hor, "NAV_ACC_RAD": settings.acceptance,
+            "RTL_RETURN_ALT": settings.rtl_alt}
 
 
 def _limits(settings: list[str]) -> dict[str, float]:

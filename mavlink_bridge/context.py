@@ -21,7 +21,7 @@ from mavlink_bridge import px4, stability, telemetry
 from mavlink_bridge.budget import RequestBudget
 from mavlink_bridge.geodesy import Origin
 from mavlink_bridge.links import Address, Endpoint, Signing
-from mavlink_bridge.params import ParameterTable, Range, fmu_range
+from mavlink_bridge.params import FLIGHT_PARAMETERS, ParameterTable, Range, fmu_range
 from mavlink_bridge.setpoints import (
     AttitudeSetpoint,
     Limits,
@@ -116,6 +116,7 @@ class BridgeConfig:
     # "ground": boot landed and disarmed, resting on the landing gear below pos0 (as PX4
     # SITL); "air": hovering at pos0 from the start, the rotors spinning whatever the arming
     start: str = "ground"
+    mission: Sequence[MissionItem] = ()  # a mission held from the start (a scenario's)
 
 
 def stopping_point(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, acc_limit: np.ndarray,
@@ -197,10 +198,12 @@ class Context:
         self.airframe = self.session.airframe
         self.params = ParameterTable(self._tunables(), self.session.set_controller_parameter,
                                      guard=stability.guard)
+        flight = {bp.name for bp in FLIGHT_PARAMETERS}
         for name, value in (config.bridge_parameters or {}).items():
-            if not name.startswith("FPB_") or self.params.index(name) is None:
+            if not (name.startswith("FPB_") or name in flight) or self.params.index(name) is None:
                 self.close()
-                raise ValueError(f"{name}: not a bridge parameter (FPB_...)")
+                raise ValueError(f"{name}: not a bridge parameter (FPB_... or "
+                                 f"{', '.join(sorted(flight))})")
             refused = self.params.set(name, float(value))
             if refused is not None:
                 self.close()
@@ -250,6 +253,11 @@ class Context:
         # the plans held (mission, fence, rally: orchestrator.mission.items), as uploaded
         self.plans: dict[int, list[MissionItem]] = {k: [] for k in items.MISSION_TYPES}
         self.mission_current = 0  # the mission item flown or to fly next (MISSION_CURRENT)
+        if config.mission:
+            why = self.install_plan(items.MISSION, list(config.mission))
+            if why is not None:
+                self.close()
+                raise ValueError(f"mission refused: {why}")
 
     @property
     def state(self) -> dict[str, dict[str, np.ndarray]]:

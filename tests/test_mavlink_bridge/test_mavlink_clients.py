@@ -22,8 +22,9 @@ ROOT = Path(__file__).resolve().parents[2]
 @pytest.mark.clients
 def test_mavproxy_headless_sees_mode_attitude_and_position(tmp_path):
     # MAVProxy without a console or map: commands on stdin, no default modules (no GUI)
-    out, _ = harness.mavproxy_session(
-        tmp_path, [], "", [("status ATTITUDE", 1.0), ("status LOCAL_POSITION_NED", 1.0)])
+    out, _ = harness.mavproxy_session(  # hovering at 3 m from the start (--start air)
+        tmp_path, ["--start", "air"], "",
+        [("status ATTITUDE", 1.0), ("status LOCAL_POSITION_NED", 1.0)])
     assert "Detected vehicle 1:1" in out, out
     assert "Mode LOITER" in out, out  # PX4 AUTO.LOITER = the bridge's HOLD
     assert "ATTITUDE {" in out and "roll :" in out, out

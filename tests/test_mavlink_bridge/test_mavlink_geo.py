@@ -328,7 +328,7 @@ def test_mavsdk_position_home_health_battery_and_set_position_global():
 def test_mavproxy_sees_the_global_position_and_no_fence_breach(tmp_path):
     # no GUI modules; the fence module is the one that printed "fence breach"
     out, fly_out = harness.mavproxy_session(
-        tmp_path, ["--origin", "46.518,6.566,400"], "fence",
+        tmp_path, ["--origin", "46.518,6.566,400", "--start", "air"], "fence",
         [("status GLOBAL_POSITION_INT", 1.0), ("status HOME_POSITION", 1.0)], settle=8.0)
     assert "origin              46.5180000, 6.5660000, 400.00 m AMSL" in fly_out, fly_out
     assert "Detected vehicle 1:1" in out, out

@@ -23,6 +23,7 @@ from orchestrator.scenario.parser import parse_scenario
 from orchestrator.scenario.reader import ScenarioError
 
 ACCURACY = 0.02  # the paper's position accuracy (m)
+nan = math.nan
 
 
 @pytest.mark.parametrize("length, speed, acc", [(2.0, 1.0, 2.0), (0.1, 1.0, 2.0),
@@ -53,10 +54,10 @@ def perfect_flight(plan, settings, start, until=200.0, ground_z=None, dt=0.01):
     ex = Executor(plan, settings, np.array(start, float), np.zeros(3), home=np.array(start))
     t, track = 0.0, []
     landed = ground_z is not None and start[2] >= ground_z - 1e-9
-    pos = np.array(start, float)
+    pos, euler = np.array(start, float), np.zeros(3)
     while not ex.finished and t < until:
-        r = ex.update(t, Vehicle(pos, r_euler if track else np.zeros(3), landed))
-        r_euler = r["euler_ref"]
+        r = ex.update(t, Vehicle(pos, euler, landed))
+        euler = r["euler_ref"]
         pos = r["pos_ref"].copy()
         if ground_z is not None:
             landed = pos[2] >= ground_z - 1e-9
@@ -93,9 +94,6 @@ def test_a_plan_flown_in_order_at_the_profiles_times():
     np.testing.assert_allclose(np.degrees(euler[-1]), [10.0, -5.0, 90.0], atol=1e-9)
     speed = max(np.linalg.norm(v) for t, _, v, _ in track if legs[4].start < t < legs[4].end)
     assert speed == pytest.approx(0.5, abs=1e-9)  # DO_CHANGE_SPEED
-
-
-nan = math.nan
 
 
 def test_landing_descends_at_the_landing_speed_and_stops_below_the_ground():
