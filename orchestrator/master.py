@@ -46,7 +46,7 @@ from orchestrator.sim.engine import (
     make_engine,
 )
 from orchestrator.sim.fmu import FmuInstance
-from orchestrator.sim.mission_feed import PERIOD_ROWS, MissionFeed
+from orchestrator.mission_feed import PERIOD_ROWS, MissionFeed
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
 from orchestrator.sim.start_values import Pose, StartValues, resting_on_ground, start_values
 from plant import plant_fmu

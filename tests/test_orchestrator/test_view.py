@@ -167,7 +167,8 @@ def test_quaternions_and_thrust_directions_against_independent_code():
 def test_fly_writes_a_live_view_of_the_flight(tmp_path):
     """``fullpose fly --save``: a hover streamed as it flies, read back through Rerun."""
     rrd = tmp_path / "fly.rrd"
-    res = subprocess.run([sys.executable, "-m", "orchestrator.cli", "fly", "--speed", "max",
+    res = subprocess.run([sys.executable, "-m", "orchestrator.cli", "fly", "--start", "air",
+                          "--speed", "max",
                           "--duration", "3", "--gcs", "udpout:127.0.0.1:9", "--save", str(rrd)],
                          capture_output=True, text=True, timeout=300)
     assert res.returncode == 0, res.stderr

@@ -196,8 +196,9 @@ def test_the_package_table_of_architecture_md_lists_every_module():
 
 ORCHESTRATOR_FLOORS = {
     "output": {"output"},
+    "mission": {"mission"},
     "sim": {"output", "sim"},
-    "scenario": {"output", "sim", "scenario"},
+    "scenario": {"output", "sim", "mission", "scenario"},
     "export": {"output", "sim", "export"},
 }
 """What each orchestrator subpackage may import of its siblings (docs/architecture.md)."""
