@@ -352,7 +352,7 @@ def autopilot_version(s: Snapshot) -> Any:
             mav.MAV_PROTOCOL_CAPABILITY_COMMAND_INT |
             mav.MAV_PROTOCOL_CAPABILITY_SET_ATTITUDE_TARGET |
             mav.MAV_PROTOCOL_CAPABILITY_SET_POSITION_TARGET_LOCAL_NED |
-            # the (empty) plans are served by mavlink_bridge.protocols
+            # the plans are served by the mission protocol (mavlink_bridge.mission_protocol)
             mav.MAV_PROTOCOL_CAPABILITY_MISSION_INT | mav.MAV_PROTOCOL_CAPABILITY_MISSION_FENCE |
             mav.MAV_PROTOCOL_CAPABILITY_MISSION_RALLY)
     return mav.MAVLink_autopilot_version_message(caps, FLIGHT_SW_VERSION, 0, 0, 0,
