@@ -92,10 +92,13 @@ def start_mission(ctx: Context, start: int | None = None) -> str | None:
     if not plan:
         return "no mission uploaded"
     seq = ctx.mission_current if start is None else start
+    if start is None and ctx.mission_complete:
+        seq = 0
     if not 0 <= seq < len(plan):
         return f"no mission item {seq} (the mission has {len(plan)})"
     if not ctx.armed:
         return "disarmed: arm first"
+    ctx.mission_complete = False
     fly(ctx, "MISSION", plan, seq)
     return None
 
@@ -160,8 +163,12 @@ def _finished(ctx: Context) -> None:
     """A plan flown to its end: a mission says so; airborne, hold where it ended (PX4:
     AUTO.LOITER); on the ground, stay (disarmed after COM_DISARM_LAND)."""
     if ctx.mode == "MISSION":
+        # as PX4: MISSION_CURRENT stays on the last item with MISSION_STATE_COMPLETE (what
+        # MAVSDK's is_mission_finished reads); a new start begins at the first item
+        ctx.mission_complete = True
+        ctx.send_all(mav.MAVLink_mission_current_message(
+            ctx.mission_current, len(ctx.plans[mi.MISSION]), mav.MISSION_STATE_COMPLETE, 0))
         ctx.statustext(mav.MAV_SEVERITY_INFO, "mission finished")
-        ctx.mission_current = 0
     if ctx.mode in ("MISSION", "TAKEOFF") and not ctx.landed:
         ctx.auto = None
         ctx.set_mode("HOLD")

@@ -253,6 +253,7 @@ class Context:
         # the plans held (mission, fence, rally: orchestrator.mission.items), as uploaded
         self.plans: dict[int, list[MissionItem]] = {k: [] for k in items.MISSION_TYPES}
         self.mission_current = 0  # the mission item flown or to fly next (MISSION_CURRENT)
+        self.mission_complete = False  # flown to its end (MISSION_STATE_COMPLETE)
         if config.mission:
             why = self.install_plan(items.MISSION, list(config.mission))
             if why is not None:
@@ -401,7 +402,8 @@ class Context:
                 home=self.home, landed_state=self.landed_state_now(),
                 mission_seq=self.mission_current,
                 mission_total=len(self.plans[items.MISSION]),
-                mission_active=self.mode == "MISSION")
+                mission_active=self.mode == "MISSION",
+                mission_complete=self.mission_complete)
         return self._snapshot
 
     def fresh_snapshot(self) -> Snapshot:
@@ -491,6 +493,7 @@ class Context:
         self.plans[kind] = [it.with_seq(i) for i, it in enumerate(plan)]
         if kind == items.MISSION:
             self.mission_current = 0
+            self.mission_complete = False
             if self.mode == "MISSION":  # the plan flown is gone: hold, as told
                 self.hold()
                 self.set_mode("HOLD")
@@ -507,6 +510,7 @@ class Context:
         if not 0 <= seq < n:
             return f"no mission item {seq} (the mission has {n})"
         self.mission_current = seq
+        self.mission_complete = False
         if self.mode == "MISSION" and self.auto is not None:  # go on from there at once
             self.auto = Executor(self.plans[items.MISSION], self.auto.settings,
                                  self.ref.pos.copy(), self.ref.euler.copy(),

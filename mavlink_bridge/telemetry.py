@@ -69,6 +69,7 @@ class Snapshot:
     mission_seq: int = 0  # the mission item flown or next (MISSION_CURRENT)
     mission_total: int = 0  # items in the mission
     mission_active: bool = False  # flying it (AUTO.MISSION)
+    mission_complete: bool = False  # flown to its end
 
 
 @dataclass
@@ -307,6 +308,7 @@ def mission_current(s: Snapshot) -> Any:
     """MISSION_CURRENT: the item flown or next, of how many, and whether a mission is
     flown (MISSION_STATE)."""
     state = (mav.MISSION_STATE_NO_MISSION if s.mission_total == 0 else
+             mav.MISSION_STATE_COMPLETE if s.mission_complete else
              mav.MISSION_STATE_ACTIVE if s.mission_active else mav.MISSION_STATE_NOT_STARTED)
     return mav.MAVLink_mission_current_message(s.mission_seq, s.mission_total, state, 0)
 

@@ -33,6 +33,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from controller import controller_fmu
+from orchestrator.mission_feed import PERIOD_ROWS, MissionFeed
 from orchestrator.output.run_result import RunResult
 from orchestrator.sim.engine import (
     COUPLINGS,
@@ -46,7 +47,6 @@ from orchestrator.sim.engine import (
     make_engine,
 )
 from orchestrator.sim.fmu import FmuInstance
-from orchestrator.mission_feed import PERIOD_ROWS, MissionFeed
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
 from orchestrator.sim.start_values import Pose, StartValues, resting_on_ground, start_values
 from plant import plant_fmu

@@ -144,7 +144,8 @@ def _mission_start(ctx: Context, p: list[float]) -> str | None:
 def _reposition(ctx: Context, p: list[float]) -> str | None:
     """DO_REPOSITION (QGroundControl's Go-to, and its Pause with every position NaN): fly to
     lat, lon, alt (NaN: where the vehicle is) at param1 m/s (-1, NaN: the cruise speed),
-    heading param4 (NaN: kept), then hold there (AUTO.LOITER)."""
+    heading param4 (radians, as common.xml and PX4 say; NaN: kept), then hold there
+    (AUTO.LOITER)."""
     if not ctx.armed or ctx.landed:
         return "on the ground: take off first"
     speed = p[0]
@@ -152,7 +153,7 @@ def _reposition(ctx: Context, p: list[float]) -> str | None:
         if speed > ctx.params.get("MPC_XY_VEL_MAX"):
             return f"speed {speed:g} m/s above MPC_XY_VEL_MAX"
         ctx.cruise = speed
-    target = auto.point_item(ctx, items.NAV_WAYPOINT, p[4], p[5], p[6], p[3])
+    target = auto.point_item(ctx, items.NAV_WAYPOINT, p[4], p[5], p[6], math.degrees(p[3]))
     if not math.isnan(p[4]) and (abs(p[4]) > 90 or abs(p[5]) > 180):
         return "latitude/longitude out of range"
     auto.fly(ctx, "HOLD", [target])

@@ -8,9 +8,9 @@ Oracles: what MAVSDK's Telemetry reports (landed state, arming, flight mode, rel
 altitude), MAVSDK's mission progress, and the bridge's own state sampled every chunk
 (``bridge.on_chunk``: attitude, touchdown, position within the paper's 2 cm where the vehicle
 holds a point).  ``pytest -s`` prints the touchdown speed, the time from touchdown to disarm
-and the mission's per-item timing.  Two deviations of the bridge from PX4 that MAVSDK trips
-over are strict xfails, each failing on its own exception only (remove the mark once fixed):
-the mission state after a mission's end, and DO_REPOSITION's heading unit.
+and the mission's per-item timing.  Two PX4 behaviours MAVSDK relies on are guarded: the
+mission state after a mission's end (MISSION_STATE_COMPLETE on the last item) and
+DO_REPOSITION's heading in radians.
 """
 
 from __future__ import annotations
@@ -312,20 +312,7 @@ class MissionNotFinished(AssertionError):
     """MAVSDK's Mission plugin does not see the end of a mission the bridge flew to its end."""
 
 
-# MAVSDK (>= 3; v4.1 here) decides a mission is finished from MISSION_CURRENT.mission_state once
-# an autopilot reports one: finished only on MISSION_STATE_COMPLETE (5), as PX4 reports after
-# the last item (keeping seq at that item).  The bridge reports seq 0 and NOT_STARTED (2) after
-# "mission finished" (mavlink_bridge/auto.py _finished, telemetry.mission_current), so
-# is_mission_finished() stays False and the progress falls back from 2/3 to 0/3.  Remove this
-# mark once the bridge reports COMPLETE (strict: the test then fails as XPASS until it is).
-BRIDGE_MISSION_STATE_BUG = pytest.mark.xfail(
-    raises=MissionNotFinished, strict=True,
-    reason="bridge: MISSION_CURRENT after a finished mission is seq 0, NOT_STARTED (PX4: the "
-           "last seq, MISSION_STATE_COMPLETE); MAVSDK's Mission plugin never sees the end")
-
-
 @pytest.mark.clients
-@BRIDGE_MISSION_STATE_BUG
 def test_mavsdk_ground_mission_plugin_upload_download_and_fly():
     """The Mission plugin's plan (3 waypoints, nothing but NAV_WAYPOINT items) accepted,
     downloaded with the same positions, flown to the end: progress 3/3, is_mission_finished."""
@@ -430,11 +417,6 @@ class HeadingNotFlown(AssertionError):
 
 
 @pytest.mark.clients
-@pytest.mark.xfail(
-    raises=HeadingNotFlown, strict=True,
-    reason="bridge: DO_REPOSITION param4 taken in degrees; PX4 takes it in radians "
-           "(navigator: rep->current.yaw = cmd.param4) and MAVSDK's goto_location sends "
-           "radians, so 30 deg is flown as 0.52 deg")
 def test_mavsdk_ground_goto_location_heading():
     """action.goto_location with a heading (yaw_deg 30): there, facing 30 deg."""
     with harness.mavsdk_session(start="ground", speed=SPEED, duration=600.0) as (
