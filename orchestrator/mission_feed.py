@@ -19,6 +19,9 @@ from orchestrator.sim.engine import REF_INPUTS, Engine
 
 PERIOD_ROWS = 5
 """Steps between two updates of the mission executor (10 ms at 2 ms, the bridge's chunk)."""
+DISARM_AFTER = 2.0
+"""s landed after a mission's end before the controller is disarmed (the bridge's default
+COM_DISARM_LAND, as PX4's)."""
 
 
 class MissionFeed:
@@ -34,6 +37,8 @@ class MissionFeed:
         self._pos = rec.columns_of("plant.pos")
         self._euler = rec.columns_of("plant.euler")
         self._landed = rec.int_columns.index("ctrl.landed")
+        self.landed_since = math.inf  # s: landed continuously since, after the mission's end
+        self.disarmed_at: float | None = None
         widths = [len(b) for b in engine.conn.ref]
         self._ref_cols = dict(zip(REF_INPUTS, np.cumsum([0, *widths[:-1]]), strict=True))
 
@@ -46,6 +51,7 @@ class MissionFeed:
         vehicle = Vehicle(row[self._pos].copy(), row[self._euler].copy(),
                           bool(rec.ints[landed_row, self._landed]))
         ref = self.executor.update(first * h, vehicle)
+        self._disarm(first * h, vehicle.landed)
         block = rec.ref
         end = min(stop + 1, rec.rows)  # the next row too: the last row keeps the last one
         for name, col in self._ref_cols.items():
@@ -58,6 +64,19 @@ class MissionFeed:
             p, v, a = self.executor.sample(row * h)
             block[row, pos:pos + 3], block[row, vel:vel + 3], block[row, acc:acc + 3] = p, v, a
 
+    def _disarm(self, t: float, landed: bool) -> None:
+        """A mission that ended on the ground disarms DISARM_AFTER later, as the bridge does:
+        the controller's ``armed`` input (held through a run) set false, the rotors stop."""
+        if self.disarmed_at is not None or self.engine.ctrl is None:
+            return
+        if not (self.executor.finished and landed):
+            self.landed_since = math.inf
+            return
+        self.landed_since = min(self.landed_since, t)
+        if t - self.landed_since >= DISARM_AFTER - 1e-9:
+            self.engine.ctrl.set("armed", False)
+            self.disarmed_at = t
+
     def record(self) -> dict[str, Any]:
         """What the mission did, for the run's metadata: each leg (seq, command, start,
         reached, end; None: not reached / not ended) and the events."""
@@ -65,7 +84,7 @@ class MissionFeed:
             return None if math.isnan(x) else float(x)
 
         ex = self.executor
-        return {"finished": ex.finished,
+        return {"finished": ex.finished, "disarmed": self.disarmed_at,
                 "legs": [{"seq": leg.seq, "command": leg.name, "start": leg.start,
                           "reached": num(leg.reached), "end": num(leg.end)} for leg in ex.legs],
                 "events": [{"time": e.time, "kind": e.kind, "seq": e.seq, "text": e.text}

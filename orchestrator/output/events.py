@@ -1,8 +1,8 @@
 """The moments of a run worth marking on its timeline, from its recording alone: the reference
 pose turning infeasible or feasible again, rotor faults, the controller's detections,
-disturbance steps, reference jumps, and on the ground touchdowns, liftoffs and the rotors
-idling or spinning up.  One source for the figures (orchestrator/output/plots.py)
-and the 3-D view (orchestrator/output/view.py)."""
+disturbance steps, reference jumps, on the ground touchdowns, liftoffs and the rotors
+idling or spinning up, and a mission's items started and reached.  One source for the
+figures (orchestrator/output/plots.py) and the 3-D view (orchestrator/output/view.py)."""
 
 from __future__ import annotations
 
@@ -12,7 +12,8 @@ import numpy as np
 
 from orchestrator.output.run_result import RunResult
 
-KINDS = ("feasibility", "fault", "detection", "disturbance", "reference", "ground")
+KINDS = ("feasibility", "fault", "detection", "disturbance", "reference", "ground",
+         "mission")
 JUMP = 1e-3
 """m: a reference increment beyond what its velocity explains by this much is a jump (a
 trajectory's own error over 2 ms is ~1e-9 m; a waypoint or a step is centimetres or more)."""
@@ -78,7 +79,31 @@ def events(r: RunResult, kinds: tuple[str, ...] = KINDS) -> list[Event]:
             out.append(Event(float(t[i]), "reference", "reference jump"))
     if "ground" in kinds:
         out += ground_events(r, t)
+    if "mission" in kinds:
+        out += mission_events(r)
     return sorted(out, key=lambda e: (e.time, e.kind))
+
+
+def mission_events(r: RunResult) -> list[Event]:
+    """A scenario mission's items (``meta["mission"]``): each leg's start and the moment it is
+    reached, the mission's end and the disarm after the landing."""
+    record = r.meta.get("mission")
+    if not isinstance(record, dict):
+        return []
+    out: list[Event] = []
+    for leg in record.get("legs", [])[:MAX_PER_KIND]:
+        if leg.get("reached") is not None and leg.get("end") is not None and \
+                leg["reached"] == leg["start"] == leg["end"]:
+            continue  # a do-item: done at once, its leg's start says it
+        out.append(Event(float(leg["start"]), "mission", f"item {leg['seq']} {leg['command']}"))
+        if leg.get("reached") is not None:
+            out.append(Event(float(leg["reached"]), "mission", f"item {leg['seq']} reached"))
+    ends = [e for e in record.get("events", []) if e.get("kind") == "finished"]
+    if ends:
+        out.append(Event(float(ends[0]["time"]), "mission", "mission finished"))
+    if record.get("disarmed") is not None:
+        out.append(Event(float(record["disarmed"]), "mission", "disarmed"))
+    return out
 
 
 def ground_events(r: RunResult, t: np.ndarray) -> list[Event]:

@@ -174,7 +174,7 @@ def y_floor(ax: Axes, min_span: float) -> None:
 
 EVENT_STYLE = {"fault": ("#d62728", "-"), "detection": ("#9467bd", "--"),
                "disturbance": ("#8c564b", ":"), "reference": ("#7f7f7f", "-."),
-               "ground": ("#2ca02c", "--")}
+               "ground": ("#2ca02c", "--"), "mission": ("#1f77b4", ":")}
 """Colour and line style of each kind of event marked on the time axes."""
 
 

@@ -104,7 +104,8 @@ def tracking_figure(result: RunResult) -> Figure:
     t = result.time
     fig = new_figure(13.0, 10.5, top=0.93, bottom=0.11, hspace=0.12, wspace=0.17)
     axs = fig.subplots(4, 2, sharex=True)
-    marks = events(result, ("fault", "detection", "disturbance", "reference", "ground"))
+    marks = events(result, ("fault", "detection", "disturbance", "reference", "ground",
+                            "mission"))
     # with imperfect sensors the true state is recorded too: it is what is judged, the
     # measured one is drawn faint behind it
     truth = result.has_truth

@@ -304,7 +304,8 @@ def _send_series(rr: Any, rec: Any, r: RunResult, n: int) -> int:
 def _send_events(rr: Any, rec: Any, r: RunResult) -> None:
     from orchestrator.output.events import events
 
-    found = events(r, ("feasibility", "fault", "detection", "reference", "ground"))
+    found = events(r, ("feasibility", "fault", "detection", "reference", "ground",
+                       "mission"))
     if not found:
         return
     # one row per instant (a timeline holds one value per entity and time): events at the

@@ -220,4 +220,13 @@ def test_shipped_mission_scenario_reaches_every_leg_within_the_paper_accuracy():
     # the takeoff off the gear lags the shaped climb by the motors' spin-up (as the
     # takeoff_and_land scenario), the rest of the run within the accuracy
     assert legs["NAV_TAKEOFF0"]["position_error"]["max"] < 0.03
-    assert np.all(r.get("ctrl.omega_cmd")[-1] == 0.0) or np.all(r.get("ctrl.idle")[-50:] == 1)
+    # landed, then disarmed 2 s later as the bridge's COM_DISARM_LAND: the rotors stopped
+    from orchestrator.mission_feed import DISARM_AFTER
+    from orchestrator.output.events import events
+
+    finished = next(e["time"] for e in record["events"] if e["kind"] == "finished")
+    assert record["disarmed"] == pytest.approx(finished + DISARM_AFTER, abs=0.011)
+    assert np.all(r.get("ctrl.omega_cmd")[t > record["disarmed"] + 0.01] == 0.0)
+    texts = [e.text for e in events(r, ("mission",))]
+    assert texts[:2] == ["item 0 NAV_TAKEOFF", "item 0 reached"]
+    assert texts[-2:] == ["mission finished", "disarmed"]
