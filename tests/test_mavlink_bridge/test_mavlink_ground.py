@@ -40,6 +40,15 @@ def until(f: Flight, cond, timeout: float, what: str) -> None:
     raise AssertionError(f"{what} not within {timeout} s (texts {f.texts[-6:]})")
 
 
+def settle(f: Flight, seconds: float) -> None:
+    """Wait, reading what comes meanwhile: a socket left unread for a second at speed 4 fills
+    its buffer with telemetry, and the kernel then drops the replies that follow."""
+    deadline = time.monotonic() + seconds
+    while time.monotonic() < deadline:
+        f.drain()
+        time.sleep(0.01)
+
+
 def pos(f: Flight) -> np.ndarray:
     return np.array(f.bridge.state["plant"]["pos"], float)
 
@@ -93,7 +102,7 @@ def test_boots_landed_disarmed_takes_off_lands_and_disarms(ground):
     # the takeoff ends in AUTO.LOITER at 1.5 m above home (home: where it rested)
     f.wait("HEARTBEAT", 20.0, lambda m: m.custom_mode == LOITER)
     assert landed_state(f) == IN_AIR
-    time.sleep(1.0)
+    settle(f, 1.0)
     p = pos(f)
     assert abs(p[2] - (rest[2] - 1.5)) < 0.02 and np.hypot(*(p[:2] - rest[:2])) < 0.02
     # disarming in flight is refused (the rotors would stop)
@@ -173,11 +182,11 @@ def test_goto_pause_speed_home_and_geofence(ground):
     f.gcs.mav.command_int_send(1, 1, mav.MAV_FRAME_GLOBAL, 192, 0, 0, -1, 1, 0, nan,
                                round(lat * 1e7), round(lon * 1e7), alt)
     f.wait("COMMAND_ACK", 3.0, lambda m: m.command == 192)
-    time.sleep(0.5)
+    settle(f, 0.5)
     f.command(192, -1, 1, 0, nan, nan, nan, nan, expect=0)
-    time.sleep(1.0)
+    settle(f, 1.0)
     held = pos(f)
-    time.sleep(1.0)
+    settle(f, 1.0)
     assert np.linalg.norm(pos(f) - held) < 0.02 and held[0] > -0.9  # stopped short
     # DO_SET_HOME here: HOME_POSITION follows
     f.command(179, 1, expect=0)
@@ -192,7 +201,7 @@ def test_goto_pause_speed_home_and_geofence(ground):
     f.command(192, -1, 1, 0, nan, lat, lon, alt, expect=0)
     f.wait("STATUSTEXT", 15.0, lambda m: "geofence breached: hold" in m.text)
     f.wait("HEARTBEAT", 3.0, lambda m: m.custom_mode == LOITER)
-    time.sleep(1.5)
+    settle(f, 1.5)
     assert 1.9 < np.hypot(*pos(f)[:2]) < 2.6  # stopped just past the fence
 
 
@@ -204,7 +213,7 @@ def test_x8_takes_off_and_lands_from_the_ground():
         f.command(400, 1, expect=0)
         f.command(22, 0, 0, 0, nan, nan, nan, nan, expect=0)
         f.wait("HEARTBEAT", 20.0, lambda m: m.custom_mode == LOITER)
-        time.sleep(1.0)
+        settle(f, 1.0)
         assert abs(pos(f)[2] - (rest[2] - 2.5)) < 0.02  # MIS_TAKEOFF_ALT's default
         f.command(20, expect=0)  # RTL: home is below, so it lands there
         f.wait("HEARTBEAT", 40.0, lambda m: not m.base_mode & ARMED)
