@@ -8,6 +8,9 @@ CONTROLLER_FMU = "FullPoseController"
 """Model name of the controller FMU (``controller/fmus/FullPoseController.fmu``)."""
 
 
-def controller_fmu() -> Path:
-    """Path of the installed (or ``FULLPOSE_BUILD_DIR``-built) FullPoseController FMU."""
-    return find_artifact("controller", "fmus", f"{CONTROLLER_FMU}.fmu")
+def controller_fmu(fmi: int = 2) -> Path:
+    """Path of the installed (or ``FULLPOSE_BUILD_DIR``-built) FullPoseController FMU: FMI
+    2.0, or with ``fmi=3`` the FMI 3.0 one (``fmus/fmi3/``)."""
+    from plant import fmu_file
+
+    return find_artifact("controller", "fmus", fmu_file(CONTROLLER_FMU, fmi))

@@ -93,14 +93,19 @@ def _cmd_run(args: argparse.Namespace) -> int:
 
     scenario = prepare(args.scenario, args.duration, args.set, airframe=args.airframe,
                        gains=args.gains)
+    if args.fmi is not None:
+        from dataclasses import replace
+
+        scenario = replace(scenario, fmi=args.fmi)
     _warn(scenario.warnings)
     if args.view or args.save is not None:  # no run whose view cannot be shown or written
         from orchestrator.output.view import check_viewer
 
         check_viewer(display=args.view)
     out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
+    fmi = "" if scenario.fmi == 2 else ", FMI 3.0"
     print(f"running {scenario.name} ({scenario.duration:g} s, airframe {scenario.airframe.name}, "
-          f"{scenario.coupling}) -> {out}")
+          f"{scenario.coupling}{fmi}) -> {out}")
     sys.stdout.flush()
     try:
         output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
@@ -408,6 +413,9 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--no-csv", action="store_true", help=argparse.SUPPRESS)  # the default now
     run.add_argument("--engine", choices=("native", "python"), default="native",
                      help="step loop: C kernel (default) or the pure-Python reference")
+    run.add_argument("--fmi", type=int, choices=(2, 3), default=None,
+                     help="the FMUs' FMI version: 2 (default) or 3 (the same model code; "
+                          "default: the scenario's `fmi`)")
     run.set_defaults(func=_cmd_run)
 
     run.add_argument("--mcap", action="store_true",

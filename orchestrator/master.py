@@ -46,7 +46,7 @@ from orchestrator.sim.engine import (
     RunError,
     make_engine,
 )
-from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance, open_fmu
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
 from orchestrator.sim.start_values import Pose, StartValues, resting_on_ground, start_values
 from plant import plant_fmu
@@ -218,9 +218,10 @@ class CoSimulation:
         is lost (``orchestrator.sim.outcome``)."""
         if self.fmus is not None:
             return self._run(*self.fmus, on_chunk)
-        plant_inst = FmuInstance(plant_fmu(), "plant")
+        fmi = self.scenario.fmi
+        plant_inst = open_fmu(plant_fmu(fmi), "plant")
         try:
-            ctrl_inst = FmuInstance(controller_fmu(), "controller")
+            ctrl_inst = open_fmu(controller_fmu(fmi), "controller")
         except BaseException:
             plant_inst.close()
             raise
@@ -235,8 +236,9 @@ class CoSimulation:
         the FMUs refuse (a parameter out of range, an infeasible hover, unstable gains) is
         an :class:`~orchestrator.sim.fmu.FmuError`; a recording too large for memory a
         :class:`RecordingTooLarge`."""
-        with FmuInstance(plant_fmu(), "plant") as plant_inst, \
-                FmuInstance(controller_fmu(), "controller") as ctrl_inst:
+        fmi = self.scenario.fmi
+        with open_fmu(plant_fmu(fmi), "plant") as plant_inst, \
+                open_fmu(controller_fmu(fmi), "controller") as ctrl_inst:
             self._setup(plant_inst, ctrl_inst, 1, self.scenario.n_steps + 1)
 
     # -- setup ---------------------------------------------------------------
@@ -340,6 +342,7 @@ class CoSimulation:
             "lost_criteria": sc.lost.summary(),
             "coupling": sc.coupling,
             "engine": self.engine,
+            "fmi": sc.fmi,
             "wall_time": wall,
             "fmu_time": fmu_time,
             "timing": self.timing,

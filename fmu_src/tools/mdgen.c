@@ -3,8 +3,11 @@
  * the model's variable table and default values, so the XML and the binary
  * cannot drift.  Run at build time:
  *
- *     mdgen OUTPUT.xml VERSION [--sources DIR FILE.c ...]
+ *     mdgen [--fmi3] OUTPUT.xml VERSION [--sources DIR FILE.c ...]
  *
+ * With --fmi3, the FMI 3.0 modelDescription.xml of the same table (write_fmi3): each row one
+ * variable (a scalar or an array with <Dimension>), value references the rows', the
+ * independent variable time at value reference 0, the ModelStructure by value reference.
  * With --sources, the C files the FMU's binary is built from (the build's one list of them,
  * as laid out flat in the FMU's sources/ folder DIR) go into the FMI 2.0 <SourceFiles> of
  * <CoSimulation> and into DIR/buildDescription.xml (the FMI 2.0.4 / FMI 3.0 form).
@@ -111,12 +114,13 @@ static int unit_used(const FpModelInfo *info, const char *unit) {
     return 0;
 }
 
-static void write_units(FILE *f, const FpModelInfo *info) {
+/* <UnitDefinitions>: the units in use, and `also` (NULL: none; FMI 3.0's time: "s"). */
+static void write_units(FILE *f, const FpModelInfo *info, const char *also) {
     size_t i, j;
     fputs("  <UnitDefinitions>\n", f);
     for (i = 0; i < N_UNITS; i++) {
         const Unit *u = &units[i];
-        if (!unit_used(info, u->name)) continue;
+        if (!unit_used(info, u->name) && !(also != NULL && strcmp(also, u->name) == 0)) continue;
         fprintf(f, "    <Unit name=\"%s\">\n      <BaseUnit", u->name);
         if (u->kg) fprintf(f, " kg=\"%d\"", u->kg);
         if (u->m) fprintf(f, " m=\"%d\"", u->m);
@@ -367,13 +371,16 @@ static int next_name(const char **p, char *buf, size_t size) {
 typedef struct {
     int *declaration; /* per row */
     char **dependencies; /* per declaration */
+    unsigned char **known_rows; /* per declaration: per row, 1 if a known (FMI 3.0) */
     size_t n;
 } InitialUnknowns;
 
 static void free_initial_unknowns(InitialUnknowns *u) {
     size_t d;
     for (d = 0; d < u->n && u->dependencies != NULL; d++) free(u->dependencies[d]);
+    for (d = 0; d < u->n && u->known_rows != NULL; d++) free(u->known_rows[d]);
     free(u->dependencies);
+    free(u->known_rows);
     free(u->declaration);
 }
 
@@ -389,9 +396,10 @@ static char *dependency_text(const unsigned char *mask, uint32_t n) {
     return text;
 }
 
-/* Marks the elements of the knowns one declaration names; -1 (with a message) on a bad name. */
+/* Marks the elements of the knowns one declaration names (mask, by listing index) and their
+ * rows (rows, by table index: the variables of FMI 3.0); -1 (with a message) on a bad name. */
 static int mark_knowns(const FpModelInfo *info, const uint32_t *first, const char *knowns,
-                       unsigned char *mask) {
+                       unsigned char *mask, unsigned char *rows) {
     char name[128];
     const char *p = knowns;
     size_t i;
@@ -409,6 +417,7 @@ static int mark_knowns(const FpModelInfo *info, const uint32_t *first, const cha
             const FpVar *v = &info->vars[i];
             if (all ? listing_rank(v->kind) != 2 : v != row) continue;
             for (k = 0; k < fp_var_count(v); k++) mask[first[i] + k] = 1;
+            rows[i] = 1;
         }
     }
     return 0;
@@ -433,8 +442,11 @@ static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *fir
     }
     u->declaration = (int *)malloc(info->n_vars * sizeof *u->declaration);
     u->dependencies = (char **)calloc(u->n, sizeof *u->dependencies);
+    u->known_rows = (unsigned char **)calloc(u->n, sizeof *u->known_rows);
     mask = (unsigned char *)malloc((size_t)n + 1);
-    if (u->declaration == NULL || u->dependencies == NULL || mask == NULL) goto fail;
+    if (u->declaration == NULL || u->dependencies == NULL || u->known_rows == NULL ||
+        mask == NULL)
+        goto fail;
     for (i = 0; i < info->n_vars; i++) u->declaration[i] = -1;
     for (d = 0; d < u->n; d++) {
         const char *p = rows[d].unknowns;
@@ -448,7 +460,9 @@ static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *fir
             u->declaration[row - info->vars] = (int)d;
         }
         memset(mask, 0, (size_t)n + 1);
-        if (mark_knowns(info, first, rows[d].knowns, mask) != 0) goto fail;
+        u->known_rows[d] = (unsigned char *)calloc(info->n_vars, 1);
+        if (u->known_rows[d] == NULL) goto fail;
+        if (mark_knowns(info, first, rows[d].knowns, mask, u->known_rows[d]) != 0) goto fail;
         u->dependencies[d] = dependency_text(mask, n);
         if (u->dependencies[d] == NULL) goto fail;
     }
@@ -540,6 +554,159 @@ static int write_build_description(const FpModelInfo *info, const SourceList *sr
     return fclose(f) == 0 ? 0 : -1;
 }
 
+/* ------------------------------------------------------------------------ */
+/* FMI 3.0: the same table, one variable per row                            */
+
+/* One <Float64Type> per declared type in use (WRENCH, which no FMI 3.0 array can state per
+ * element, has no name and is left out). */
+static void write_types3(FILE *f, const FpModelInfo *info) {
+    int t;
+    fputs("  <TypeDefinitions>\n", f);
+    for (t = 0; t < FP_N_TYPES; t++) {
+        const FpDeclaredType *d = fp_declared_type((FpTypeId)t);
+        if (d->name[0] == '\0' || !type_used(info, (FpTypeId)t)) continue;
+        fprintf(f, "    <Float64Type name=\"%s\" quantity=\"%s\" unit=\"%s\"", d->name,
+                d->quantity, d->unit);
+        if (d->nominal != 0.0) fprintf(f, " nominal=\"%.17g\"", d->nominal);
+        fputs("/>\n", f);
+    }
+    fputs("  </TypeDefinitions>\n", f);
+}
+
+/* A row as one FMI 3.0 variable: a scalar, or an array with <Dimension start="rows"/> (and a
+ * second one of cols for a matrix, its elements row-major), its start values listed
+ * element by element.  A WRENCH row (force then torque) has no declared type or unit: the
+ * description says which elements are in N and which in N.m. */
+static void write_variable3(FILE *f, const FpVar *v, const void *model) {
+    static const char *const causality[] = {"parameter", "parameter", "input", "output"};
+    static const char *const tag[] = {"Float64", "Int32", "Boolean"};
+    const char *p = (const char *)model + v->offset;
+    const char *variability;
+    uint32_t k, n = fp_var_count(v);
+    if (v->kind == FP_PARAM_FIXED) variability = "fixed";
+    else if (v->kind == FP_PARAM_TUNABLE) variability = "tunable";
+    else variability = v->type == FP_REAL ? "continuous" : "discrete";
+    fprintf(f, "    <%s name=\"%s\" valueReference=\"%u\" causality=\"%s\" variability=\"%s\"",
+            tag[v->type], v->name, (unsigned)v->vr, causality[v->kind], variability);
+    if (v->kind == FP_PARAM_FIXED || v->kind == FP_PARAM_TUNABLE) fputs(" initial=\"exact\"", f);
+    fputs(" description=\"", f);
+    xml_text(f, v->description);
+    if (v->range.flags & (FP_RANGE_LO_OPEN | FP_RANGE_HI_OPEN)) {
+        char range[96];
+        fputs("; range ", f);
+        xml_text(f, fp_range_text(&v->range, v->type != FP_REAL, range, sizeof range));
+    }
+    if (v->dtype == FP_T_WRENCH) fputs("; unit N for elements 1-3, N.m for elements 4-6", f);
+    fputc('"', f);
+    if (v->type == FP_REAL && v->dtype != FP_T_WRENCH) {
+        const FpDeclaredType *d = fp_declared_type(v->dtype);
+        fprintf(f, " declaredType=\"%s\" unit=\"%s\"", d->name, d->unit);
+    }
+    write_range(f, v);
+    if (v->kind != FP_OUTPUT) {
+        fputs(" start=\"", f);
+        for (k = 0; k < n; k++) {
+            if (k > 0) fputc(' ', f);
+            if (v->type == FP_REAL) fprintf(f, "%.17g", ((const double *)p)[k]);
+            else if (v->type == FP_INTEGER) fprintf(f, "%d", (int)((const int32_t *)p)[k]);
+            else fputs(((const int32_t *)p)[k] ? "true" : "false", f);
+        }
+        fputc('"', f);
+    }
+    if (v->rows == 1 && v->cols == 1) {
+        fputs("/>\n", f);
+        return;
+    }
+    fprintf(f, ">\n      <Dimension start=\"%u\"/>\n", (unsigned)v->rows);
+    if (v->cols > 1) fprintf(f, "      <Dimension start=\"%u\"/>\n", (unsigned)v->cols);
+    fprintf(f, "    </%s>\n", tag[v->type]);
+}
+
+static int compare_u32(const void *a, const void *b) {
+    uint32_t x = *(const uint32_t *)a, y = *(const uint32_t *)b;
+    return x < y ? -1 : x > y;
+}
+
+/* <ModelStructure> of FMI 3.0: the same declarations as FMI 2.0's, by value reference (a
+ * known is a whole variable): every output an <Output> without dependencies and an
+ * <InitialUnknown> with its declaration's knowns, ascending. */
+static int write_model_structure3(FILE *f, const FpModelInfo *info, const InitialUnknowns *u) {
+    uint32_t *vrs = (uint32_t *)malloc(info->n_vars * sizeof *vrs);
+    size_t i, j, n;
+    if (vrs == NULL) return -1;
+    fputs("  <ModelStructure>\n", f);
+    for (i = 0; i < info->n_vars; i++)
+        if (info->vars[i].kind == FP_OUTPUT)
+            fprintf(f, "    <Output valueReference=\"%u\" dependencies=\"\"/>\n",
+                    (unsigned)info->vars[i].vr);
+    for (i = 0; i < info->n_vars; i++) {
+        const unsigned char *known;
+        if (info->vars[i].kind != FP_OUTPUT) continue;
+        known = u->known_rows[u->declaration[i]];
+        for (j = 0, n = 0; j < info->n_vars; j++)
+            if (known[j]) vrs[n++] = info->vars[j].vr;
+        qsort(vrs, n, sizeof *vrs, compare_u32);
+        fprintf(f, "    <InitialUnknown valueReference=\"%u\" dependencies=\"",
+                (unsigned)info->vars[i].vr);
+        for (j = 0; j < n; j++) fprintf(f, "%s%u", j > 0 ? " " : "", (unsigned)vrs[j]);
+        fputs("\"/>\n", f);
+    }
+    fputs("  </ModelStructure>\n", f);
+    free(vrs);
+    return 0;
+}
+
+/* The FMI 3.0 modelDescription.xml: the header, a <CoSimulation> without Event Mode, the
+ * units, types and log categories, the independent variable time (value reference 0), the
+ * rows in the listing order of FMI 2.0 (inputs, outputs, parameters) and the ModelStructure. */
+static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const char *guid,
+                      const char *date, const char *version, const InitialUnknowns *u) {
+    size_t i;
+    int c, rank;
+    fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n", f);
+    fprintf(f,
+            "<fmiModelDescription fmiVersion=\"3.0\" modelName=\"%s\" instantiationToken=\"%s\"\n"
+            "  description=\"",
+            info->model_name, guid);
+    xml_text(f, info->description);
+    fprintf(f, "\"\n  author=\"%s\" version=\"", AUTHOR);
+    xml_text(f, version);
+    fprintf(f,
+            "\"\n  copyright=\"Copyright (c) %.4s %s\" license=\"%s\"\n"
+            "  generationTool=\"fullpose mdgen\" generationDateAndTime=\"%s\"\n"
+            "  variableNamingConvention=\"structured\">\n",
+            date, AUTHOR, LICENSE, date);
+    fprintf(f,
+            "  <CoSimulation modelIdentifier=\"%s\" canHandleVariableCommunicationStepSize=\"true\""
+            " canBeInstantiatedOnlyOncePerProcess=\"false\" canGetAndSetFMUState=\"true\""
+            " canSerializeFMUState=\"true\" providesDirectionalDerivatives=\"false\""
+            " providesAdjointDerivatives=\"false\" maxOutputDerivativeOrder=\"0\""
+            " hasEventMode=\"false\" providesIntermediateUpdate=\"false\""
+            " mightReturnEarlyFromDoStep=\"false\""
+            " canReturnEarlyAfterIntermediateUpdate=\"false\"/>\n",
+            info->model_name);
+    write_units(f, info, "s");
+    write_types3(f, info);
+    fputs("  <LogCategories>\n", f);
+    for (c = 0; c < FP_LOG_N_CATEGORIES; c++)
+        fprintf(f, "    <Category name=\"%s\" description=\"%s\"/>\n", fp_log_category_name(c),
+                fp_log_category_description(c));
+    fputs("  </LogCategories>\n", f);
+    fprintf(f, "  <DefaultExperiment startTime=\"0\" stopTime=\"%.17g\" stepSize=\"%.17g\"/>\n",
+            info->default_stop, info->default_step);
+    fputs("  <ModelVariables>\n", f);
+    fputs("    <Float64 name=\"time\" valueReference=\"0\" causality=\"independent\""
+          " variability=\"continuous\" description=\"Simulation time\" unit=\"s\"/>\n",
+          f);
+    for (rank = 0; rank < 3; rank++)
+        for (i = 0; i < info->n_vars; i++)
+            if (listing_rank(info->vars[i].kind) == rank) write_variable3(f, &info->vars[i], model);
+    fputs("  </ModelVariables>\n", f);
+    if (write_model_structure3(f, info, u) != 0) return -1;
+    fputs("</fmiModelDescription>\n", f);
+    return 0;
+}
+
 int main(int argc, char **argv) {
     const FpModelInfo *info = fp_model_info();
     char guid[40], date[32];
@@ -550,8 +717,13 @@ int main(int argc, char **argv) {
     int c, rank;
     InitialUnknowns unknowns;
     SourceList src = {NULL, NULL, 0};
+    int fmi3 = argc > 1 && strcmp(argv[1], "--fmi3") == 0;
+    if (fmi3) { /* the FMI 3.0 modelDescription.xml of the same table */
+        argv++;
+        argc--;
+    }
     if (argc < 3 || (argc > 3 && (strcmp(argv[3], "--sources") != 0 || argc < 6))) {
-        fprintf(stderr, "usage: mdgen OUTPUT.xml VERSION [--sources DIR FILE.c ...]\n");
+        fprintf(stderr, "usage: mdgen [--fmi3] OUTPUT.xml VERSION [--sources DIR FILE.c ...]\n");
         return 2;
     }
     if (argc > 3) {
@@ -572,6 +744,15 @@ int main(int argc, char **argv) {
         return 1;
     }
     fp_model_guid(info, guid);
+    for (i = 0; fmi3 && i < info->n_vars; i++)
+        if (info->vars[i].vr == 0) {
+            fprintf(stderr, "mdgen: %s has value reference 0, FMI 3.0's time\n",
+                    info->vars[i].name);
+            free_initial_unknowns(&unknowns);
+            free(first);
+            free(model);
+            return 1;
+        }
     f = fopen(argv[1], "w");
     if (f == NULL) {
         perror(argv[1]);
@@ -579,6 +760,13 @@ int main(int argc, char **argv) {
         free(first);
         free(model);
         return 1;
+    }
+    if (fmi3) {
+        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns);
+        free_initial_unknowns(&unknowns);
+        free(first);
+        free(model);
+        return fclose(f) == 0 && bad == 0 ? 0 : 1;
     }
     fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n", f);
     fprintf(f,
@@ -605,7 +793,7 @@ int main(int argc, char **argv) {
         write_source_files(f, &src);
         fputs("  </CoSimulation>\n", f);
     }
-    write_units(f, info);
+    write_units(f, info, NULL);
     write_types(f, info);
     fputs("  <LogCategories>\n", f);
     for (c = 0; c < FP_LOG_N_CATEGORIES; c++)

@@ -3,8 +3,9 @@
 # Writes the rename list of an FMU's one translation unit (fp_unity_begin.h): for every
 # function with external linkage that the FMU's C files define (a definition starts at column
 # 0 and is neither static nor a declaration), "#define NAME FP_UNITY_NAME(NAME)"; the FMI
-# functions (fmi2*) keep their names, which fmi2Functions.h gives them.  Comments are left out
-# before the definitions are looked for.  The file is rewritten only when the list changes.
+# functions (fmi2*, fmi3*) keep their names, which fmi2Functions.h or fmi3Functions.h give
+# them.  Comments are left out before the definitions are looked for.  The file is rewritten
+# only when the list changes.
 # tests/test_fmus/test_source_builds.py checks the result where it matters: every symbol a
 # unity object defines is an FMI function or carries the prefix.
 
@@ -25,7 +26,7 @@ foreach(file IN LISTS files)
   foreach(line IN LISTS lines)
     if(line MATCHES "^[A-Za-z_][A-Za-z0-9_ *]*[ *]([A-Za-z_][A-Za-z0-9_]*)\\(")
       set(name "${CMAKE_MATCH_1}")
-      if(line MATCHES "^(static|typedef|extern)[ \t]" OR name MATCHES "^fmi2")
+      if(line MATCHES "^(static|typedef|extern)[ \t]" OR name MATCHES "^fmi[23]")
         continue()
       endif()
       # a declaration ends its line with ");" (the ';' became ','); a definition does not

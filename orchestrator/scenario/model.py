@@ -71,6 +71,8 @@ class Scenario:
     # mission items flown by the mission executor instead of reference signals (position
     # and attitude are then the start pose, held until the executor takes over)
     mission: ScenarioMission | None = None
+    # the FMI version of the FMUs flown (2 or 3: the same model code, the same results)
+    fmi: int = 2
 
     @property
     def true_airframe(self) -> Airframe:
@@ -161,6 +163,7 @@ class Scenario:
             "coupling": self.coupling,
             "start": self.start,
             "mission": None if self.mission is None else self.mission.summary(),
+            "fmi": self.fmi,
             "faults": [vars(f) for f in self.faults],
             "plant_parameters": dict(self.plant_parameters),
             "controller_parameters": dict(self.controller_parameters),

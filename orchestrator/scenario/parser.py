@@ -21,6 +21,7 @@ Layout (units SI, angles in rad unless the key ends in ``_deg``; world frame NED
     airframe = "paper_hexacopter" # shipped airframe name, or a path to an airframe file
                                   #   (relative paths: from this file's folder)
     coupling = "gauss-seidel"     # optional: "gauss-seidel" (default) or "jacobi"
+    fmi = 2                       # optional: the FMUs' FMI version, 2 (default) or 3
     start = "air"                 # optional: "air" (default: at the reference's start, rotors
                                   #   at hover trim) or "ground" (resting level on the landing
                                   #   gear below it, rotors stopped)
@@ -111,7 +112,7 @@ DEFAULT_STEP = STEP_QUANTUM
 """The communication step of a scenario that names none, s."""
 _TOP_KEYS = ("name", "description", "duration", "step", "airframe", "coupling", "start",
              "reference", "disturbance", "fault", "fault_detection", "lost", "plant",
-             "controller", "origin", "mission")
+             "controller", "origin", "mission", "fmi")
 
 
 def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
@@ -127,6 +128,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
     step = top.number("step", DEFAULT_STEP, positive=True)
     airframe = _airframe(top, base_dir)
     coupling = top.string("coupling", "gauss-seidel", choices=COUPLINGS)
+    fmi = _fmi_version(top)
     start = top.string("start", "air", choices=("air", "ground"))
     if start == "ground" and airframe.gear is None:
         raise top.fail("start", f"'ground' needs a landing gear, and airframe "
@@ -188,6 +190,7 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         coupling=coupling,
         start=start,
         mission=mission,
+        fmi=fmi,
         position=position,
         attitude=attitude,
         faults=faults,
@@ -200,6 +203,17 @@ def parse_scenario(data: dict[str, Any], source: str = "<scenario>", *,
         torque=dist.get("torque", Scenario.torque),
         acceleration=dist.get("acceleration", Scenario.acceleration),
     ))
+
+
+def _fmi_version(top: FieldReader) -> int:
+    """``fmi = 2`` (default) or ``3``: which FMUs a run flies."""
+    if not top.has("fmi"):
+        top.used.add("fmi")
+        return 2
+    value = top.integer("fmi")
+    if value not in (2, 3):
+        raise top.fail("fmi", f"expected 2 or 3 (the FMI version of the FMUs), got {value}")
+    return value
 
 
 def _airframe(top: FieldReader, base_dir: Path | None) -> Airframe:

@@ -34,10 +34,11 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
-from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.fmu import FmuInstance, Kernel
 
 MAX_ROTORS = 8
 ROTOR_SIGNALS = frozenset({"omega_cmd", "alpha_cmd", "beta_cmd", "omega", "alpha", "beta",
@@ -92,14 +93,14 @@ columns."""
 
 def _outputs(inst: FmuInstance, kind: str, n_rotors: int, truth: bool = True,
              n_contacts: int = MAX_CONTACTS) -> list[str]:
-    return [v.name for v in inst.md.modelVariables
+    return [v.name for v in inst.variables.values()
             if v.causality == "output" and v.type == kind and rotor_used(v.name, n_rotors)
             and contact_used(v.name, n_contacts)
             and (truth or not v.name.split("[")[0].endswith(TRUTH_SUFFIX))]
 
 
 def _inputs(inst: FmuInstance, n_rotors: int) -> list[str]:
-    return [v.name for v in inst.md.modelVariables
+    return [v.name for v in inst.variables.values()
             if v.causality == "input" and rotor_used(v.name, n_rotors)
             and v.name not in HELD_INPUTS]
 
@@ -320,8 +321,34 @@ class Engine(ABC):
             "p_cmd": _refs(plant, conn.commands), "p_dist": _refs(plant, conn.dist_names),
             "p_out": _refs(plant, conn.plant_out), "p_int": _refs(plant, conn.plant_int),
         }
-        self._p = _raw(plant)
-        self._c = _raw(ctrl) if ctrl is not None else None
+        self._entries: dict[str, tuple[Kernel, dict[str, Callable[..., int]]]] = {}
+
+    def _kernel(self, which: str) -> tuple[Kernel, dict[str, Callable[..., int]]]:
+        """(the kernel's view, typed entries) of the plant or the controller, found at first
+        use: an FMI 3.0 instance's adapter exists once the instance is initialized."""
+        found = self._entries.get(which)
+        if found is None:
+            inst = self.plant if which == "plant" else self.ctrl
+            assert inst is not None
+            k = inst.kernel()
+            found = self._entries[which] = (k, _raw(k.entries))
+        return found
+
+    @property
+    def _p(self) -> dict[str, Callable[..., int]]:
+        return self._kernel("plant")[1]
+
+    @property
+    def _c(self) -> dict[str, Callable[..., int]] | None:
+        return self._kernel("ctrl")[1] if self.ctrl is not None else None
+
+    @property
+    def _pc(self) -> int:
+        return self._kernel("plant")[0].component
+
+    @property
+    def _cc(self) -> int:
+        return self._kernel("ctrl")[0].component
 
     def initialize(self, plant_params: Mapping[str, Value], ctrl_params: Mapping[str, Value],
                    ref0: np.ndarray) -> None:
@@ -357,14 +384,13 @@ class Engine(ABC):
         fns = self._c
         assert fns is not None
         v = self.vrs
-        a = fns["fmi2SetReal"](ctrl.slave.component, v["c_in"], len(v["c_in"]),
-                               _address(rec.ref, k))
-        a |= fns["fmi2DoStep"](ctrl.slave.component, t, self.h, 1)
-        a |= fns["fmi2GetReal"](ctrl.slave.component, v["c_out"], len(v["c_out"]),
-                                _address(rec.ctrl, k))
-        a |= fns["fmi2GetInteger"](ctrl.slave.component, v["c_int"], len(v["c_int"]),
+        cc = self._cc
+        a = fns["fmi2SetReal"](cc, v["c_in"], len(v["c_in"]), _address(rec.ref, k))
+        a |= fns["fmi2DoStep"](cc, t, self.h, 1)
+        a |= fns["fmi2GetReal"](cc, v["c_out"], len(v["c_out"]), _address(rec.ctrl, k))
+        a |= fns["fmi2GetInteger"](cc, v["c_int"], len(v["c_int"]),
                                    _address(rec.int_block("ctrl"), k))
-        a |= fns["fmi2GetBoolean"](ctrl.slave.component, v["c_bool"], len(v["c_bool"]),
+        a |= fns["fmi2GetBoolean"](cc, v["c_bool"], len(v["c_bool"]),
                                    _address(rec.int_block("ctrl_bool"), k))
         if a > _OK_STATUS:
             self.fail(t, k)
@@ -373,18 +399,17 @@ class Engine(ABC):
         """The plant's outputs into row k; the controller's current ones into the spare row."""
         rec, v = self.rec, self.vrs
         p = self._p
-        pc = self.plant.slave.component
+        pc = self._pc
         p["fmi2GetReal"](pc, v["p_out"], len(v["p_out"]), _address(rec.plant, k))
         p["fmi2GetInteger"](pc, v["p_int"], len(v["p_int"]), _address(rec.int_block("plant"), k))
-        if self.ctrl is not None and self._c is not None:
-            self._c["fmi2GetReal"](self.ctrl.slave.component, v["c_out"], len(v["c_out"]),
-                             _address(rec.ctrl, rec.spare))
+        c = self._c
+        if self.ctrl is not None and c is not None:
+            c["fmi2GetReal"](self._cc, v["c_out"], len(v["c_out"]), _address(rec.ctrl, rec.spare))
 
 
-def _raw(inst: FmuInstance) -> dict[str, Callable[..., int]]:
-    """The FMI entry points of a loaded FMU, typed for buffer addresses."""
-    dll = inst.slave.dll
-    return {name: (_STEP_FN if name == "fmi2DoStep" else _ARRAY_FN)((name, dll))
+def _raw(entries: Mapping[str, int]) -> dict[str, Callable[..., int]]:
+    """The kernel's FMI entries (addresses), typed for buffer addresses."""
+    return {name: (_STEP_FN if name == "fmi2DoStep" else _ARRAY_FN)(entries[name])
             for name in _CTRL_FNS}
 
 
@@ -400,7 +425,7 @@ class PythonEngine(Engine):
         """Run rows first..last (exclusive) from t0: the reference Python loop of the native
         kernel."""
         rec, v, h, jacobi = self.rec, self.vrs, self.h, self.jacobi
-        pc = self.plant.slave.component
+        pc = self._pc
         p_set, p_step, p_get, p_geti = (self._p[n] for n in _PLANT_FNS)
         # each block's row 0 address and row stride: element [k, 0] is at base + k * stride
         stride = rec.data.strides[0]
@@ -419,7 +444,7 @@ class PythonEngine(Engine):
         closed = self._c is not None and self.ctrl is not None
         if closed:
             assert self._c is not None and self.ctrl is not None
-            cc = self.ctrl.slave.component
+            cc = self._cc
             c_set, c_step, c_get, c_geti, c_getb = (self._c[n] for n in _CTRL_FNS)
         for k in range(first, last):
             t = t0 + k * h
@@ -453,31 +478,36 @@ class NativeEngine(Engine):
         from orchestrator.sim.native import cosim
 
         self._lib = cosim()
-        vp = ctypes.c_void_p
-
-        def entry(inst: FmuInstance | None, name: str) -> int | None:
-            return None if inst is None else ctypes.cast(getattr(inst.slave.dll, name), vp).value
-
-        fns = (vp * 9)(*[entry(ctrl, n) for n in _CTRL_FNS],
-                       *[entry(plant, n) for n in _PLANT_FNS])
-        comps = (vp * 2)(None if ctrl is None else ctrl.slave.component, plant.slave.component)
-        vrs = (vp * 9)(*[ctypes.addressof(self.vrs[k]) for k in _GROUPS])
-        counts = (ctypes.c_size_t * 9)(*[len(self.vrs[k]) for k in _GROUPS])
-        col, icol = rec.blocks, rec.int_blocks
-        offsets = (ctypes.c_long * 7)(col["ref"].start, col["plant"].start, col["dist"].start,
-                                      col["ctrl"].start, icol["ctrl"].start,
-                                      icol["ctrl_bool"].start, icol["plant"].start)
         self._failed = ctypes.c_long(-1)
-        self._keep = (fns, comps, vrs, counts, offsets)
-        self._args = (fns, comps, vrs, counts, rec.data.ctypes.data,
-                      rec.data.strides[0] // rec.data.itemsize, rec.ints.ctypes.data,
-                      rec.ints.strides[0] // rec.ints.itemsize,
-                      _address(rec.data, rec.spare), offsets)
+        self._args: tuple[Any, ...] | None = None
+
+    def _arguments(self) -> tuple[Any, ...]:
+        """The kernel's arguments, made at the first steps (the instances initialized)."""
+        if self._args is None:
+            vp, rec, ctrl = ctypes.c_void_p, self.rec, self.ctrl
+            c_fns = [None] * len(_CTRL_FNS) if ctrl is None else [
+                self._kernel("ctrl")[0].entries[n] for n in _CTRL_FNS]
+            p_entries = self._kernel("plant")[0].entries
+            fns = (vp * 9)(*c_fns, *[p_entries[n] for n in _PLANT_FNS])
+            comps = (vp * 2)(None if ctrl is None else self._cc, self._pc)
+            vrs = (vp * 9)(*[ctypes.addressof(self.vrs[k]) for k in _GROUPS])
+            counts = (ctypes.c_size_t * 9)(*[len(self.vrs[k]) for k in _GROUPS])
+            col, icol = rec.blocks, rec.int_blocks
+            offsets = (ctypes.c_long * 7)(col["ref"].start, col["plant"].start,
+                                          col["dist"].start, col["ctrl"].start,
+                                          icol["ctrl"].start, icol["ctrl_bool"].start,
+                                          icol["plant"].start)
+            self._keep = (fns, comps, vrs, counts, offsets)
+            self._args = (fns, comps, vrs, counts, rec.data.ctypes.data,
+                          rec.data.strides[0] // rec.data.itemsize, rec.ints.ctypes.data,
+                          rec.ints.strides[0] // rec.ints.itemsize,
+                          _address(rec.data, rec.spare), offsets)
+        return self._args
 
     def steps(self, first: int, last: int, t0: float) -> None:
         """Run rows first..last (exclusive) from t0 in the C step kernel (libfp_cosim)."""
-        if self._lib.fp_cosim_steps(*self._args, t0, self.h, int(self.jacobi), first, last,
-                                    ctypes.byref(self._failed)):
+        if self._lib.fp_cosim_steps(*self._arguments(), t0, self.h, int(self.jacobi), first,
+                                    last, ctypes.byref(self._failed)):
             k = int(self._failed.value)
             self.fail(t0 + k * self.h, k)
 

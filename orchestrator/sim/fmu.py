@@ -67,6 +67,21 @@ class FmuError(FMICallException, RuntimeError):
         Exception.__init__(self, f"{model}: {text}")
 
 
+@dataclass(frozen=True)
+class Kernel:
+    """What the step kernel (``libfp_cosim``) calls on an instance: its component and the
+    addresses of its FMI 2.0-shaped entries ``fmi2SetReal``, ``fmi2DoStep``,
+    ``fmi2GetReal``, ``fmi2GetInteger``, ``fmi2GetBoolean`` (an FMI 3.0 instance: an
+    adapter's, ``orchestrator.sim.fmu3``)."""
+
+    component: int
+    entries: dict[str, int]
+
+
+KERNEL_ENTRIES = ("fmi2SetReal", "fmi2DoStep", "fmi2GetReal", "fmi2GetInteger",
+                  "fmi2GetBoolean")
+
+
 @dataclass
 class Signal:
     """A group of Real variables read or written together (e.g. ``pos[1..3]``)."""
@@ -229,6 +244,13 @@ class FmuInstance:
             for name, value in values.items():
                 self.set(name, value)
 
+    def kernel(self) -> Kernel:
+        """The component and FMI entries the step kernel calls (the FMU's own)."""
+        vp = ctypes.c_void_p
+        return Kernel(int(self.slave.component),
+                      {n: int(ctypes.cast(getattr(self.slave.dll, n), vp).value or 0)
+                       for n in KERNEL_ENTRIES})
+
     # -- lifecycle -------------------------------------------------------------
 
     @contextmanager
@@ -296,3 +318,19 @@ class FmuInstance:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+def fmi_version(fmu_path: str | Path) -> int:
+    """2 or 3: the FMI version of an FMU (its modelDescription's fmiVersion)."""
+    return 3 if str(model_description(Path(fmu_path)).fmiVersion).startswith("3") else 2
+
+
+def open_fmu(fmu_path: str | Path, instance_name: str | None = None,
+             log: LogSink | None = None, logging_on: bool = False,
+             unzip_dir: str | Path | None = None) -> FmuInstance:
+    """An instance of an FMI 2.0 or 3.0 co-simulation FMU, by its modelDescription."""
+    if fmi_version(fmu_path) == 3:
+        from orchestrator.sim.fmu3 import Fmu3Instance
+
+        return Fmu3Instance(fmu_path, instance_name, log, logging_on, unzip_dir)
+    return FmuInstance(fmu_path, instance_name, log, logging_on, unzip_dir)

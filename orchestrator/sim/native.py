@@ -11,9 +11,18 @@ from plant.common.artifacts import load_library
 _VP = ctypes.c_void_p
 _L = ctypes.c_long
 
+_SZ = ctypes.c_size_t
 SIGNATURES: dict[str, list[object]] = {
     "fp_cosim_steps": [_VP, _VP, _VP, _VP, _VP, _L, _VP, _L, _VP, _VP, ctypes.c_double,
                        ctypes.c_double, ctypes.c_int, _L, _L, ctypes.POINTER(_L)],
+    # the FMI 3.0 adapter (fmu_src/host/fp_fmi3_adapter.h)
+    "fp_fmi3_adapter_new": [_VP, _VP, _SZ, _VP, _VP, _VP, ctypes.POINTER(_VP)],
+    "fp_fmi3_adapter_free": [_VP],
+    "fp_fmi3_set_real": [_VP, _VP, _SZ, _VP],
+    "fp_fmi3_get_real": [_VP, _VP, _SZ, _VP],
+    "fp_fmi3_get_integer": [_VP, _VP, _SZ, _VP],
+    "fp_fmi3_get_boolean": [_VP, _VP, _SZ, _VP],
+    "fp_fmi3_do_step": [_VP, ctypes.c_double, ctypes.c_double, ctypes.c_int],
 }
 """ctypes argument types of every function of the library (all return int)."""
 
