@@ -249,7 +249,7 @@ def test_every_fmi3_function_is_exported_and_nothing_else(model, tmp_path):
 
 
 def test_unprovided_functions_answer_error_naming_themselves(tmp_path):
-    with fmu3(fmu_path("MultirotorPlant"), tmp_path) as (slave, log, md):
+    with fmu3(fmu_path("MultirotorPlant"), tmp_path) as (slave, log, _md):
         c = slave.component
         dll = slave.dll
         null = None
@@ -395,7 +395,7 @@ def test_illegal_calls_are_errors_naming_function_and_variable(tmp_path):
 
 def test_boolean_and_int32_arrays(tmp_path):
     """fmi3Boolean is one byte: a Boolean array read and written as bools; Int32 arrays."""
-    with fmu3(fmu_path("MultirotorPlant"), tmp_path, initialize=False) as (slave, log, md):
+    with fmu3(fmu_path("MultirotorPlant"), tmp_path, initialize=False) as (slave, _log, md):
         ref = vrs(md)
         slave.enterInitializationMode(startTime=0.0)
         assert slave.getBoolean([ref["init_trim"], ref["timing"]]) == [True, False]
@@ -445,7 +445,7 @@ def outputs(slave: FMU3Slave, md) -> np.ndarray:
 
 @pytest.mark.parametrize("model", ["MultirotorPlant", "FullPoseController"])
 def test_fmu_state_round_trips_reproduce_the_next_step(model, tmp_path):
-    with fmu3(fmu_path(model), tmp_path) as (slave, log, md):
+    with fmu3(fmu_path(model), tmp_path) as (slave, _log, md):
         t = 0.0
         for _ in range(50):
             assert do_step(slave, t) == FMI3_OK
@@ -489,7 +489,7 @@ def test_an_fmi2_state_restores_in_the_fmi3_fmu(tmp_path):
     finally:
         s2.terminate()
         s2.freeInstance()
-    with fmu3(fmu_path("MultirotorPlant"), tmp_path) as (slave, log, md):
+    with fmu3(fmu_path("MultirotorPlant"), tmp_path) as (slave, _log, _md):
         slave.setFMUState(slave.deserializeFMUState(blob))
         assert do_step(slave, 20 * H) == FMI3_OK
         assert slave.getFloat64([300], 3) == pos2
@@ -633,7 +633,7 @@ def test_closed_loop_fmi3_pair_equals_fmi2_pair(tmp_path):
 
 def test_signals_fmu3_plays_its_table(tmp_path):
     """The ScenarioSignals FMU reads its table from the native resourcePath."""
-    with fmu3(signals_fmu3(tmp_path), tmp_path) as (slave, log, md):
+    with fmu3(signals_fmu3(tmp_path), tmp_path) as (slave, _log, md):
         ref = vrs(md)
         assert slave.getFloat64([ref["pos_ref"]], 3) == [0.0, 0.0, -1.0]
         t = 0.0
