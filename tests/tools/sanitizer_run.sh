@@ -47,7 +47,8 @@ status=0
 echo "+ pytest (FMU tests on the sanitizer build)"
 python -m pytest -q -p no:cacheprovider tests/test_plant/test_plant_fmu.py tests/test_controller/test_controller_fmu.py \
   tests/test_controller/test_wls_piqp.py tests/test_fmus/test_closed_loop.py tests/test_fmus/test_host_api.py \
-  tests/test_fmus/test_state_format.py tests/test_fmus/test_fmi_discipline.py tests/test_fmus/test_robustness.py || status=1
+  tests/test_fmus/test_state_format.py tests/test_fmus/test_fmi_discipline.py tests/test_fmus/test_robustness.py \
+  tests/test_fmus/test_fmi3.py || status=1
 # the ScenarioSignals FMU's table reader on good and broken tables, and one replay through it
 python -m pytest -q -p no:cacheprovider tests/test_orchestrator/test_ssp_scenario.py \
   -k "player or bad_table or fmpy_replays or validates" || status=1
