@@ -46,7 +46,8 @@ from orchestrator.sim.engine import (
     RunError,
     make_engine,
 )
-from orchestrator.sim.fmu import FmuInstance, open_fmu
+from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.fmu3 import open_fmu
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
 from orchestrator.sim.start_values import Pose, StartValues, resting_on_ground, start_values
 from plant import plant_fmu

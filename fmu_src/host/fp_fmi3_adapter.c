@@ -1,8 +1,9 @@
 /*
- * FMI 3.0 co-simulation instances behind FMI 2.0-shaped entry points (fp_fmi3_adapter.h).
- * All memory is taken at creation; a set, get or step allocates nothing.
+ * FMI 3.0 co-simulation instances behind FMI 2.0-shaped entry points (declared in
+ * fp_cosim.h, "The FMI 3.0 adapter").  All memory is taken at creation; a set, get or step
+ * allocates nothing.
  */
-#include "fp_fmi3_adapter.h"
+#include "fp_cosim.h"
 
 #include <stdbool.h>
 #include <stdlib.h>

@@ -33,7 +33,8 @@ LogSink = Callable[[int, str, str], None]
 """Receives (status, category, message) for every message the FMU logs."""
 
 _STATUS = ("OK", "WARNING", "DISCARD", "ERROR", "FATAL", "PENDING")
-_FAILED = ("DISCARD", "ERROR", "FATAL")
+FAILED_STATUSES = ("DISCARD", "ERROR", "FATAL")
+"""The status names of a failed FMI call (their messages explain an FmuError)."""
 
 
 def installed_fmu(model: str) -> Path:
@@ -146,7 +147,7 @@ class FmuInstance:
         try:
             self.slave.instantiate(callbacks=self._callbacks, loggingOn=logging_on)
         except Exception:  # fmpy raises a bare Exception when fmi2Instantiate returns NULL
-            logged = [m for s, _, m in self.messages if s in _FAILED]
+            logged = [m for s, _, m in self.messages if s in FAILED_STATUSES]
             raise FmuError(self.md.modelName, "fmi2Instantiate", logged,
                            "fmi2Instantiate") from None
         self.time = 0.0
@@ -160,7 +161,7 @@ class FmuInstance:
         # process-wide logger, so it cannot serve several masters; our FMUs pass
         # no varargs and only escape '%', which is undone here.
         msg = message.decode(errors="replace").replace("%%", "%") if message else ""
-        if self._sink is None or status_name(status) in _FAILED:
+        if self._sink is None or status_name(status) in FAILED_STATUSES:
             self.messages.append((status_name(status), cat, msg))  # errors: for FmuError
         if self._sink is not None:
             self._sink(status, cat, msg)
@@ -261,7 +262,7 @@ class FmuInstance:
         try:
             yield
         except FMICallException as e:
-            logged = [m for s, _, m in self.messages[first:] if s in _FAILED]
+            logged = [m for s, _, m in self.messages[first:] if s in FAILED_STATUSES]
             raise FmuError(self.md.modelName, what, logged, e.function, e.status) from None
 
     def enter_initialization(self, start_time: float = 0.0,
@@ -319,18 +320,3 @@ class FmuInstance:
     def __exit__(self, *exc: object) -> None:
         self.close()
 
-
-def fmi_version(fmu_path: str | Path) -> int:
-    """2 or 3: the FMI version of an FMU (its modelDescription's fmiVersion)."""
-    return 3 if str(model_description(Path(fmu_path)).fmiVersion).startswith("3") else 2
-
-
-def open_fmu(fmu_path: str | Path, instance_name: str | None = None,
-             log: LogSink | None = None, logging_on: bool = False,
-             unzip_dir: str | Path | None = None) -> FmuInstance:
-    """An instance of an FMI 2.0 or 3.0 co-simulation FMU, by its modelDescription."""
-    if fmi_version(fmu_path) == 3:
-        from orchestrator.sim.fmu3 import Fmu3Instance
-
-        return Fmu3Instance(fmu_path, instance_name, log, logging_on, unzip_dir)
-    return FmuInstance(fmu_path, instance_name, log, logging_on, unzip_dir)

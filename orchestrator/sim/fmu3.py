@@ -7,7 +7,7 @@ overrides all name elements, so the handle shows the elements of every array und
 2.0 names (a matrix ``poly_A[i,j]``, row-major) with element references of its own (their
 place in the list), reads and writes whole variables underneath, and hands the step kernel
 an adapter with FMI 2.0-shaped entry points on those element references
-(``fmu_src/host/fp_fmi3_adapter.h``), created once the instance is initialized.
+(``fmu_src/host/fp_cosim.h``, "The FMI 3.0 adapter"), created once the instance is initialized.
 """
 
 from __future__ import annotations
@@ -25,7 +25,7 @@ from fmpy.fmi1 import FMICallException
 from fmpy.fmi3 import FMU3Slave
 
 from orchestrator.sim.fmu import (
-    _FAILED,
+    FAILED_STATUSES,
     FmuError,
     FmuInstance,
     Kernel,
@@ -37,7 +37,7 @@ from plant.common.model_description import model_description
 
 Value = float | int | bool
 _TYPES = {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean"}
-_KIND = {"Real": 0, "Integer": 1, "Boolean": 2}  # fp_fmi3_adapter.h FP_FMI3_*
+_KIND = {"Real": 0, "Integer": 1, "Boolean": 2}  # fp_cosim.h FP_FMI3_*
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,7 @@ class Fmu3Instance(FmuInstance):
         try:
             self.slave.instantiate(loggingOn=logging_on, logMessage=self._on_log3)
         except Exception:  # fmpy raises a bare Exception when instantiation returns NULL
-            logged = [m for s, _, m in self.messages if s in _FAILED]
+            logged = [m for s, _, m in self.messages if s in FAILED_STATUSES]
             raise FmuError(self.md.modelName, "fmi3InstantiateCoSimulation", logged,
                            "fmi3InstantiateCoSimulation") from None
         self.time = 0.0
@@ -127,7 +127,7 @@ class Fmu3Instance(FmuInstance):
     def _on_log3(self, env: object, status: int, category: bytes, message: bytes) -> None:
         cat = category.decode(errors="replace") if category else ""
         msg = message.decode(errors="replace") if message else ""
-        if self._sink is None or status_name(status) in _FAILED:
+        if self._sink is None or status_name(status) in FAILED_STATUSES:
             self.messages.append((status_name(status), cat, msg))
         if self._sink is not None:
             self._sink(status, cat, msg)
@@ -289,9 +289,9 @@ class Fmu3Instance(FmuInstance):
             kinds = (ctypes.c_int * n)(*[_KIND[e.type] for e in variables.values()])
             out = ctypes.c_void_p()
             status = lib.fp_fmi3_adapter_new(self.slave.component, fns, n, vrs, sizes, kinds,
-                                             ctypes.byref(out))
+                                             ctypes.addressof(out))
             if status != 0 or not out.value:
-                logged = [m for s, _, m in self.messages if s in _FAILED]
+                logged = [m for s, _, m in self.messages if s in FAILED_STATUSES]
                 raise FmuError(self.md.modelName, "reading every variable for the step kernel",
                                logged)
             self._adapter = int(out.value)
@@ -330,3 +330,17 @@ class Fmu3Instance(FmuInstance):
         self.slave.freeInstance()
         if self._owns_unzip:
             shutil.rmtree(self.unzip_dir, ignore_errors=True)
+
+
+def fmi_version(fmu_path: str | Path) -> int:
+    """2 or 3: the FMI version of an FMU (its modelDescription's fmiVersion)."""
+    return 3 if str(model_description(Path(fmu_path)).fmiVersion).startswith("3") else 2
+
+
+def open_fmu(fmu_path: str | Path, instance_name: str | None = None,
+             log: LogSink | None = None, logging_on: bool = False,
+             unzip_dir: str | Path | None = None) -> FmuInstance:
+    """An instance of an FMI 2.0 or 3.0 co-simulation FMU, by its modelDescription."""
+    if fmi_version(fmu_path) == 3:
+        return Fmu3Instance(fmu_path, instance_name, log, logging_on, unzip_dir)
+    return FmuInstance(fmu_path, instance_name, log, logging_on, unzip_dir)

@@ -15,8 +15,8 @@ _SZ = ctypes.c_size_t
 SIGNATURES: dict[str, list[object]] = {
     "fp_cosim_steps": [_VP, _VP, _VP, _VP, _VP, _L, _VP, _L, _VP, _VP, ctypes.c_double,
                        ctypes.c_double, ctypes.c_int, _L, _L, ctypes.POINTER(_L)],
-    # the FMI 3.0 adapter (fmu_src/host/fp_fmi3_adapter.h)
-    "fp_fmi3_adapter_new": [_VP, _VP, _SZ, _VP, _VP, _VP, ctypes.POINTER(_VP)],
+    # the FMI 3.0 adapter (fmu_src/host/fp_cosim.h, fp_fmi3_*)
+    "fp_fmi3_adapter_new": [_VP, _VP, _SZ, _VP, _VP, _VP, _VP],
     "fp_fmi3_adapter_free": [_VP],
     "fp_fmi3_set_real": [_VP, _VP, _SZ, _VP],
     "fp_fmi3_get_real": [_VP, _VP, _SZ, _VP],

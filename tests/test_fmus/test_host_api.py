@@ -43,6 +43,7 @@ FUNCTION_POINTER_TYPEDEFS = {"FpFn"}
 EXACT = {
     ("int", 0): ctypes.c_int,
     ("long", 0): ctypes.c_long,
+    ("size_t", 0): ctypes.c_size_t,
     ("double", 0): ctypes.c_double,
     ("void", 1): ctypes.c_void_p,
     ("double", 1): ctypes.POINTER(ctypes.c_double),
