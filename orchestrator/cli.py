@@ -278,19 +278,21 @@ def _cmd_fmus(args: argparse.Namespace) -> int:
 
 def _cmd_build_fmus(args: argparse.Namespace) -> int:
     from orchestrator.export.fmu_build import build_fmus
-    from orchestrator.export.platforms import parse_platforms
+    from orchestrator.export.platforms import binary_folder, parse_platforms
 
     platforms = parse_platforms(args.platforms)
-    print(f"building the FMUs for {', '.join(p.name for p in platforms)} (Zig, from each "
-          f"FMU's sources/) -> {args.out}")
+    version = "FMI 3.0" if args.fmi == 3 else "FMI 2.0"
+    print(f"building the {version} FMUs for {', '.join(p.name for p in platforms)} (Zig, from "
+          f"each FMU's sources/) -> {args.out}")
     sys.stdout.flush()
-    report = build_fmus(platforms, args.out)
+    report = build_fmus(platforms, args.out, fmi=args.fmi)
     models = sorted({m for m, _ in report.binary_sizes}, key=lambda m: m != "MultirotorPlant")
     print(f"{'platform':16s} {'binaries/':16s} {'time':>8s}  "
           + "  ".join(f"{m:>18s}" for m in models))
     for p in platforms:
         sizes = "  ".join(f"{report.binary_sizes[(m, p.name)] / 1024:15.0f} KiB" for m in models)
-        print(f"{p.name:16s} {p.folder:16s} {report.seconds[p.name]:6.1f} s  {sizes}")
+        print(f"{p.name:16s} {binary_folder(p, args.fmi):16s} {report.seconds[p.name]:6.1f} s  "
+              f"{sizes}")
     for name, size in report.sizes().items():
         print(f"wrote {args.out / name} ({size / 1024:.0f} KiB)")
     print(f"built in {report.total_seconds:.1f} s")
@@ -546,6 +548,9 @@ def build_parser() -> argparse.ArgumentParser:
                          "x86_64-windows, x86_64-darwin, aarch64-darwin (default: all)")
     bf.add_argument("--out", type=Path, required=True,
                     help="folder for the .fmu files (plant, controller, ScenarioSignals)")
+    bf.add_argument("--fmi", type=int, choices=(2, 3), default=2,
+                    help="the FMI 2.0 FMUs (default) or the FMI 3.0 ones (binaries/ by FMI 3.0 "
+                         "platform tuples)")
     bf.set_defaults(func=_cmd_build_fmus)
     for command in entry_points(group=COMMANDS_GROUP):
         command.load()(sub)

@@ -39,14 +39,14 @@ class BuildReport:
         return {p.name: p.stat().st_size for p in self.fmus}
 
 
-def installed_fmus() -> list[Path]:
+def installed_fmus(fmi: int = 2) -> list[Path]:
     """The installed plant and controller FMUs and the scenario player of the SSP export
-    (``orchestrator.export.signals``), the sources of every build."""
+    (``orchestrator.export.signals``) of FMI version ``fmi``, the sources of every build."""
     from controller import controller_fmu
     from orchestrator.export.signals import signals_fmu
     from plant import plant_fmu
 
-    return [plant_fmu(), controller_fmu(), signals_fmu()]
+    return [plant_fmu(fmi), controller_fmu(fmi), signals_fmu(fmi)]
 
 
 def _unpack(fmu: Path, into: Path) -> tuple[str, Path]:
@@ -85,13 +85,13 @@ def write_fmu(root: Path, out: Path) -> None:
 
 
 def build_fmus(platforms: Sequence[Platform], out: Path,
-               sources: Sequence[Path] | None = None) -> BuildReport:
-    """Writes ``out/<model>.fmu`` for each FMU in ``sources`` (default: the installed plant
-    and controller FMUs) with binaries for ``platforms``."""
+               sources: Sequence[Path] | None = None, fmi: int = 2) -> BuildReport:
+    """Writes ``out/<model>.fmu`` for each FMU in ``sources`` (default: the installed plant,
+    controller and player FMUs of FMI version ``fmi``) with binaries for ``platforms``."""
     if not platforms:
         raise PlatformBuildError("no platform to build")
     zig_command()  # a missing compiler is said before anything is done
-    fmus = list(sources) if sources is not None else installed_fmus()
+    fmus = list(sources) if sources is not None else installed_fmus(fmi)
     out = Path(out)
     if out.exists() and not out.is_dir():
         raise PlatformBuildError(f"{out} exists and is not a folder")
@@ -106,7 +106,7 @@ def build_fmus(platforms: Sequence[Platform], out: Path,
             built: dict[str, Path] = {}
             for p in platforms:
                 lib, seconds = build_platform(p, src, staged / "binaries",
-                                              work / fmu.stem / "targets", model, built)
+                                              work / fmu.stem / "targets", model, built, fmi)
                 report.seconds[p.name] += seconds
                 report.binary_sizes[(model, p.name)] = lib.stat().st_size
             archive = work / f"{model}.fmu"

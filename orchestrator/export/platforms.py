@@ -165,21 +165,30 @@ def compile_target(target: Target, sources: Path, out: Path, label: str) -> None
         raise PlatformBuildError(f"{label}: zig cc -target {target.triple} failed:\n{tail}")
 
 
+def binary_folder(platform: Platform, fmi: int = 2) -> str:
+    """The ``binaries/`` folder of ``platform`` in an FMU of FMI version ``fmi``: FMI 2.0's
+    (``linux64``, ``win64``, ``darwin64``, else the FMI 3.0 tuple), FMI 3.0's tuple."""
+    return platform.folder if fmi == 2 else platform.name
+
+
 def build_platform(platform: Platform, sources: Path, binaries: Path, work: Path, model: str,
-                   built: dict[str, Path]) -> tuple[Path, float]:
-    """The binary of ``model`` for ``platform``, ``binaries/<folder>/<model><suffix>``, from
-    ``sources``; each target compiled into ``work`` unless already in ``built`` (triple ->
-    library, updated); returns the binary and the seconds spent."""
+                   built: dict[str, Path], fmi: int = 2) -> tuple[Path, float]:
+    """The binary of ``model`` for ``platform``, ``binaries/<folder>/<model><suffix>``
+    (:func:`binary_folder`), from ``sources``; each target compiled into ``work`` unless already
+    in ``built`` (triple -> library, updated); returns the binary and the seconds spent.  In
+    FMI 3.0, ``x86_64-darwin`` holds the x86_64 slice alone (``aarch64-darwin`` the arm64
+    one), not FMI 2.0's universal ``darwin64`` file."""
     start = time.perf_counter()
     slices = []
-    for target in platform.targets:
+    targets = platform.targets if fmi == 2 else platform.targets[:1]
+    for target in targets:
         if target.triple not in built:
             lib = work / target.triple / f"{model}{target.suffix}"
             lib.parent.mkdir(parents=True, exist_ok=True)
             compile_target(target, sources, lib, f"{model} for {platform.name}")
             built[target.triple] = lib
         slices.append(built[target.triple])
-    out = binaries / platform.folder / f"{model}{platform.suffix}"
+    out = binaries / binary_folder(platform, fmi) / f"{model}{platform.suffix}"
     out.parent.mkdir(parents=True, exist_ok=True)
     if len(slices) == 1:
         shutil.copyfile(slices[0], out)

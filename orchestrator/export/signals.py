@@ -47,10 +47,13 @@ DISTURBANCE_GROUPS = ("f_d", "tau_d", "a_d", "efficiency")
 """The plant inputs the FMU feeds."""
 
 
-def signals_fmu() -> Path:
-    """Path of the installed (or ``FULLPOSE_BUILD_DIR``-built) ScenarioSignals FMU, without a
-    table (it refuses to instantiate until one is added: :func:`signals_fmu_with`)."""
-    return find_artifact("orchestrator", "fmus", f"{SIGNALS_FMU}.fmu")
+def signals_fmu(fmi: int = 2) -> Path:
+    """Path of the installed (or ``FULLPOSE_BUILD_DIR``-built) ScenarioSignals FMU (FMI 2.0, or
+    3.0 with ``fmi=3``), without a table (it refuses to instantiate until one is added:
+    :func:`signals_fmu_with`)."""
+    from plant import fmu_file
+
+    return find_artifact("orchestrator", "fmus", fmu_file(SIGNALS_FMU, fmi))
 
 
 @dataclass(frozen=True)
