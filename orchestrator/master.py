@@ -47,7 +47,7 @@ from orchestrator.sim.engine import (
     make_engine,
 )
 from orchestrator.sim.fmu import FmuInstance
-from orchestrator.sim.fmu3 import open_fmu
+from orchestrator.sim.fmu3 import fmi_of, open_fmu
 from orchestrator.sim.outcome import Lost, LostCriteria, first_lost
 from orchestrator.sim.start_values import Pose, StartValues, resting_on_ground, start_values
 from plant import plant_fmu
@@ -343,7 +343,7 @@ class CoSimulation:
             "lost_criteria": sc.lost.summary(),
             "coupling": sc.coupling,
             "engine": self.engine,
-            "fmi": sc.fmi,
+            "fmi": fmi_of(plant_inst),  # the version flown (a sweep's workers: FMI 2.0)
             "wall_time": wall,
             "fmu_time": fmu_time,
             "timing": self.timing,

@@ -337,6 +337,11 @@ def fmi_version(fmu_path: str | Path) -> int:
     return 3 if str(model_description(Path(fmu_path)).fmiVersion).startswith("3") else 2
 
 
+def fmi_of(inst: FmuInstance) -> int:
+    """2 or 3: the FMI version of an open instance."""
+    return 3 if isinstance(inst, Fmu3Instance) else 2
+
+
 def open_fmu(fmu_path: str | Path, instance_name: str | None = None,
              log: LogSink | None = None, logging_on: bool = False,
              unzip_dir: str | Path | None = None) -> FmuInstance:
