@@ -5,7 +5,10 @@
  * is used).  The format and the lifecycle bits are those of the FMI 2.0 FMU of the same
  * model: its instantiation token is that FMU's GUID, so a state serialized by either
  * restores in the other.  FMI 3.0 has no memory callbacks: states are malloc'ed.  Part of
- * the FMI 3.0 glue (fmi3_glue_internal.h); the lifecycle it restores is fmi3_glue.c's.
+ * the FMI 3.0 glue (fmi3_glue_internal.h); the lifecycle it restores is fmi3_glue.c's.  A
+ * Scheduled Execution instance takes the states of co-simulation ones and the reverse (Clock
+ * Activation Mode is saved as Step Mode); restored, its next activation is due at the
+ * state's time.
  */
 #include <stdlib.h>
 #include <string.h>
@@ -44,7 +47,27 @@ static int check_state(Fmi3Instance *inst, const unsigned char *buf, size_t size
 static fmi3Status snapshot_read(Fmi3Instance *inst, const unsigned char *buf, const char *fn) {
     StateHeader h;
     if (!check_state(inst, buf, 0, STATE_ALL, fn, "FMUState", &h)) return fmi3Error;
+    if (inst->interface == G3_SCHEDULED_EXECUTION && h.state == S_STEP_FAILED) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: the state was saved by a Co-Simulation instance after a discarded step, a "
+                "state Scheduled Execution does not have",
+                fn);
+        return fmi3Error;
+    }
     memcpy(inst->scratch, buf + sizeof h, inst->info->model_size);
+    if (inst->interface == G3_SCHEDULED_EXECUTION && (h.state & S_INITIALIZED)) {
+        /* the clock's interval is constant: a state of another sample time cannot go on */
+        const FpVar *ts = inst->internal_step;
+        double saved;
+        memcpy(&saved, (const char *)inst->scratch + ts->offset, sizeof saved);
+        if (saved != inst->se_interval) {
+            g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                    "%s: the state's %s is %.17g s, but the clock %s activates samples every "
+                    "%.17g s (a constant interval)",
+                    fn, ts->name, saved, FP_SE_CLOCK_NAME, inst->se_interval);
+            return fmi3Error;
+        }
+    }
     if (inst->info->check_restored != NULL) {
         FpStatus s;
         inst->checking = 1;
@@ -61,6 +84,9 @@ static fmi3Status snapshot_read(Fmi3Instance *inst, const unsigned char *buf, co
     inst->dirty = (h.flags & STATE_FLAG_DIRTY) != 0;
     inst->tunables_dirty = (h.flags & STATE_FLAG_TUNABLES_DIRTY) != 0;
     inst->time = h.time;
+    /* Scheduled Execution: the next activation is due at the state's time (a state saved by
+     * either interface after a sample holds the instant of the next one) */
+    g3_se_anchor(inst);
     return fmi3OK;
 }
 

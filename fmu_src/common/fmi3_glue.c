@@ -10,11 +10,20 @@
  * fmi3Error with a message naming the function and the state.  Logging goes through the
  * importer's fmi3LogMessageCallback by category.
  *
+ * The FMU built with FP_FMI3_SCHEDULED_EXECUTION (fmi3_scheduled.h: the controller) also
+ * provides Scheduled Execution over the same model: Instantiated -> Initialization Mode ->
+ * (fmi3ExitInitializationMode) Clock Activation Mode -> Terminated, with fmi3Reset and the
+ * FMU states as above; its one input clock's model partition, one sample of the model, runs
+ * in fmi3ActivateModelPartition, the same model step fmi3DoStep runs for a step of one
+ * sample time.  Clock Activation Mode is the lifecycle state of Step Mode (S_STEP_COMPLETE),
+ * told apart by the instance's interface.
+ *
  * The value access is fmi3_values.c, FMU states fmi3_fmustate.c (the format of
  * fmu_state.c, as for FMI 2.0), the resources/ folder fmi3_resources.c; what they share is
- * fmi3_glue_internal.h.  Model Exchange and Scheduled Execution are not provided yet: their
- * instantiation answers NULL with a message, and every function of theirs (as every other
- * function this FMU does not provide) is exported and answers fmi3Error naming itself.
+ * fmi3_glue_internal.h.  Model Exchange is not provided yet, nor Scheduled Execution by the
+ * FMUs built without it: their instantiation answers NULL with a message, and every
+ * function of theirs (as every other function this FMU does not provide) is exported and
+ * answers fmi3Error naming itself.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -38,6 +47,12 @@ const char *g3_state_name(int state) {
     case S_ERROR: return "Error";
     default: return "Fatal";
     }
+}
+
+const char *g3_mode_name(const Fmi3Instance *inst) {
+    if (inst->interface == G3_SCHEDULED_EXECUTION && inst->state == S_STEP_COMPLETE)
+        return "Clock Activation Mode";
+    return g3_state_name(inst->state);
 }
 
 static fmi3Status to_fmi3(FpStatus s) {
@@ -111,7 +126,7 @@ Fmi3Instance *g3_enter(fmi3Instance c, const char *fn, int states) {
     if (inst == NULL) return NULL;
     if (inst->state & states) return inst;
     g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s may not be called in state %s", fn,
-            g3_state_name(inst->state));
+            g3_mode_name(inst));
     return NULL;
 }
 
@@ -136,6 +151,12 @@ fmi3Status g3_refresh(Fmi3Instance *inst) {
     if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi3Error);
     inst->dirty = 0;
     return to_fmi3(s);
+}
+
+void g3_se_anchor(Fmi3Instance *inst) {
+    inst->se_base = inst->time;
+    inst->se_k = 0;
+    inst->se_set_pending = 0;
 }
 
 /* ------------------------------------------------------------------------ */
@@ -220,20 +241,18 @@ static void early_error(fmi3LogMessageCallback logger, fmi3InstanceEnvironment e
     if (logger != NULL) logger(env, fmi3Error, fp_log_category_name(FP_LOG_ERROR), message);
 }
 
-fmi3Instance fmi3InstantiateCoSimulation(
-    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
-    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
-    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
-    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
-    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
+/* An instance with its logger, name and token checked, nothing allocated but itself; NULL
+ * with the reason logged.  fn names the instantiation function in messages. */
+static Fmi3Instance *new_instance(const char *fn, fmi3String instanceName,
+                                  fmi3String instantiationToken, fmi3Boolean loggingOn,
+                                  fmi3InstanceEnvironment instanceEnvironment,
+                                  fmi3LogMessageCallback logMessage) {
     const FpModelInfo *info = fp_model_info();
-    Fmi3Instance *inst;
-    uint32_t max_vr = 0;
-    size_t i;
-    (void)intermediateUpdate; /* providesIntermediateUpdate="false": never called */
-    inst = (Fmi3Instance *)calloc(1, sizeof(Fmi3Instance));
+    Fmi3Instance *inst = (Fmi3Instance *)calloc(1, sizeof(Fmi3Instance));
+    char message[96];
     if (inst == NULL) {
-        early_error(logMessage, instanceEnvironment, "fmi3InstantiateCoSimulation: out of memory");
+        snprintf(message, sizeof message, "%s: out of memory", fn);
+        early_error(logMessage, instanceEnvironment, message);
         return NULL;
     }
     inst->magic = G3_INSTANCE_LIVE;
@@ -248,24 +267,84 @@ fmi3Instance fmi3InstantiateCoSimulation(
     fp_model_guid(info, inst->guid);
 
     if (instanceName == NULL || instanceName[0] == '\0') {
-        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
-                "fmi3InstantiateCoSimulation: instanceName must not be empty");
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: instanceName must not be empty", fn);
         release_instance(inst);
         return NULL;
     }
     if (instantiationToken == NULL || strcmp(instantiationToken, inst->guid) != 0) {
         g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
-                "fmi3InstantiateCoSimulation: instantiationToken %s does not match this binary "
-                "(%s); the FMU is inconsistent",
-                instantiationToken ? instantiationToken : "(null)", inst->guid);
+                "%s: instantiationToken %s does not match this binary (%s); the FMU is "
+                "inconsistent",
+                fn, instantiationToken ? instantiationToken : "(null)", inst->guid);
         release_instance(inst);
         return NULL;
     }
+    return inst;
+}
+
+/* The rest of an instantiation: the value reference map, the model and its scratch copy,
+ * the table from resources/, the defaults.  0, or -1 with the reason logged (the caller
+ * releases the instance). */
+static int complete_instance(Fmi3Instance *inst, const char *fn, fmi3String resourcePath) {
+    const FpModelInfo *info = inst->info;
+    uint32_t max_vr = 0;
+    size_t i;
+    for (i = 0; i < info->n_vars; i++)
+        if (info->vars[i].vr > max_vr) max_vr = info->vars[i].vr;
+    inst->n_vr = max_vr + 1;
+    if (info->model_size < sizeof(int32_t) ||
+        info->initialized_offset > info->model_size - sizeof(int32_t)) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: the model's initialized marker (at %lu) lies beyond its %lu bytes; the "
+                "FMU is inconsistent",
+                fn, (unsigned long)info->initialized_offset, (unsigned long)info->model_size);
+        return -1;
+    }
+    inst->vr_map = (int32_t *)calloc(inst->n_vr, sizeof(int32_t));
+    inst->model = calloc(1, info->model_size);
+    inst->scratch = calloc(1, info->model_size);
+    if (inst->vr_map == NULL || inst->model == NULL || inst->scratch == NULL) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: out of memory", fn);
+        return -1;
+    }
+    /* one variable per row, its value reference the row's (element k of the FMI 2.0 FMU's
+     * vr + k is not an FMI 3.0 value reference); 0 is the independent variable time */
+    for (i = 0; i < inst->n_vr; i++) inst->vr_map[i] = -1;
+    for (i = 0; i < info->n_vars; i++) inst->vr_map[info->vars[i].vr] = (int32_t)i;
+    inst->internal_step = find_internal_step(info);
+    if (info->table_resource != NULL) {
+        char why[640];
+        if (g3_load_table(inst, resourcePath, why, sizeof why) != 0) {
+            g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: %s", fn, why);
+            return -1;
+        }
+        g3_logf(inst, FP_OK, FP_LOG_EVENTS, "read resources/%s: %lu rows of %lu signals",
+                info->table_resource, (unsigned long)inst->table.rows,
+                (unsigned long)inst->table.cols);
+    }
+    info->set_defaults(inst->model);
+    set_initialized(inst, 0);
+    inst->dirty = 1;
+    return 0;
+}
+
+fmi3Instance fmi3InstantiateCoSimulation(
+    fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
+    fmi3Boolean visible, fmi3Boolean loggingOn, fmi3Boolean eventModeUsed,
+    fmi3Boolean earlyReturnAllowed, const fmi3ValueReference requiredIntermediateVariables[],
+    size_t nRequiredIntermediateVariables, fmi3InstanceEnvironment instanceEnvironment,
+    fmi3LogMessageCallback logMessage, fmi3IntermediateUpdateCallback intermediateUpdate) {
+    static const char fn[] = "fmi3InstantiateCoSimulation";
+    Fmi3Instance *inst;
+    (void)intermediateUpdate; /* providesIntermediateUpdate="false": never called */
+    inst = new_instance(fn, instanceName, instantiationToken, loggingOn, instanceEnvironment,
+                        logMessage);
+    if (inst == NULL) return NULL;
     if (eventModeUsed) {
         g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
                 "fmi3InstantiateCoSimulation: eventModeUsed = true, but %s has no Event Mode "
                 "(hasEventMode=\"false\"); instantiate it with eventModeUsed = false",
-                info->model_name);
+                inst->info->model_name);
         release_instance(inst);
         return NULL;
     }
@@ -276,49 +355,15 @@ fmi3Instance fmi3InstantiateCoSimulation(
                 "(providesIntermediateUpdate=\"false\")",
                 (unsigned long)nRequiredIntermediateVariables,
                 requiredIntermediateVariables ? (unsigned)requiredIntermediateVariables[0] : 0u,
-                info->model_name);
+                inst->info->model_name);
         release_instance(inst);
         return NULL;
     }
-    for (i = 0; i < info->n_vars; i++)
-        if (info->vars[i].vr > max_vr) max_vr = info->vars[i].vr;
-    inst->n_vr = max_vr + 1;
-    if (info->model_size < sizeof(int32_t) ||
-        info->initialized_offset > info->model_size - sizeof(int32_t)) {
-        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
-                "fmi3InstantiateCoSimulation: the model's initialized marker (at %lu) lies beyond "
-                "its %lu bytes; the FMU is inconsistent",
-                (unsigned long)info->initialized_offset, (unsigned long)info->model_size);
+    if (complete_instance(inst, fn, resourcePath) != 0) {
         release_instance(inst);
         return NULL;
     }
-    inst->vr_map = (int32_t *)calloc(inst->n_vr, sizeof(int32_t));
-    inst->model = calloc(1, info->model_size);
-    inst->scratch = calloc(1, info->model_size);
-    if (inst->vr_map == NULL || inst->model == NULL || inst->scratch == NULL) {
-        g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi3InstantiateCoSimulation: out of memory");
-        release_instance(inst);
-        return NULL;
-    }
-    /* one variable per row, its value reference the row's (element k of the FMI 2.0 FMU's
-     * vr + k is not an FMI 3.0 value reference); 0 is the independent variable time */
-    for (i = 0; i < inst->n_vr; i++) inst->vr_map[i] = -1;
-    for (i = 0; i < info->n_vars; i++) inst->vr_map[info->vars[i].vr] = (int32_t)i;
-    inst->internal_step = find_internal_step(info);
-    if (info->table_resource != NULL) {
-        char why[640];
-        if (g3_load_table(inst, resourcePath, why, sizeof why) != 0) {
-            g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "fmi3InstantiateCoSimulation: %s", why);
-            release_instance(inst);
-            return NULL;
-        }
-        g3_logf(inst, FP_OK, FP_LOG_EVENTS, "read resources/%s: %lu rows of %lu signals",
-                info->table_resource, (unsigned long)inst->table.rows,
-                (unsigned long)inst->table.cols);
-    }
-    info->set_defaults(inst->model);
-    set_initialized(inst, 0);
-    inst->dirty = 1;
+    inst->interface = G3_CO_SIMULATION;
     G3_LOG_CALL(inst,
                 "fmi3InstantiateCoSimulation(instanceName = \"%.64s\", instantiationToken = "
                 "\"%s\", resourcePath = \"%.200s\", visible = %d, loggingOn = %d, eventModeUsed "
@@ -326,7 +371,7 @@ fmi3Instance fmi3InstantiateCoSimulation(
                 instanceName, instantiationToken, resourcePath ? resourcePath : "(null)",
                 (int)visible, (int)loggingOn, (int)eventModeUsed, (int)earlyReturnAllowed);
     g3_logf(inst, FP_OK, FP_LOG_EVENTS, "instantiated %s (FMI 3.0 co-simulation)",
-            info->model_name);
+            inst->info->model_name);
     return inst;
 }
 
@@ -339,28 +384,74 @@ fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String in
     (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible,
         (void)loggingOn;
     snprintf(message, sizeof message,
-             "fmi3InstantiateModelExchange: %s provides co-simulation only (no <ModelExchange> "
-             "in its modelDescription.xml); use fmi3InstantiateCoSimulation",
-             fp_model_info()->model_name);
+             "fmi3InstantiateModelExchange: %s provides %s only (no <ModelExchange> in its "
+             "modelDescription.xml); use fmi3InstantiateCoSimulation",
+             fp_model_info()->model_name,
+             G3_SE_PROVIDED ? "co-simulation and scheduled execution" : "co-simulation");
     early_error(logMessage, instanceEnvironment, message);
     return NULL;
 }
 
+/*
+ * Scheduled Execution (the FMU built with FP_FMI3_SCHEDULED_EXECUTION, fmi3_scheduled.h): an
+ * instance as a co-simulation one, with the interval of its input clock taken from the
+ * internal step's default.  The three callbacks are kept, none is required (NULL is taken)
+ * and none is called: the FMU has no output or countdown clock whose activation
+ * clockUpdate would report, and its one model partition touches nothing but its own
+ * instance, so no code of it needs lockPreemption / unlockPreemption around it.
+ */
 fmi3Instance fmi3InstantiateScheduledExecution(
     fmi3String instanceName, fmi3String instantiationToken, fmi3String resourcePath,
     fmi3Boolean visible, fmi3Boolean loggingOn, fmi3InstanceEnvironment instanceEnvironment,
     fmi3LogMessageCallback logMessage, fmi3ClockUpdateCallback clockUpdate,
     fmi3LockPreemptionCallback lockPreemption, fmi3UnlockPreemptionCallback unlockPreemption) {
-    char message[256];
-    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible,
-        (void)loggingOn, (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
-    snprintf(message, sizeof message,
-             "fmi3InstantiateScheduledExecution: %s provides co-simulation only (no "
-             "<ScheduledExecution> in its modelDescription.xml); use "
-             "fmi3InstantiateCoSimulation",
-             fp_model_info()->model_name);
-    early_error(logMessage, instanceEnvironment, message);
-    return NULL;
+    static const char fn[] = "fmi3InstantiateScheduledExecution";
+    Fmi3Instance *inst;
+    if (!G3_SE_PROVIDED) {
+        char message[256];
+        (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible,
+            (void)loggingOn, (void)clockUpdate, (void)lockPreemption, (void)unlockPreemption;
+        snprintf(message, sizeof message,
+                 "fmi3InstantiateScheduledExecution: %s provides co-simulation only (no "
+                 "<ScheduledExecution> in its modelDescription.xml); use "
+                 "fmi3InstantiateCoSimulation",
+                 fp_model_info()->model_name);
+        early_error(logMessage, instanceEnvironment, message);
+        return NULL;
+    }
+    inst = new_instance(fn, instanceName, instantiationToken, loggingOn, instanceEnvironment,
+                        logMessage);
+    if (inst == NULL) return NULL;
+    if (complete_instance(inst, fn, resourcePath) != 0) {
+        release_instance(inst);
+        return NULL;
+    }
+    if (inst->internal_step == NULL) { /* (mdgen --scheduled-execution refuses such a model) */
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: %s has no internal step parameter to give its clock %s an interval; the "
+                "FMU is inconsistent",
+                fn, inst->info->model_name, FP_SE_CLOCK_NAME);
+        release_instance(inst);
+        return NULL;
+    }
+    inst->interface = G3_SCHEDULED_EXECUTION;
+    inst->clock_update = clockUpdate;
+    inst->lock_preemption = lockPreemption;
+    inst->unlock_preemption = unlockPreemption;
+    inst->se_interval = *(const double *)g3_element(inst, inst->internal_step, 0);
+    G3_LOG_CALL(inst,
+                "fmi3InstantiateScheduledExecution(instanceName = \"%.64s\", instantiationToken "
+                "= \"%s\", resourcePath = \"%.200s\", visible = %d, loggingOn = %d, clockUpdate "
+                "%s, lockPreemption %s, unlockPreemption %s)",
+                instanceName, instantiationToken, resourcePath ? resourcePath : "(null)",
+                (int)visible, (int)loggingOn, clockUpdate ? "given" : "NULL",
+                lockPreemption ? "given" : "NULL", unlockPreemption ? "given" : "NULL");
+    g3_logf(inst, FP_OK, FP_LOG_EVENTS,
+            "instantiated %s (FMI 3.0 scheduled execution: clock %s, vr %u, interval %s = "
+            "%.17g s)",
+            inst->info->model_name, FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR,
+            inst->internal_step->name, inst->se_interval);
+    return inst;
 }
 
 void fmi3FreeInstance(fmi3Instance c) {
@@ -398,10 +489,28 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance c) {
     inst->dirty = 1; /* always validate the final parameter set */
     s = g3_refresh(inst);
     if (s > fmi3Warning) return s;
+    if (inst->interface == G3_SCHEDULED_EXECUTION) {
+        /* the clock's interval is constant, the model's sample time is a parameter: they
+         * must be one */
+        double ts = *(const double *)g3_element(inst, inst->internal_step, 0);
+        if (ts != inst->se_interval) {
+            g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                    "fmi3ExitInitializationMode: %s = %.17g s, but in Scheduled Execution the "
+                    "clock %s (vr %u) activates the samples at its constant interval %.17g s "
+                    "(intervalVariability=\"constant\"): leave %s at %.17g s, or use "
+                    "co-simulation",
+                    inst->internal_step->name, ts, FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR,
+                    inst->se_interval, inst->internal_step->name, inst->se_interval);
+            return fail(inst, fmi3Error);
+        }
+    }
     set_initialized(inst, 1);
-    /* Co-Simulation without Event Mode: Step Mode follows Initialization Mode directly */
+    /* Co-Simulation without Event Mode: Step Mode follows Initialization Mode directly;
+     * Scheduled Execution: Clock Activation Mode (the same lifecycle state), its first
+     * activation due at the start time */
     inst->state = S_STEP_COMPLETE;
     inst->tunables_dirty = 0;
+    g3_se_anchor(inst);
     g3_logf(inst, FP_OK, FP_LOG_EVENTS, "initialized at t = %g", inst->time);
     return s;
 }
@@ -424,6 +533,7 @@ fmi3Status fmi3Reset(fmi3Instance c) {
     inst->dirty = 1;
     inst->tunables_dirty = 0;
     inst->n_warned = 0; /* a new initialization: its warnings are news again */
+    g3_se_anchor(inst);
     g3_logf(inst, FP_OK, FP_LOG_EVENTS, "reset");
     return fmi3OK;
 }
@@ -455,6 +565,13 @@ fmi3Status fmi3DoStep(fmi3Instance c, fmi3Float64 currentCommunicationPoint,
     FpStatus s;
     double tol;
     G3_CHECK("fmi3DoStep", S_STEP_COMPLETE);
+    if (inst->interface != G3_CO_SIMULATION) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "fmi3DoStep may not be called in state %s: a Scheduled Execution instance "
+                "runs its samples by fmi3ActivateModelPartition",
+                g3_mode_name(inst));
+        return fmi3Error;
+    }
     G3_LOG_CALL(inst,
                 "fmi3DoStep(currentCommunicationPoint = %.17g, communicationStepSize = %.17g, "
                 "noSetFMUStatePriorToCurrentPoint = %d)",
@@ -515,7 +632,14 @@ static fmi3Status not_provided(fmi3Instance c, const char *fn, const char *why) 
 
 #define G3_NO_EVENT_MODE "the FMU has no Event Mode (hasEventMode=\"false\")"
 #define G3_NO_CLOCKS "the FMU has no clocks"
+#if G3_SE_PROVIDED
+#define G3_NO_ME \
+    "the FMU provides co-simulation and scheduled execution only (Model Exchange comes later)"
+#define G3_NO_EVALUATE "the FMU has no Event Mode (providesEvaluateDiscreteStates=\"false\")"
+#else
 #define G3_NO_ME "the FMU provides co-simulation only (Model Exchange comes later)"
+#define G3_NO_EVALUATE G3_NO_CLOCKS " (providesEvaluateDiscreteStates=\"false\")"
+#endif
 #define G3_NO_SE "the FMU provides co-simulation only (Scheduled Execution comes later)"
 
 fmi3Status fmi3EnterEventMode(fmi3Instance c) {
@@ -540,8 +664,7 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance c) {
-    return not_provided(c, "fmi3EvaluateDiscreteStates",
-                        G3_NO_CLOCKS " (providesEvaluateDiscreteStates=\"false\")");
+    return not_provided(c, "fmi3EvaluateDiscreteStates", G3_NO_EVALUATE);
 }
 
 fmi3Status fmi3GetNumberOfVariableDependencies(fmi3Instance c, fmi3ValueReference valueReference,
@@ -599,13 +722,69 @@ fmi3Status fmi3GetOutputDerivatives(fmi3Instance c, const fmi3ValueReference val
     return not_provided(c, "fmi3GetOutputDerivatives", "maxOutputDerivativeOrder=\"0\"");
 }
 
-/* Clocks */
+/* Clocks.  Without Scheduled Execution the FMU has none.  With it, its one clock is the
+ * input clock of Scheduled Execution (fmi3_scheduled.h), periodic with a constant interval
+ * and no shift: a Scheduled Execution instance answers its interval (qualifier
+ * fmi3IntervalUnchanged, the only one a constant clock has) and its shift (0); nothing sets
+ * them, the fractions are not supported (supportsFraction="false"), and a Co-Simulation
+ * instance, which steps without Event Mode, has no clock to ask about. */
+
+#define G3_CONSTANT_CLOCK                                                               \
+    "the clock " FP_SE_CLOCK_NAME " has a constant interval and no shift "              \
+    "(intervalVariability=\"constant\"): nothing sets them"
+#define G3_NO_FRACTION                                                                  \
+    "the clock " FP_SE_CLOCK_NAME " has supportsFraction=\"false\": its interval and shift are " \
+    "read by fmi3GetIntervalDecimal and fmi3GetShiftDecimal"
+
+/* The checks of a clock inquiry on a Scheduled Execution instance: every reference the
+ * clock, the arrays there.  The instance, or NULL with the reason logged. */
+static Fmi3Instance *clock_inquiry(fmi3Instance c, const char *fn,
+                                   const fmi3ValueReference vrs[], size_t n, const void *out,
+                                   const void *out2) {
+    size_t i;
+    Fmi3Instance *inst = g3_enter(c, fn, S_INIT | S_STEP_COMPLETE);
+    if (inst == NULL) return NULL;
+    G3_LOG_CALL(inst, "%s(nValueReferences = %lu%s%u)", fn, (unsigned long)n,
+                n > 0 && vrs != NULL ? ": vr " : ", vr ",
+                n > 0 && vrs != NULL ? (unsigned)vrs[0] : 0u);
+    if (inst->interface != G3_SCHEDULED_EXECUTION) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: a Co-Simulation instance has no active clock (no Event Mode); the clock "
+                "%s (vr %u) is Scheduled Execution's",
+                fn, FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR);
+        return NULL;
+    }
+    if (n > 0 && (vrs == NULL || out == NULL || out2 == NULL)) {
+        g3_null_argument(inst, fn, vrs == NULL ? "valueReferences" : "an output array");
+        return NULL;
+    }
+    for (i = 0; i < n; i++)
+        if (!g3_is_clock(vrs[i])) {
+            g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                    "%s: value reference %u is no clock; the FMU's one clock is %s (vr %u)", fn,
+                    (unsigned)vrs[i], FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR);
+            return NULL;
+        }
+    return inst;
+}
 
 fmi3Status fmi3GetIntervalDecimal(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, fmi3Float64 intervals[],
                                   fmi3IntervalQualifier qualifiers[]) {
-    (void)valueReferences, (void)nValueReferences, (void)intervals, (void)qualifiers;
-    return not_provided(c, "fmi3GetIntervalDecimal", G3_NO_CLOCKS);
+    Fmi3Instance *inst;
+    size_t i;
+    if (!G3_SE_PROVIDED) {
+        (void)valueReferences, (void)nValueReferences, (void)intervals, (void)qualifiers;
+        return not_provided(c, "fmi3GetIntervalDecimal", G3_NO_CLOCKS);
+    }
+    inst = clock_inquiry(c, "fmi3GetIntervalDecimal", valueReferences, nValueReferences,
+                         intervals, qualifiers);
+    if (inst == NULL) return fmi3Error;
+    for (i = 0; i < nValueReferences; i++) {
+        intervals[i] = inst->se_interval;
+        qualifiers[i] = fmi3IntervalUnchanged;
+    }
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference valueReferences[],
@@ -613,46 +792,61 @@ fmi3Status fmi3GetIntervalFraction(fmi3Instance c, const fmi3ValueReference valu
                                    fmi3UInt64 resolutions[], fmi3IntervalQualifier qualifiers[]) {
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions,
         (void)qualifiers;
-    return not_provided(c, "fmi3GetIntervalFraction", G3_NO_CLOCKS);
+    return not_provided(c, "fmi3GetIntervalFraction",
+                        G3_SE_PROVIDED ? G3_NO_FRACTION : G3_NO_CLOCKS);
 }
 
 fmi3Status fmi3GetShiftDecimal(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, fmi3Float64 shifts[]) {
-    (void)valueReferences, (void)nValueReferences, (void)shifts;
-    return not_provided(c, "fmi3GetShiftDecimal", G3_NO_CLOCKS);
+    Fmi3Instance *inst;
+    size_t i;
+    if (!G3_SE_PROVIDED) {
+        (void)valueReferences, (void)nValueReferences, (void)shifts;
+        return not_provided(c, "fmi3GetShiftDecimal", G3_NO_CLOCKS);
+    }
+    inst = clock_inquiry(c, "fmi3GetShiftDecimal", valueReferences, nValueReferences, shifts,
+                         shifts);
+    if (inst == NULL) return fmi3Error;
+    for (i = 0; i < nValueReferences; i++) shifts[i] = 0.0;
+    return fmi3OK;
 }
 
 fmi3Status fmi3GetShiftFraction(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, fmi3UInt64 counters[],
                                 fmi3UInt64 resolutions[]) {
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
-    return not_provided(c, "fmi3GetShiftFraction", G3_NO_CLOCKS);
+    return not_provided(c, "fmi3GetShiftFraction",
+                        G3_SE_PROVIDED ? G3_NO_FRACTION : G3_NO_CLOCKS);
 }
 
 fmi3Status fmi3SetIntervalDecimal(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                   size_t nValueReferences, const fmi3Float64 intervals[]) {
     (void)valueReferences, (void)nValueReferences, (void)intervals;
-    return not_provided(c, "fmi3SetIntervalDecimal", G3_NO_CLOCKS);
+    return not_provided(c, "fmi3SetIntervalDecimal",
+                        G3_SE_PROVIDED ? G3_CONSTANT_CLOCK : G3_NO_CLOCKS);
 }
 
 fmi3Status fmi3SetIntervalFraction(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                    size_t nValueReferences, const fmi3UInt64 counters[],
                                    const fmi3UInt64 resolutions[]) {
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
-    return not_provided(c, "fmi3SetIntervalFraction", G3_NO_CLOCKS);
+    return not_provided(c, "fmi3SetIntervalFraction",
+                        G3_SE_PROVIDED ? G3_CONSTANT_CLOCK : G3_NO_CLOCKS);
 }
 
 fmi3Status fmi3SetShiftDecimal(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                size_t nValueReferences, const fmi3Float64 shifts[]) {
     (void)valueReferences, (void)nValueReferences, (void)shifts;
-    return not_provided(c, "fmi3SetShiftDecimal", G3_NO_CLOCKS);
+    return not_provided(c, "fmi3SetShiftDecimal",
+                        G3_SE_PROVIDED ? G3_CONSTANT_CLOCK : G3_NO_CLOCKS);
 }
 
 fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference valueReferences[],
                                 size_t nValueReferences, const fmi3UInt64 counters[],
                                 const fmi3UInt64 resolutions[]) {
     (void)valueReferences, (void)nValueReferences, (void)counters, (void)resolutions;
-    return not_provided(c, "fmi3SetShiftFraction", G3_NO_CLOCKS);
+    return not_provided(c, "fmi3SetShiftFraction",
+                        G3_SE_PROVIDED ? G3_CONSTANT_CLOCK : G3_NO_CLOCKS);
 }
 
 /* Model Exchange (an instance of this FMU is never one: these answer on any instance) */
@@ -713,10 +907,114 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *nContinuousSt
     return not_provided(c, "fmi3GetNumberOfContinuousStates", G3_NO_ME);
 }
 
-/* Scheduled Execution */
+/* ------------------------------------------------------------------------ */
+/* Scheduled Execution                                                      */
 
+/* clockReference is no clock of the FMU: say what it is. */
+static void not_a_clock(Fmi3Instance *inst, const char *fn, fmi3ValueReference r) {
+    const char *what = NULL;
+    if (r == G3_TIME_VR) what = "time";
+    else if (r < inst->n_vr && inst->vr_map[r] >= 0) what = inst->info->vars[inst->vr_map[r]].name;
+    if (what != NULL)
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: clockReference %u is the variable %s, not a clock; the FMU's one input "
+                "clock is %s (vr %u)",
+                fn, (unsigned)r, what, FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR);
+    else
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: unknown clock reference %u; the FMU's one input clock is %s (vr %u)", fn,
+                (unsigned)r, FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR);
+}
+
+/* An activation at another time than the next instant due: say which and why. */
+static void off_schedule(Fmi3Instance *inst, const char *fn, double t, double due, double tol) {
+    double ts = inst->se_interval, k;
+    if (!isfinite(t)) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: activationTime %g is not finite", fn, t);
+        return;
+    }
+    if (t < due && inst->se_k > 0 && fabs(t - (due - ts)) <= tol) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: clock %s was activated at t = %.17g already: each instant is activated "
+                "once, in increasing time; the next one is t = %.17g",
+                fn, FP_SE_CLOCK_NAME, t, due);
+        return;
+    }
+    k = (t - due) / ts; /* instants from the one due to t (whole when t is on the grid) */
+    g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+            "%s: activationTime %.17g is not the next instant of clock %s (vr %u), t = %.17g "
+            "(%.17g + %lld x %.17g s): %s; the clock is periodic (intervalDecimal = %.17g s), "
+            "each instant activated once, in order",
+            fn, t, FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR, due, inst->se_base,
+            (long long)inst->se_k, ts,
+            t < due ? "it lies before it"
+            : fabs(k - floor(k + 0.5)) * ts <= tol ? "it would skip the instants between"
+                                                    : "it lies off the clock's grid",
+            ts);
+}
+
+/*
+ * One sample of the clock's model partition at activationTime: the model's step over one
+ * interval from activationTime, the call fmi3DoStep(activationTime, Ts) makes in
+ * co-simulation, so the sample and its outputs are those of co-simulation stepping by Ts, to
+ * the bit.  activationTime must be the next instant of the clock's grid, t0 + k Ts (t0 the
+ * start time, k the activations so far; from a restored FMU state, its time plus k Ts),
+ * within half the tolerance the model's grid allows (fp_model.h: FP_STEP_TOL of Ts plus
+ * FP_TIME_TOL of the time), so that the model runs exactly that sample, from the inputs set
+ * before the call.  Any other time (off the grid, an instant skipped, an instant activated
+ * twice) is refused with fmi3Error, naming both times, and leaves the instance in Error, as an
+ * fmi3DoStep at the wrong communication point does.  No heap, no lock: the callbacks
+ * lockPreemption / unlockPreemption are not called (fmi3InstantiateScheduledExecution).
+ */
 fmi3Status fmi3ActivateModelPartition(fmi3Instance c, fmi3ValueReference clockReference,
                                       fmi3Float64 activationTime) {
-    (void)clockReference, (void)activationTime;
-    return not_provided(c, "fmi3ActivateModelPartition", G3_NO_SE);
+    static const char fn[] = "fmi3ActivateModelPartition";
+    Fmi3Instance *inst;
+    FpStatus s;
+    double ts, due, tol;
+    if (!G3_SE_PROVIDED) {
+        (void)clockReference, (void)activationTime;
+        return not_provided(c, fn, G3_NO_SE);
+    }
+    inst = g3_enter(c, fn, S_ANY_BUT_FATAL);
+    if (inst == NULL) return fmi3Error;
+    G3_LOG_CALL(inst, "fmi3ActivateModelPartition(clockReference = %u, activationTime = %.17g)",
+                (unsigned)clockReference, activationTime);
+    if (inst->interface != G3_SCHEDULED_EXECUTION) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: a Co-Simulation instance (fmi3InstantiateCoSimulation) runs its samples by "
+                "fmi3DoStep; fmi3ActivateModelPartition is Scheduled Execution's "
+                "(fmi3InstantiateScheduledExecution)",
+                fn);
+        return fmi3Error;
+    }
+    if (inst->state != S_STEP_COMPLETE) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s may not be called in state %s", fn,
+                g3_mode_name(inst));
+        return fmi3Error;
+    }
+    if (!g3_is_clock(clockReference)) {
+        not_a_clock(inst, fn, clockReference);
+        return fmi3Error;
+    }
+    ts = inst->se_interval;
+    due = inst->se_base + (double)inst->se_k * ts;
+    tol = 0.5 * (FP_STEP_TOL * ts + FP_TIME_TOL * fabs(due));
+    if (!isfinite(activationTime) || fabs(activationTime - due) > tol) {
+        off_schedule(inst, fn, activationTime, due, tol);
+        return fail(inst, fmi3Error);
+    }
+    if (inst->tunables_dirty && inst->info->tunables_changed != NULL) {
+        s = inst->info->tunables_changed(inst->model, &inst->model_logger);
+        if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi3Error);
+    }
+    inst->tunables_dirty = 0;
+    s = inst->info->step(inst->model, activationTime, ts, &inst->model_logger);
+    /* Scheduled Execution has no discarded step: fmi3Discard is treated as fmi3Error */
+    if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi3Error);
+    inst->se_k++;
+    inst->time = inst->se_base + (double)inst->se_k * ts;
+    inst->se_set_pending = 0;
+    /* as fmi3DoStep: a completed sample answers fmi3OK, its warnings logged as they happen */
+    return fmi3OK;
 }

@@ -26,9 +26,20 @@
 #if defined(__GNUC__)
 #pragma GCC diagnostic pop
 #endif
+#include "fmi3_scheduled.h"
 #include "fmu_state.h"
 #include "fp_model.h"
 #include "fp_table.h"
+
+/* 1 in the FMU that provides Scheduled Execution (fmi3_scheduled.h), 0 in the others. */
+#if defined(FP_FMI3_SCHEDULED_EXECUTION)
+#define G3_SE_PROVIDED 1
+#else
+#define G3_SE_PROVIDED 0
+#endif
+
+/* The interface an instance was instantiated for. */
+enum { G3_CO_SIMULATION = 0, G3_SCHEDULED_EXECUTION = 1 };
 
 /* The distinct warnings one initialization reports once each (beyond them, repeats show). */
 #define G3_MAX_WARNINGS_SEEN 32
@@ -62,10 +73,37 @@ typedef struct {
     uint64_t warned[G3_MAX_WARNINGS_SEEN];
     int n_warned;
     FpTable table; /* the model's table from resources/ (FpModelInfo.table_resource) */
+    /* The interface (G3_CO_SIMULATION, G3_SCHEDULED_EXECUTION).  Scheduled Execution's Clock
+     * Activation Mode is the lifecycle state S_STEP_COMPLETE (fmu_state.h): an FMU state
+     * saved by either interface restores in the other. */
+    int interface;
+    /* Scheduled Execution: the importer's callbacks, kept but never called (one input clock,
+     * no output or countdown clock to report; the one model partition shares nothing to
+     * guard against preemption: docs/fmus.md, "Scheduled Execution"). */
+    fmi3ClockUpdateCallback clock_update;
+    fmi3LockPreemptionCallback lock_preemption;
+    fmi3UnlockPreemptionCallback unlock_preemption;
+    double se_interval;  /* the clock's constant interval: the internal step's default */
+    double se_base;      /* the next activation is due at se_base + se_k * se_interval */
+    int64_t se_k;
+    int se_set_pending;  /* a value set in Clock Activation Mode, no activation since */
 } Fmi3Instance;
 
 /* The FMI 3.0 name of a lifecycle state ("Step Mode", ...). */
 const char *g3_state_name(int state);
+
+/* The name of an instance's state for its interface ("Clock Activation Mode" for
+ * Scheduled Execution's S_STEP_COMPLETE). */
+const char *g3_mode_name(const Fmi3Instance *inst);
+
+/* Scheduled Execution: the next activation due at the instance's time, the count restarted
+ * (at the end of initialization and when an FMU state is restored). */
+void g3_se_anchor(Fmi3Instance *inst);
+
+/* 1 if r is the input clock of Scheduled Execution (fmi3_scheduled.h) in this FMU. */
+static inline int g3_is_clock(fmi3ValueReference r) {
+    return G3_SE_PROVIDED && r == FP_SE_CLOCK_VR;
+}
 
 /* fmi3_glue.c: the logging through the importer's callback. */
 void g3_logf(Fmi3Instance *inst, FpStatus status, FpLogCategory category, const char *fmt, ...)

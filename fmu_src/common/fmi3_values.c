@@ -134,6 +134,13 @@ static void unknown_reference(Fmi3Instance *inst, fmi3ValueReference r, const ch
             return;
         }
     }
+    if (g3_is_clock(r)) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: variable %s (vr %u) is of type Clock, the input clock of Scheduled "
+                "Execution (fmi3ActivateModelPartition activates it)",
+                fn, FP_SE_CLOCK_NAME, (unsigned)r);
+        return;
+    }
     g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: unknown value reference %u", fn, (unsigned)r);
 }
 
@@ -208,6 +215,22 @@ static void mark_changed(Fmi3Instance *inst, const FpVar *v) {
     else if (v->kind == FP_PARAM_TUNABLE) inst->tunables_dirty = 1;
 }
 
+/* Scheduled Execution, Clock Activation Mode: "It is not allowed to call fmi3Get{VariableType}
+ * functions after fmi3Set{VariableType} functions without an fmi3ActivateModelPartition call
+ * in between" (FMI 3.0, the state Clock Activation Mode).  1 (the call refused, logged) if
+ * this get would. */
+static int set_before_get(Fmi3Instance *inst, const char *fn) {
+    if (!inst->se_set_pending || inst->interface != G3_SCHEDULED_EXECUTION ||
+        inst->state != S_STEP_COMPLETE)
+        return 0;
+    g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+            "%s may not be called in Clock Activation Mode after an fmi3Set call without an "
+            "fmi3ActivateModelPartition in between: the values set are the next sample's "
+            "inputs, the values read its results",
+            fn);
+    return 1;
+}
+
 /* ------------------------------------------------------------------------ */
 /* Float64, Int32, Boolean                                                  */
 
@@ -217,6 +240,7 @@ static fmi3Status get_values(fmi3Instance c, const fmi3ValueReference vr[], size
     fmi3Status s;
     size_t i, at = 0;
     G3_CHECK(fn, S_READABLE);
+    if (set_before_get(inst, fn)) return fmi3Error;
     if (null_arrays(inst, fn, vr, nvr, values, n_values) != fmi3OK) return fmi3Error;
     if (check_call(inst, vr, nvr, n_values, type, 0, fn) != fmi3OK) {
         log_values(inst, fn, vr, nvr, n_values, NULL, type);
@@ -265,6 +289,8 @@ static fmi3Status set_values(fmi3Instance c, const fmi3ValueReference vr[], size
         }
         mark_changed(inst, v);
     }
+    if (inst->interface == G3_SCHEDULED_EXECUTION && inst->state == S_STEP_COMPLETE && nvr > 0)
+        inst->se_set_pending = 1;
     return fmi3OK;
 }
 
@@ -381,15 +407,34 @@ fmi3Status fmi3SetBinary(fmi3Instance c, const fmi3ValueReference valueReference
                         "fmi3SetBinary", "Binary");
 }
 
-/* Clocks: a clock call has one value per reference (no nValues). */
+/* Clocks: a clock call has one value per reference (no nValues).  The input clock of
+ * Scheduled Execution (fmi3_scheduled.h) is neither read nor set: fmi3ActivateModelPartition
+ * activates it; fmi3GetClock reads output clocks and fmi3SetClock sets clocks in Event
+ * Mode, of which the FMU has none. */
+static fmi3Status clock_values(fmi3Instance c, const fmi3ValueReference vr[], size_t nvr,
+                               const void *values, int set, const char *fn) {
+    size_t i;
+    if (G3_SE_PROVIDED && vr != NULL)
+        for (i = 0; i < nvr; i++)
+            if (g3_is_clock(vr[i])) {
+                G3_CHECK(fn, set ? S_WRITABLE : S_READABLE);
+                G3_LOG_CALL(inst, "%s(nvr = %lu)", fn, (unsigned long)nvr);
+                g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                        "%s: %s (vr %u) is the input clock of Scheduled Execution: "
+                        "fmi3ActivateModelPartition activates it; the FMU has no %s",
+                        fn, FP_SE_CLOCK_NAME, (unsigned)vr[i],
+                        set ? "Event Mode to set a clock in" : "output clock to read");
+                return fmi3Error;
+            }
+    return no_such_type(c, vr, nvr, values, nvr, set, fn, "Clock");
+}
+
 fmi3Status fmi3GetClock(fmi3Instance c, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, fmi3Clock values[]) {
-    return no_such_type(c, valueReferences, nValueReferences, values, nValueReferences, 0,
-                        "fmi3GetClock", "Clock");
+    return clock_values(c, valueReferences, nValueReferences, values, 0, "fmi3GetClock");
 }
 
 fmi3Status fmi3SetClock(fmi3Instance c, const fmi3ValueReference valueReferences[],
                         size_t nValueReferences, const fmi3Clock values[]) {
-    return no_such_type(c, valueReferences, nValueReferences, values, nValueReferences, 1,
-                        "fmi3SetClock", "Clock");
+    return clock_values(c, valueReferences, nValueReferences, values, 1, "fmi3SetClock");
 }

@@ -3,11 +3,16 @@
  * the model's variable table and default values, so the XML and the binary
  * cannot drift.  Run at build time:
  *
- *     mdgen [--fmi3] OUTPUT.xml VERSION [--sources DIR FILE.c ...]
+ *     mdgen [--fmi3 [--scheduled-execution]] OUTPUT.xml VERSION [--sources DIR FILE.c ...]
  *
  * With --fmi3, the FMI 3.0 modelDescription.xml of the same table (write_fmi3): each row one
  * variable (a scalar or an array with <Dimension>), value references the rows', the
  * independent variable time at value reference 0, the ModelStructure by value reference.
+ * With --scheduled-execution besides, the FMU provides FMI 3.0 Scheduled Execution too
+ * (common/fmi3_scheduled.h): a <ScheduledExecution> beside the <CoSimulation>, the input
+ * clock of constant interval (the default of the model's internal step, Ts), and the inputs
+ * and outputs in its model partition (variability "discrete", clocks="<clock>"; clocked
+ * outputs are no InitialUnknowns).
  * With --sources, the C files the FMU's binary is built from (the build's one list of them,
  * as laid out flat in the FMU's sources/ folder DIR) go into the FMI 2.0 <SourceFiles> of
  * <CoSimulation> and into DIR/buildDescription.xml (the FMI 2.0.4 / FMI 3.0 form).
@@ -33,6 +38,7 @@
 #include <string.h>
 #include <time.h>
 
+#include "fmi3_scheduled.h"
 #include "fp_model.h"
 
 /* The InitialUnknowns declarations of both models' tables (only these macros are used here;
@@ -577,17 +583,21 @@ static void write_types3(FILE *f, const FpModelInfo *info) {
  * second one of cols for a matrix, its elements row-major), its start values listed
  * element by element.  A WRENCH row (force then torque) has no declared type or unit: the
  * description says which elements are in N and which in N.m. */
-static void write_variable3(FILE *f, const FpVar *v, const void *model) {
+static void write_variable3(FILE *f, const FpVar *v, const void *model, int clocked) {
     static const char *const causality[] = {"parameter", "parameter", "input", "output"};
     static const char *const tag[] = {"Float64", "Int32", "Boolean"};
     const char *p = (const char *)model + v->offset;
     const char *variability;
     uint32_t k, n = fp_var_count(v);
+    /* clocked: an input or output of the clock's model partition (Scheduled Execution),
+     * which FMI 3.0 requires to be discrete */
+    clocked = clocked && (v->kind == FP_INPUT || v->kind == FP_OUTPUT);
     if (v->kind == FP_PARAM_FIXED) variability = "fixed";
     else if (v->kind == FP_PARAM_TUNABLE) variability = "tunable";
-    else variability = v->type == FP_REAL ? "continuous" : "discrete";
+    else variability = v->type == FP_REAL && !clocked ? "continuous" : "discrete";
     fprintf(f, "    <%s name=\"%s\" valueReference=\"%u\" causality=\"%s\" variability=\"%s\"",
             tag[v->type], v->name, (unsigned)v->vr, causality[v->kind], variability);
+    if (clocked) fprintf(f, " clocks=\"%u\"", (unsigned)FP_SE_CLOCK_VR);
     if (v->kind == FP_PARAM_FIXED || v->kind == FP_PARAM_TUNABLE) fputs(" initial=\"exact\"", f);
     fputs(" description=\"", f);
     xml_text(f, v->description);
@@ -629,8 +639,11 @@ static int compare_u32(const void *a, const void *b) {
 
 /* <ModelStructure> of FMI 3.0: the same declarations as FMI 2.0's, by value reference (a
  * known is a whole variable): every output an <Output> without dependencies and an
- * <InitialUnknown> with its declaration's knowns, ascending. */
-static int write_model_structure3(FILE *f, const FpModelInfo *info, const InitialUnknowns *u) {
+ * <InitialUnknown> with its declaration's knowns, ascending; no <InitialUnknown> when the
+ * outputs are clocked (Scheduled Execution: FMI 3.0 excludes clocked variables from the
+ * initial unknowns). */
+static int write_model_structure3(FILE *f, const FpModelInfo *info, const InitialUnknowns *u,
+                                  int clocked) {
     uint32_t *vrs = (uint32_t *)malloc(info->n_vars * sizeof *vrs);
     size_t i, j, n;
     if (vrs == NULL) return -1;
@@ -641,7 +654,7 @@ static int write_model_structure3(FILE *f, const FpModelInfo *info, const Initia
                     (unsigned)info->vars[i].vr);
     for (i = 0; i < info->n_vars; i++) {
         const unsigned char *known;
-        if (info->vars[i].kind != FP_OUTPUT) continue;
+        if (info->vars[i].kind != FP_OUTPUT || clocked) continue;
         known = u->known_rows[u->declaration[i]];
         for (j = 0, n = 0; j < info->n_vars; j++)
             if (known[j]) vrs[n++] = info->vars[j].vr;
@@ -656,11 +669,27 @@ static int write_model_structure3(FILE *f, const FpModelInfo *info, const Initia
     return 0;
 }
 
-/* The FMI 3.0 modelDescription.xml: the header, a <CoSimulation> without Event Mode, the
- * units, types and log categories, the independent variable time (value reference 0), the
- * rows in the listing order of FMI 2.0 (inputs, outputs, parameters) and the ModelStructure. */
+/* The fixed Real scalar parameter holding the model's internal step (fp_model.h), whose
+ * default is the interval of the clock of Scheduled Execution; NULL if none. */
+static const FpVar *internal_step(const FpModelInfo *info) {
+    static const char *const names[] = FP_INTERNAL_STEP_NAMES;
+    size_t i, j;
+    for (i = 0; i < info->n_vars; i++) {
+        const FpVar *v = &info->vars[i];
+        if (v->type != FP_REAL || v->kind != FP_PARAM_FIXED || fp_var_count(v) != 1) continue;
+        for (j = 0; j < sizeof names / sizeof names[0]; j++)
+            if (strcmp(v->name, names[j]) == 0) return v;
+    }
+    return NULL;
+}
+
+/* The FMI 3.0 modelDescription.xml: the header, a <CoSimulation> without Event Mode (and
+ * with `scheduled`, a <ScheduledExecution>), the units, types and log categories, the
+ * independent variable time (value reference 0), with `scheduled` the input clock, the rows
+ * in the listing order of FMI 2.0 (inputs, outputs, parameters) and the ModelStructure. */
 static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const char *guid,
-                      const char *date, const char *version, const InitialUnknowns *u) {
+                      const char *date, const char *version, const InitialUnknowns *u,
+                      int scheduled) {
     size_t i;
     int c, rank;
     fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n", f);
@@ -685,6 +714,13 @@ static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const
             " mightReturnEarlyFromDoStep=\"false\""
             " canReturnEarlyAfterIntermediateUpdate=\"false\"/>\n",
             info->model_name);
+    if (scheduled)
+        fprintf(f,
+                "  <ScheduledExecution modelIdentifier=\"%s\""
+                " canBeInstantiatedOnlyOncePerProcess=\"false\" canGetAndSetFMUState=\"true\""
+                " canSerializeFMUState=\"true\" providesDirectionalDerivatives=\"false\""
+                " providesAdjointDerivatives=\"false\"/>\n",
+                info->model_name);
     write_units(f, info, "s");
     write_types3(f, info);
     fputs("  <LogCategories>\n", f);
@@ -698,11 +734,21 @@ static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const
     fputs("    <Float64 name=\"time\" valueReference=\"0\" causality=\"independent\""
           " variability=\"continuous\" description=\"Simulation time\" unit=\"s\"/>\n",
           f);
+    if (scheduled) {
+        const FpVar *step = internal_step(info);
+        fprintf(f,
+                "    <Clock name=\"%s\" valueReference=\"%u\" causality=\"input\""
+                " description=\"%s\" intervalVariability=\"constant\""
+                " intervalDecimal=\"%.17g\" priority=\"%d\"/>\n",
+                FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR, FP_SE_CLOCK_DESCRIPTION,
+                *(const double *)((const char *)model + step->offset), FP_SE_CLOCK_PRIORITY);
+    }
     for (rank = 0; rank < 3; rank++)
         for (i = 0; i < info->n_vars; i++)
-            if (listing_rank(info->vars[i].kind) == rank) write_variable3(f, &info->vars[i], model);
+            if (listing_rank(info->vars[i].kind) == rank)
+                write_variable3(f, &info->vars[i], model, scheduled);
     fputs("  </ModelVariables>\n", f);
-    if (write_model_structure3(f, info, u) != 0) return -1;
+    if (write_model_structure3(f, info, u, scheduled) != 0) return -1;
     fputs("</fmiModelDescription>\n", f);
     return 0;
 }
@@ -717,13 +763,19 @@ int main(int argc, char **argv) {
     int c, rank;
     InitialUnknowns unknowns;
     SourceList src = {NULL, NULL, 0};
-    int fmi3 = argc > 1 && strcmp(argv[1], "--fmi3") == 0;
+    int fmi3 = argc > 1 && strcmp(argv[1], "--fmi3") == 0, scheduled = 0;
     if (fmi3) { /* the FMI 3.0 modelDescription.xml of the same table */
         argv++;
         argc--;
+        scheduled = argc > 1 && strcmp(argv[1], "--scheduled-execution") == 0;
+        if (scheduled) { /* and Scheduled Execution besides co-simulation */
+            argv++;
+            argc--;
+        }
     }
     if (argc < 3 || (argc > 3 && (strcmp(argv[3], "--sources") != 0 || argc < 6))) {
-        fprintf(stderr, "usage: mdgen [--fmi3] OUTPUT.xml VERSION [--sources DIR FILE.c ...]\n");
+        fprintf(stderr, "usage: mdgen [--fmi3 [--scheduled-execution]] OUTPUT.xml VERSION "
+                        "[--sources DIR FILE.c ...]\n");
         return 2;
     }
     if (argc > 3) {
@@ -744,15 +796,32 @@ int main(int argc, char **argv) {
         return 1;
     }
     fp_model_guid(info, guid);
-    for (i = 0; fmi3 && i < info->n_vars; i++)
-        if (info->vars[i].vr == 0) {
-            fprintf(stderr, "mdgen: %s has value reference 0, FMI 3.0's time\n",
-                    info->vars[i].name);
+    for (i = 0; fmi3 && i < info->n_vars; i++) {
+        const FpVar *v = &info->vars[i];
+        const char *clash = NULL;
+        if (v->vr == 0) clash = "value reference 0, FMI 3.0's time";
+        else if (scheduled && v->vr <= FP_SE_CLOCK_VR && FP_SE_CLOCK_VR < v->vr + fp_var_count(v))
+            clash = "the value reference of the clock of Scheduled Execution "
+                    "(fmi3_scheduled.h) among its elements";
+        else if (scheduled && strcmp(v->name, FP_SE_CLOCK_NAME) == 0)
+            clash = "the name of the clock of Scheduled Execution (fmi3_scheduled.h)";
+        if (clash != NULL) {
+            fprintf(stderr, "mdgen: %s has %s\n", v->name, clash);
             free_initial_unknowns(&unknowns);
             free(first);
             free(model);
             return 1;
         }
+    }
+    if (scheduled && internal_step(info) == NULL) {
+        fprintf(stderr, "mdgen: --scheduled-execution: %s has no internal step parameter "
+                        "(fp_model.h FP_INTERNAL_STEP_NAMES) to give the clock its interval\n",
+                info->model_name);
+        free_initial_unknowns(&unknowns);
+        free(first);
+        free(model);
+        return 1;
+    }
     f = fopen(argv[1], "w");
     if (f == NULL) {
         perror(argv[1]);
@@ -762,7 +831,7 @@ int main(int argc, char **argv) {
         return 1;
     }
     if (fmi3) {
-        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns);
+        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns, scheduled);
         free_initial_unknowns(&unknowns);
         free(first);
         free(model);
