@@ -38,6 +38,14 @@ static int check_state(Instance *inst, const unsigned char *buf, size_t size, in
 static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, const char *fn) {
     StateHeader h;
     if (!check_state(inst, buf, 0, STATE_ALL, fn, "FMUstate", &h)) return fmi2Error;
+    /* a state of the other interface would put this instance in a state it has not */
+    if (h.state & (inst->me ? S_STEP_COMPLETE | S_STEP_FAILED : S_ME_RUNNING)) {
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "%s: the FMUstate was saved by a %s instance (in %s); this instance is %s",
+                  fn, inst->me ? "co-simulation" : "Model Exchange", fp_lifecycle_name(h.state),
+                  inst->me ? "Model Exchange" : "co-simulation");
+        return fmi2Error;
+    }
     memcpy(inst->scratch, buf + sizeof h, inst->info->model_size);
     if (inst->info->check_restored != NULL) {
         FpStatus s;
@@ -55,6 +63,7 @@ static fmi2Status snapshot_read(Instance *inst, const unsigned char *buf, const 
     inst->dirty = (h.flags & STATE_FLAG_DIRTY) != 0;
     inst->tunables_dirty = (h.flags & STATE_FLAG_TUNABLES_DIRTY) != 0;
     inst->time = h.time;
+    inst->me_stale = 1;
     return fmi2OK;
 }
 

@@ -128,16 +128,41 @@ static fmi2Status fail(Instance *inst, fmi2Status status) {
     return status;
 }
 
+fmi2Status glue_fail(Instance *inst, fmi2Status status) { return fail(inst, status); }
+
+/* Model Exchange: the model's derivatives and outputs at the time, states and inputs set
+ * (the model evaluates once per change, however often they are read). */
+static fmi2Status me_refresh(Instance *inst) {
+    FpStatus s;
+    if (!inst->me_stale) return fmi2OK;
+    if (inst->tunables_dirty && inst->info->tunables_changed != NULL) {
+        s = inst->info->tunables_changed(inst->model, &inst->model_logger);
+        if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi2Error);
+    }
+    inst->tunables_dirty = 0;
+    s = inst->info->me->evaluate(inst->model, inst->time, &inst->model_logger);
+    if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi2Error);
+    inst->me_stale = 0;
+    return fmi2OK;
+}
+
 /* Brings initial outputs up to date after parameter changes (FMI 2.0: values
- * read in initialization mode are computed from what was set). */
+ * read in initialization mode are computed from what was set); a Model Exchange instance
+ * also checks that its parameters leave it something a solver can integrate. */
 fmi2Status glue_refresh(Instance *inst) {
     FpStatus s;
+    if (inst->state & S_ME_RUNNING) return me_refresh(inst);
     if (!(inst->state & (S_INIT | S_INSTANTIATED)) || !inst->dirty) return fmi2OK;
     inst->checking = 1;
     s = inst->info->initialize(inst->model, inst->time, &inst->model_logger);
+    if (s != FP_ERROR && s != FP_DISCARD && inst->me) {
+        FpStatus me = inst->info->me->check(inst->model, &inst->model_logger);
+        if (me != FP_OK) s = me;
+    }
     inst->checking = 0;
     if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi2Error);
     inst->dirty = 0;
+    inst->me_stale = 1;
     return to_fmi(s);
 }
 
@@ -275,14 +300,24 @@ fmi2Component fmi2Instantiate(fmi2String instanceName, fmi2Type fmuType, fmi2Str
         release_instance(inst);
         return NULL;
     }
-    if (fmuType != fmi2CoSimulation) {
+    if (fmuType == fmi2ModelExchange && info->me == NULL) {
         glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
                   "fmi2Instantiate: %s supports co-simulation only (fmuType must be "
-                  "fmi2CoSimulation)",
+                  "fmi2CoSimulation): it has no continuous state to hand to a solver, it "
+                  "computes on its own sample grid",
                   info->model_name);
         release_instance(inst);
         return NULL;
     }
+    if (fmuType != fmi2CoSimulation && fmuType != fmi2ModelExchange) {
+        glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                  "fmi2Instantiate: fmuType %d is neither fmi2ModelExchange nor "
+                  "fmi2CoSimulation",
+                  (int)fmuType);
+        release_instance(inst);
+        return NULL;
+    }
+    inst->me = fmuType == fmi2ModelExchange;
     if (fmuGUID == NULL || strcmp(fmuGUID, inst->guid) != 0) {
         glue_logf(inst, FP_ERROR, FP_LOG_ERROR,
                   "fmi2Instantiate: GUID %s does not match this binary (%s); the FMU is "
@@ -383,14 +418,14 @@ fmi2Status fmi2ExitInitializationMode(fmi2Component c) {
     s = glue_refresh(inst);
     if (s > fmi2Warning) return s;
     set_initialized(inst, 1);
-    inst->state = S_STEP_COMPLETE;
+    inst->state = inst->me ? S_EVENT_MODE : S_STEP_COMPLETE;
     inst->tunables_dirty = 0;
     glue_logf(inst, FP_OK, FP_LOG_EVENTS, "initialized at t = %g", inst->time);
     return s;
 }
 
 fmi2Status fmi2Terminate(fmi2Component c) {
-    CHECK("fmi2Terminate", S_STEP_COMPLETE | S_STEP_FAILED);
+    CHECK("fmi2Terminate", S_STEP_COMPLETE | S_STEP_FAILED | S_ME_RUNNING);
     LOG_CALL(inst, "fmi2Terminate()");
     inst->state = S_TERMINATED;
     return fmi2OK;
@@ -577,4 +612,5 @@ fmi2Status fmi2GetStringStatus(fmi2Component c, const fmi2StatusKind s, fmi2Stri
     return unsupported_status(inst, "fmi2GetStringStatus", s);
 }
 
-/* Model-exchange entry points are absent on purpose: this is a CS-only FMU. */
+/* The Model Exchange entry points are fmi2_me.c's, in the FMUs whose model has them
+ * (FpModelInfo.me). */

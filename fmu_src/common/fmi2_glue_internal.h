@@ -49,6 +49,11 @@ typedef struct {
     uint64_t warned[MAX_WARNINGS_SEEN];      /* FNV-1a of the warnings reported */
     int n_warned;
     FpTable table; /* the model's table from resources/ (FpModelInfo.table_resource) */
+    /* Model Exchange (fmi2_me.c): instantiated as fmi2ModelExchange (the model has
+     * FpModelInfo.me); the time, the states or the inputs changed since the model last
+     * evaluated its derivatives and outputs (evaluated again before they are read) */
+    int me;
+    int me_stale;
 } Instance;
 
 /* fmi2_glue.c: the logging through the importer's callback, the entry checks, and the
@@ -71,8 +76,13 @@ Instance *glue_enter(fmi2Component c, const char *fn, int states);
 fmi2Status glue_null_argument(Instance *inst, const char *fn, const char *what);
 
 /* Brings initial outputs up to date after parameter changes (FMI 2.0: values
- * read in initialization mode are computed from what was set). */
+ * read in initialization mode are computed from what was set); in Model Exchange, the
+ * derivatives and outputs after the time, the states or the inputs changed. */
 fmi2Status glue_refresh(Instance *inst);
+
+/* A failure of the model's computation: fmi2Error leaves the instance in Error, fmi2Discard
+ * (co-simulation) in StepFailed; the status is returned. */
+fmi2Status glue_fail(Instance *inst, fmi2Status status);
 
 /* The entry of a function taking the instance c: `inst` declared, the call refused when c
  * is not a live instance in one of `states`. */

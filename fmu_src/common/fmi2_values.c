@@ -10,7 +10,12 @@
 #include "fmi2_glue_internal.h"
 
 /* fmi2Get{Real,Integer,Boolean,String}: from initialization on, and in Error for diagnosis */
-#define S_READABLE (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
+#define S_READABLE \
+    (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR | S_ME_RUNNING)
+/* fmi2SetReal: continuous inputs in Model Exchange's both modes too; fmi2SetInteger,
+ * fmi2SetBoolean: discrete values change in Event Mode only */
+#define S_SETTABLE_REAL (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_ME_RUNNING)
+#define S_SETTABLE_DISCRETE (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_EVENT_MODE)
 
 /* logCalls shows at most this many values of one get or set. */
 #define CALL_VALUES 8
@@ -104,10 +109,23 @@ static fmi2Status may_set(Instance *inst, const FpVar *v, uint32_t k, const char
             why = "it is a fixed parameter and initialization has ended";
         break;
     case FP_PARAM_TUNABLE:
+        if (!(inst->state & (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_EVENT_MODE)))
+            why = inst->state == S_CONTINUOUS_TIME
+                      ? "a tunable parameter changes in Event Mode only"
+                      : "the FMU is not initialized or stepping";
+        break;
     case FP_INPUT:
-        if (!(inst->state & (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE)))
+        if (inst->state == S_CONTINUOUS_TIME && v->type != FP_REAL)
+            why = "a discrete input changes in Event Mode only";
+        else if (!(inst->state & (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_ME_RUNNING)))
             why = "the FMU is not initialized or stepping";
         break;
+    case FP_STATE:
+        why = "it is a continuous state (Model Exchange sets the states with "
+              "fmi2SetContinuousStates)";
+        break;
+    case FP_DERIVATIVE: why = "it is a state derivative, computed"; break;
+    case FP_LOCAL: why = "it is a local variable, computed"; break;
     }
     if (why == NULL) return fmi2OK;
     fp_var_element_name(v, k, name, sizeof name);
@@ -118,6 +136,7 @@ static fmi2Status may_set(Instance *inst, const FpVar *v, uint32_t k, const char
 static void mark_changed(Instance *inst, const FpVar *v) {
     if (inst->state & (S_INSTANTIATED | S_INIT)) inst->dirty = 1;
     else if (v->kind == FP_PARAM_TUNABLE) inst->tunables_dirty = 1;
+    inst->me_stale = 1; /* (Model Exchange: outputs and derivatives follow the inputs) */
 }
 
 /* ------------------------------------------------------------------------ */
@@ -193,7 +212,7 @@ static fmi2Status check_sets(Instance *inst, const fmi2ValueReference vr[], size
 fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                        const fmi2Real value[]) {
     size_t i;
-    CHECK("fmi2SetReal", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    CHECK("fmi2SetReal", S_SETTABLE_REAL);
     if (null_arrays(inst, "fmi2SetReal", vr, nvr, value) != fmi2OK) return fmi2Error;
     log_values(inst, "fmi2SetReal", vr, nvr, value, FP_REAL, nvr);
     if (check_sets(inst, vr, nvr, FP_REAL, "fmi2SetReal") != fmi2OK) return fmi2Error;
@@ -209,7 +228,7 @@ fmi2Status fmi2SetReal(fmi2Component c, const fmi2ValueReference vr[], size_t nv
 static fmi2Status set_ints(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                            const int *value, FpVarType type, const char *fn) {
     size_t i;
-    CHECK(fn, S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    CHECK(fn, S_SETTABLE_DISCRETE);
     if (null_arrays(inst, fn, vr, nvr, value) != fmi2OK) return fmi2Error;
     log_values(inst, fn, vr, nvr, value, type, nvr);
     if (check_sets(inst, vr, nvr, type, fn) != fmi2OK) return fmi2Error;
@@ -234,7 +253,7 @@ fmi2Status fmi2SetBoolean(fmi2Component c, const fmi2ValueReference vr[], size_t
 
 fmi2Status fmi2SetString(fmi2Component c, const fmi2ValueReference vr[], size_t nvr,
                          const fmi2String value[]) {
-    CHECK("fmi2SetString", S_INSTANTIATED | S_INIT | S_STEP_COMPLETE);
+    CHECK("fmi2SetString", S_SETTABLE_DISCRETE);
     log_values(inst, "fmi2SetString", vr, nvr, NULL, FP_REAL, 0);
     if (null_arrays(inst, "fmi2SetString", vr, nvr, value) != fmi2OK) return fmi2Error;
     if (nvr == 0) return fmi2OK;

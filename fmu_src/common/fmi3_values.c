@@ -156,6 +156,9 @@ static fmi3Status may_set(Fmi3Instance *inst, const FpVar *v, const char *fn) {
     case FP_INPUT:
         if (!(inst->state & S_WRITABLE)) why = "the FMU is not initialized or stepping";
         break;
+    case FP_STATE: why = "it is a continuous state, computed"; break;
+    case FP_DERIVATIVE: why = "it is a state derivative, computed"; break;
+    case FP_LOCAL: why = "it is a local variable, computed"; break;
     }
     if (why == NULL) return fmi3OK;
     g3_logf(inst, FP_ERROR, FP_LOG_ERROR, "%s: cannot set %s (vr %u): %s", fn, v->name,

@@ -17,6 +17,8 @@ const char *fp_lifecycle_name(int state) {
     case S_STEP_FAILED: return "StepFailed";
     case S_TERMINATED: return "Terminated";
     case S_ERROR: return "Error";
+    case S_EVENT_MODE: return "EventMode";
+    case S_CONTINUOUS_TIME: return "ContinuousTimeMode";
     default: return "Fatal";
     }
 }

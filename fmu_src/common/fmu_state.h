@@ -19,8 +19,9 @@
 
 #include "fp_model.h"
 
-/* The lifecycle states of an FMU instance (FMI 2.0 co-simulation, spec section 4.2.4): one
- * bit each, as the glue's state machine and a saved state's header hold them. */
+/* The lifecycle states of an FMU instance (FMI 2.0 co-simulation, spec section 4.2.4, and
+ * Model Exchange, section 3.2.3: Event Mode and Continuous-Time Mode): one bit each, as the
+ * glue's state machine and a saved state's header hold them. */
 enum {
     S_INSTANTIATED = 1 << 0,
     S_INIT = 1 << 1,
@@ -28,12 +29,17 @@ enum {
     S_STEP_FAILED = 1 << 3,
     S_TERMINATED = 1 << 4,
     S_ERROR = 1 << 5,
-    S_FATAL = 1 << 6
+    S_FATAL = 1 << 6,
+    S_EVENT_MODE = 1 << 7,
+    S_CONTINUOUS_TIME = 1 << 8
 };
-#define S_ANY_BUT_FATAL \
-    (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
+/* the states of a Model Exchange instance after initialization, before termination */
+#define S_ME_RUNNING (S_EVENT_MODE | S_CONTINUOUS_TIME)
+#define S_ANY_BUT_FATAL                                                                  \
+    (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR | \
+     S_ME_RUNNING)
 /* a saved state's payload is a model after initialization */
-#define S_INITIALIZED (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED)
+#define S_INITIALIZED (S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ME_RUNNING)
 
 /* The name of one lifecycle state ("Instantiated", ...). */
 const char *fp_lifecycle_name(int state);

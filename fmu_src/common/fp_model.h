@@ -25,7 +25,16 @@ typedef enum {
     FP_PARAM_FIXED = 0,   /* parameter, fixed: set before initialization only */
     FP_PARAM_TUNABLE = 1, /* parameter, tunable: may change between steps */
     FP_INPUT = 2,         /* input, continuous (Real) or discrete (Integer/Boolean) */
-    FP_OUTPUT = 3         /* output, calculated */
+    FP_OUTPUT = 3,        /* output, calculated */
+    /* Model Exchange (FpModelExchange): a Real row of continuous states, local and
+     * continuous, calculated; never set by value (fmi2SetContinuousStates sets states) */
+    FP_STATE = 4,
+    /* the derivative of a state row, local and continuous, calculated: the row named "der_"
+     * followed by the state row's name, of the same shape (tools/mdgen.c checks it) */
+    FP_DERIVATIVE = 5,
+    /* a Real the model computes for an importer to read, local and continuous, calculated
+     * (the plant's contact depths: its event indicators, FpModelExchange.indicators) */
+    FP_LOCAL = 6
 } FpVarKind;
 
 /*
@@ -60,7 +69,9 @@ typedef enum {
     T(DIMENSIONLESS, "Dimensionless", "Dimensionless", "1", 0.0) /* normals, quaternion */  \
     T(BLOCK_GAIN, "BlockGain", "InverseTime", "1/s", 0.0) /* C, D of the control blocks */ \
     /* a 6-vector [force (N); torque (N.m)]: elements 1-3 are FORCE, 4-6 TORQUE */          \
-    T(WRENCH, "", "", "", 0.0)
+    T(WRENCH, "", "", "", 0.0)                                                              \
+    /* the rate of a dimensionless quantity (the plant's quaternion derivative) */           \
+    T(DIMENSIONLESS_RATE, "DimensionlessRate", "InverseTime", "1/s", 0.0)
 
 #define FP_TYPE_ENUM(id, name, quantity, unit, nominal) FP_T_##id,
 typedef enum { FP_DECLARED_TYPES(FP_TYPE_ENUM) FP_N_TYPES } FpTypeId;
@@ -233,7 +244,46 @@ typedef struct {
      * when it is missing or malformed, and hands it to every callback (FpLogger.table).
      */
     const char *table_resource;
+    /* Model Exchange: the model's right-hand side for an importer's solver, NULL for a model
+     * that is co-simulation only (below). */
+    const struct FpModelExchange *me;
 } FpModelInfo;
+
+/*
+ * The optional Model Exchange side of a model: its continuous state handed to an importer's
+ * solver.  The state is the model's own (the same vector its co-simulation step integrates),
+ * exposed by its FP_STATE rows in order, their derivatives by the FP_DERIVATIVE rows; the
+ * right-hand side is the one the co-simulation step integrates, at the inputs as that step
+ * takes them.  Discontinuities the solver must locate are event indicators (sign changes);
+ * a discrete state the model keeps (updated after every internal step in co-simulation) is
+ * updated after every completed integrator step and in every event.  No callback allocates.
+ */
+typedef struct FpModelExchange {
+    uint32_t n_states;           /* continuous states (the FP_STATE rows' elements) */
+    uint32_t n_event_indicators; /* fixed: the modelDescription's numberOfEventIndicators */
+    /* The FP_LOCAL row of n_event_indicators elements that holds them (FMI 3.0 names event
+     * indicators by value reference), NULL for none; kept up to date by evaluate. */
+    const char *indicators;
+    /* After a successful initialize: FP_ERROR (logged, naming the parameter) when the
+     * parameters ask for what only the co-simulation step does (e.g. sensor noise drawn per
+     * communication step), FP_OK when the model can be integrated by a solver. */
+    FpStatus (*check)(const void *model, const FpLogger *logger);
+    void (*get_states)(const void *model, double *x);
+    void (*set_states)(void *model, const double *x);
+    /* A scale of each state (1 where none), for the solver's absolute tolerances. */
+    void (*nominals)(const void *model, double *nominal);
+    /* The derivatives (kept in the model: get_derivatives), the outputs and everything else
+     * computed from the state, at time t and the current state and inputs.  FP_ERROR with
+     * the reason logged when an input is unusable (the co-simulation step's input checks). */
+    FpStatus (*evaluate)(void *model, double t, const FpLogger *logger);
+    void (*get_derivatives)(const void *model, double *dx);
+    /* The event indicators at the current state (z), n_event_indicators of them. */
+    void (*event_indicators)(const void *model, double *z);
+    /* After a completed integrator step, and in Event Mode: the discrete state updated from
+     * the continuous one at time t.  FP_ERROR (logged) when the state left the range the model
+     * means anything in (as the co-simulation step refuses it). */
+    FpStatus (*update_discrete)(void *model, double t, const FpLogger *logger);
+} FpModelExchange;
 
 /*
  * The work of one communication step.  A model that subdivides a step (the plant's RK4

@@ -592,6 +592,7 @@ static const FpModelInfo controller_info = {
     controller_check_restored,
     offsetof(ControllerModel, initialized),
     NULL,
+    NULL, /* co-simulation only: sampled on its own grid, no continuous state */
 };
 
 const FpModelInfo *controller_model_info(void) { return &controller_info; }

@@ -84,6 +84,14 @@ int contact_deepest(const ContactParams *p, const double pos[3], const double *r
     return deepest;
 }
 
+void contact_depths(const ContactParams *p, const double pos[3], const double *r, double *depth) {
+    int i;
+    for (i = 0; i < p->n; i++) {
+        double at[3];
+        depth[i] = point_at(p, i, pos, r, at);
+    }
+}
+
 int32_t contact_update_anchors(const ContactParams *p, const double pos[3], const double *r,
                                double *anchor) {
     int32_t anchored = 0;

@@ -57,6 +57,11 @@ void contact_wrench(const ContactParams *p, const double pos[3], const double ve
 int contact_deepest(const ContactParams *p, const double pos[3], const double *r,
                     double *depth);
 
+/* Each point's depth below the ground at the pose (> 0: below, < 0: above), into depth[0 ..
+ * n - 1]: where it changes sign the contact force switches on or off (Model Exchange's event
+ * indicators). */
+void contact_depths(const ContactParams *p, const double pos[3], const double *r, double *depth);
+
 /*
  * After an internal step, at the new state: the anchors of the points touching (a new one
  * where a point touched down, dragged along where a point slips, dropped where it lifted

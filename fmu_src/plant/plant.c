@@ -24,7 +24,21 @@
     FP_STATIC_ASSERT(sizeof(((FpAirframe *)0)->name) == (rows) * (cols) * ELEM_SIZE_##type,     \
                      name##_size);                                                              \
     FP_STATIC_ASSERT((FP_##type == FP_REAL) == (FP_T_##dtype != FP_T_NONE), name##_dtype);
-PLANT_VARIABLES(PLANT_CHECK, PLANT_AF_CHECK)
+/* ... and a Model Exchange row is a Real part of its vector member. */
+#define PLANT_XS_CHECK(name, vr, type, kind, rows, cols, dtype, range, desc, member, first)      \
+    FP_STATIC_ASSERT(FP_##type == FP_REAL && FP_T_##dtype != FP_T_NONE, name##_real);           \
+    FP_STATIC_ASSERT(((first) + (rows) * (cols)) * sizeof(double) <=                              \
+                         sizeof(((PlantModel *)0)->member),                                      \
+                     name##_within);
+PLANT_VARIABLES(PLANT_CHECK, PLANT_AF_CHECK, PLANT_XS_CHECK)
+/* The state rows cover x (their order is checked by tools/mdgen.c). */
+#define PLANT_NO_ROW(...)
+#define PLANT_XS_COUNT_STATE(rows, cols) +(rows) * (cols)
+#define PLANT_XS_COUNT_DERIVATIVE(rows, cols)
+#define PLANT_XS_COUNT(name, vr, type, kind, rows, cols, dtype, range, desc, member, first)      \
+    PLANT_XS_COUNT_##kind(rows, cols)
+FP_STATIC_ASSERT(0 PLANT_VARIABLES(PLANT_NO_ROW, PLANT_NO_ROW, PLANT_XS_COUNT) == PLANT_NX,
+                 state_rows_cover_x);
 
 #define PLANT_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                          \
     {#name, vr, FP_##type, FP_##kind, rows, cols, offsetof(PlantModel, name), FP_T_##dtype, range, \
@@ -32,17 +46,26 @@ PLANT_VARIABLES(PLANT_CHECK, PLANT_AF_CHECK)
 #define PLANT_AF_ROW(name, vr, type, kind, rows, cols, dtype, range, desc)                       \
     {#name, vr, FP_##type, FP_##kind, rows, cols,                                                 \
      offsetof(PlantModel, af) + offsetof(FpAirframe, name), FP_T_##dtype, range, desc},
-static const FpVar plant_vars[] = {PLANT_VARIABLES(PLANT_ROW, PLANT_AF_ROW)};
+#define PLANT_XS_ROW(name, vr, type, kind, rows, cols, dtype, range, desc, member, first)        \
+    {#name, vr, FP_##type, FP_##kind, rows, cols,                                                 \
+     offsetof(PlantModel, member) + (size_t)(first) * sizeof(double), FP_T_##dtype, range, desc},
+static const FpVar plant_vars[] = {PLANT_VARIABLES(PLANT_ROW, PLANT_AF_ROW, PLANT_XS_ROW)};
 #define N_PLANT_VARS (sizeof plant_vars / sizeof plant_vars[0])
 
 /* Row indices (PV_mass, ...): the input checks read their ranges from the rows. */
 #define PLANT_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc) PV_##name,
-enum { PLANT_VARIABLES(PLANT_INDEX, PLANT_INDEX) PV_COUNT };
+#define PLANT_XS_INDEX(name, vr, type, kind, rows, cols, dtype, range, desc, member, first)      \
+    PV_##name,
+enum { PLANT_VARIABLES(PLANT_INDEX, PLANT_INDEX, PLANT_XS_INDEX) PV_COUNT };
 
-/* State vector layout. */
-enum { X_POS = 0, X_VEL = 3, X_QUAT = 6, X_RATE = 10, X_OMEGA = 13 };
-#define X_ALPHA (X_OMEGA + FP_MAX_ROTORS)
-#define X_BETA (X_ALPHA + FP_MAX_ROTORS)
+/* State vector layout (plant.h). */
+#define X_POS PLANT_X_POS
+#define X_VEL PLANT_X_VEL
+#define X_QUAT PLANT_X_QUAT
+#define X_RATE PLANT_X_RATE
+#define X_OMEGA PLANT_X_OMEGA
+#define X_ALPHA PLANT_X_ALPHA
+#define X_BETA PLANT_X_BETA
 
 /* ------------------------------------------------------------------------ */
 /* Defaults: the paper's tilting hexacopter (Table I).                      */
@@ -173,6 +196,19 @@ static int check_start_above_ground(const PlantModel *m, const FpLogger *logger)
            m->pos0[0], m->pos0[1], m->pos0[2], i + 1, depth, m->ground_z, limit,
            m->pos0[2] - depth);
     return 1;
+}
+
+/* Each contact point's depth below the ground at the state (contact_depth, the event
+ * indicators of Model Exchange): -1 for the points beyond n_contacts (never crossing). */
+static void contact_depth_of(const PlantModel *m, double z[PLANT_MAX_CONTACTS]) {
+    int i;
+    for (i = 0; i < PLANT_MAX_CONTACTS; i++) z[i] = -1.0;
+    if (m->n_contacts > 0) {
+        ContactParams cp = contact_params(m);
+        double r[3][3];
+        rot_from_quat(m->x + X_QUAT, r);
+        contact_depths(&cp, m->x + X_POS, &r[0][0], z);
+    }
 }
 
 /* After an internal step: the contact points' anchors at the new state (contact.h). */
@@ -336,26 +372,16 @@ static double sample_instant(double t0, double p, double t) {
     return t0 + floor((t - t0) / p + 1e-9) * p;
 }
 
-/* Outputs at communication point t: the true state, and the measurements taken from it.
- * Pose measurements (pos, vel, euler, quat) are sampled every mocap_period and show the state
- * mocap_delay before their sample instant; inertial ones (acc, rate, ang_acc) are sampled at
- * the first communication point at or after each imu_period; both are held in between and
- * their noise is drawn once per sample.  With all three parameters 0 every measurement is the
- * current state plus fresh noise. */
-static FpStatus compute_outputs(PlantModel *m, const Commands *u, double t,
-                                const FpLogger *logger) {
-    double dx[PLANT_NX];
-    double s_pose = sample_instant(m->t0, m->mocap_period, t);
-    double s_imu = sample_instant(m->t0, m->imu_period, t);
-    int pose_due = s_pose > m->mocap_last, imu_due = s_imu > m->imu_last;
-    /* (a sample instant on this point up to the round-off of summed steps is this point) */
-    int delayed = m->mocap_delay > 0.0 || fabs(s_pose - t) > 1e-9 * m->mocap_period;
+/* The outputs of the true state: the derivative at the state and the commands u (der_x), the
+ * rotor wrench, the contact, the state as the *_true outputs and the actuators. */
+static void true_outputs(PlantModel *m, const Commands *u) {
     int i;
     ContactWrench cw;
-    derivative(m, u, m->x, dx, m->f_b, m->tau_b, &cw);
+    derivative(m, u, m->x, m->der_x, m->f_b, m->tau_b, &cw);
     memcpy(m->contact_force, cw.normal, sizeof m->contact_force);
     m->contact_flags = cw.flags;
     m->landed = m->n_contacts > 0 && cw.flags == (int32_t)((1u << m->n_contacts) - 1u);
+    contact_depth_of(m, m->contact_depth);
     for (i = 0; i < 3; i++) {
         m->pos_true[i] = m->x[X_POS + i];
         m->vel_true[i] = m->x[X_VEL + i];
@@ -371,6 +397,24 @@ static FpStatus compute_outputs(PlantModel *m, const Commands *u, double t,
         m->alpha[i] = used ? m->x[X_ALPHA + i] : 0.0;
         m->beta[i] = used ? m->x[X_BETA + i] : 0.0;
     }
+}
+
+/* Outputs at communication point t: the true state, and the measurements taken from it.
+ * Pose measurements (pos, vel, euler, quat) are sampled every mocap_period and show the state
+ * mocap_delay before their sample instant; inertial ones (acc, rate, ang_acc) are sampled at
+ * the first communication point at or after each imu_period; both are held in between and
+ * their noise is drawn once per sample.  With all three parameters 0 every measurement is the
+ * current state plus fresh noise. */
+static FpStatus compute_outputs(PlantModel *m, const Commands *u, double t,
+                                const FpLogger *logger) {
+    const double *dx = m->der_x;
+    double s_pose = sample_instant(m->t0, m->mocap_period, t);
+    double s_imu = sample_instant(m->t0, m->imu_period, t);
+    int pose_due = s_pose > m->mocap_last, imu_due = s_imu > m->imu_last;
+    /* (a sample instant on this point up to the round-off of summed steps is this point) */
+    int delayed = m->mocap_delay > 0.0 || fabs(s_pose - t) > 1e-9 * m->mocap_period;
+    int i;
+    true_outputs(m, u);
     history_push(m, t);
     if (pose_due) {
         double p[9];
@@ -614,8 +658,9 @@ static FpStatus plant_initialize(void *model, double t0, const FpLogger *logger)
 #define PLANT_MAX_SPEED 1e3    /* m/s */
 #define PLANT_MAX_RATE 1e3     /* rad/s body rate */
 
-/* 0 if x is finite and inside the physical range; else logs the first quantity outside it. */
-static int state_outside(const double *x, double t, const FpLogger *logger) {
+/* 0 if x is finite and inside the physical range; else logs the first quantity outside it (at
+ * the end of a co-simulation step from t, or at time t of a Model Exchange instance: me). */
+static int state_outside(const double *x, double t, int me, const FpLogger *logger) {
     static const char *const names[] = {"pos", "vel", "quat", "rate"};
     static const int first[] = {X_POS, X_VEL, X_QUAT, X_RATE}, size[] = {3, 3, 4, 3};
     static const double limit[] = {PLANT_MAX_DISTANCE, PLANT_MAX_SPEED, 2.0, PLANT_MAX_RATE};
@@ -624,6 +669,13 @@ static int state_outside(const double *x, double t, const FpLogger *logger) {
         for (i = 0; i < size[g]; i++) {
             double v = x[first[g] + i];
             if (!(fabs(v) <= limit[g])) {
+                if (me) {
+                    fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                           "the vehicle state left its physical range at t = %.6g s: %s[%d] = "
+                           "%g (limit %g) (are the inputs f_d, tau_d, a_d plausible?)",
+                           t, names[g], i + 1, v, limit[g]);
+                    return 1;
+                }
                 fp_log(logger, FP_ERROR, FP_LOG_ERROR,
                        "the vehicle state left its physical range in the step from t = %.6g s: "
                        "%s[%d] = %g (limit %g); the step is refused and the state kept from "
@@ -634,9 +686,13 @@ static int state_outside(const double *x, double t, const FpLogger *logger) {
         }
     for (i = X_OMEGA; i < PLANT_NX; i++)
         if (!isfinite(x[i])) {
-            fp_log(logger, FP_ERROR, FP_LOG_ERROR,
-                   "the actuator state is not finite after the step from t = %.6g s; the step "
-                   "is refused and the state kept from before it", t);
+            if (me)
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                       "the actuator state is not finite at t = %.6g s", t);
+            else
+                fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+                       "the actuator state is not finite after the step from t = %.6g s; the "
+                       "step is refused and the state kept from before it", t);
             return 1;
         }
     return 0;
@@ -668,7 +724,7 @@ static FpStatus plant_step(void *model, double t, double h, const FpLogger *logg
         rk4_step(m, &u, m->x, hi);
         if (m->n_contacts > 0) update_anchors(m);
     }
-    if (state_outside(m->x, t, logger)) {
+    if (state_outside(m->x, t, 0, logger)) {
         memcpy(m->x, x_before, sizeof x_before);
         memcpy(m->contact_anchor, anchor_before, sizeof anchor_before);
         m->contact_anchored = anchored_before;
@@ -727,6 +783,126 @@ static FpStatus plant_check_restored(const void *model, int initialized,
     return FP_OK;
 }
 
+/* ------------------------------------------------------------------------ */
+/* Model Exchange (fp_model.h FpModelExchange, docs/fmus.md "Model Exchange")  */
+
+/* What only the co-simulation step does is refused: sensor noise is drawn once per
+ * communication step and sample, sampling and latency act on communication points and the
+ * step's timing times fmi2DoStep; Model Exchange has none of them.  Each parameter that asks
+ * for one is named. */
+static FpStatus plant_me_check(const void *model, const FpLogger *logger) {
+    const PlantModel *m = (const PlantModel *)model;
+    static const char *const names[] = {"noise_pos",  "noise_vel",    "noise_acc",
+                                        "noise_att",  "noise_rate",   "noise_ang_acc",
+                                        "mocap_period", "mocap_delay", "imu_period"};
+    const double values[] = {m->noise_pos,  m->noise_vel,    m->noise_acc,
+                             m->noise_att,  m->noise_rate,   m->noise_ang_acc,
+                             m->mocap_period, m->mocap_delay, m->imu_period};
+    size_t i;
+    int bad = 0;
+    for (i = 0; i < sizeof names / sizeof names[0]; i++) {
+        char v[FP_REAL_TEXT];
+        if (values[i] == 0.0) continue;
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "parameter %s = %s must be 0 in Model Exchange: %s acts per communication step "
+               "of co-simulation, which a Model Exchange instance has not (its outputs are the "
+               "true state); use the co-simulation interface for %s",
+               names[i], fp_real_text(v, values[i]),
+               i < 6 ? "sensor noise" : i < 8 ? "the motion-capture sampling" : "the IMU sampling",
+               i < 6 ? "sensor noise" : "sensor timing");
+        bad++;
+    }
+    if (m->timing) {
+        fp_log(logger, FP_ERROR, FP_LOG_ERROR,
+               "parameter timing = true must be false in Model Exchange: t_step times "
+               "fmi2DoStep, which a Model Exchange instance has not");
+        bad++;
+    }
+    return bad ? FP_ERROR : FP_OK;
+}
+
+static void plant_me_get_states(const void *model, double *x) {
+    memcpy(x, ((const PlantModel *)model)->x, sizeof ((const PlantModel *)model)->x);
+}
+
+/* The solver's state as it is: the quaternion is not renormalized (the co-simulation step
+ * renormalizes after every RK4 step; a solver keeps its norm to its tolerance, and the
+ * right-hand side takes it as it comes, as RK4's inner stages do). */
+static void plant_me_set_states(void *model, const double *x) {
+    memcpy(((PlantModel *)model)->x, x, sizeof ((PlantModel *)model)->x);
+}
+
+static void plant_me_get_derivatives(const void *model, double *dx) {
+    memcpy(dx, ((const PlantModel *)model)->der_x, sizeof ((const PlantModel *)model)->der_x);
+}
+
+/* The state rows' declared nominals (RotorSpeed 100 rad/s), 1 where none. */
+static void plant_me_nominals(const void *model, double *nominal) {
+    size_t i, k = 0;
+    (void)model;
+    for (i = 0; i < N_PLANT_VARS; i++) {
+        const FpVar *v = &plant_vars[i];
+        double n = fp_declared_type(v->dtype)->nominal;
+        uint32_t j;
+        if (v->kind != FP_STATE) continue;
+        for (j = 0; j < fp_var_count(v) && k < PLANT_NX; j++) nominal[k++] = n > 0.0 ? n : 1.0;
+    }
+}
+
+/* The right-hand side the RK4 step integrates, at the commands saturated as the step
+ * saturates them (sat_flags: the commands set now), and the outputs of the state: the true
+ * state, which the measured outputs equal (ideal sensors: plant_me_check). */
+static FpStatus plant_me_evaluate(void *model, double t, const FpLogger *logger) {
+    PlantModel *m = (PlantModel *)model;
+    Commands u;
+    int i;
+    (void)t; /* (autonomous: time enters through the inputs only) */
+    if (check_inputs(m, logger) != 0) return FP_ERROR;
+    saturate(m, &u, &m->sat_flags);
+    true_outputs(m, &u);
+    for (i = 0; i < 3; i++) {
+        m->pos[i] = m->pos_true[i];
+        m->vel[i] = m->vel_true[i];
+        m->euler[i] = m->euler_true[i];
+        m->rate[i] = m->rate_true[i];
+        m->acc[i] = m->der_x[X_VEL + i];
+        m->ang_acc[i] = m->der_x[X_RATE + i];
+    }
+    memcpy(m->quat, m->quat_true, sizeof m->quat);
+    m->pose_age = 0.0;
+    return FP_OK;
+}
+
+/* Each contact point's depth below the ground (contact_depth): the contact force switches
+ * on where one changes sign (its damping term jumps there), so the solver locates touchdown
+ * and lift-off. */
+static void plant_me_event_indicators(const void *model, double *z) {
+    contact_depth_of((const PlantModel *)model, z);
+}
+
+/* After a completed integrator step and in an event: the contact anchors at the state (as
+ * after every RK4 step in co-simulation), the state checked against its physical range. */
+static FpStatus plant_me_update_discrete(void *model, double t, const FpLogger *logger) {
+    PlantModel *m = (PlantModel *)model;
+    if (state_outside(m->x, t, 1, logger)) return FP_ERROR;
+    if (m->n_contacts > 0) update_anchors(m);
+    return FP_OK;
+}
+
+static const FpModelExchange plant_me = {
+    PLANT_NX,
+    PLANT_NZ,
+    "contact_depth",
+    plant_me_check,
+    plant_me_get_states,
+    plant_me_set_states,
+    plant_me_nominals,
+    plant_me_evaluate,
+    plant_me_get_derivatives,
+    plant_me_event_indicators,
+    plant_me_update_discrete,
+};
+
 static const FpModelInfo plant_info = {
     "MultirotorPlant",
     "6-DoF multirotor with up to 8 tilting rotors (paper eq. 1-3), first-order motor and servo "
@@ -743,6 +919,7 @@ static const FpModelInfo plant_info = {
     plant_check_restored,
     offsetof(PlantModel, initialized),
     NULL,
+    &plant_me,
 };
 
 const FpModelInfo *plant_model_info(void) { return &plant_info; }

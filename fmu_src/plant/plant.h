@@ -10,6 +10,16 @@
 #include "multirotor.h"
 
 #define PLANT_NX (13 + 3 * FP_MAX_ROTORS) /* p, v, q, Omega, omega, alpha, beta */
+/* The state vector x: where each part begins (plant_vars.h names the parts x_pos, ...). */
+#define PLANT_X_POS 0
+#define PLANT_X_VEL 3
+#define PLANT_X_QUAT 6
+#define PLANT_X_RATE 10
+#define PLANT_X_OMEGA 13
+#define PLANT_X_ALPHA (PLANT_X_OMEGA + FP_MAX_ROTORS)
+#define PLANT_X_BETA (PLANT_X_ALPHA + FP_MAX_ROTORS)
+/* Model Exchange: an event indicator per contact point (plant.c plant_event_indicators) */
+#define PLANT_NZ PLANT_MAX_CONTACTS
 #define PLANT_HISTORY 512 /* communication points of true pose kept for mocap_delay */
 
 typedef struct {
@@ -41,8 +51,10 @@ typedef struct {
     double pose_age;
     double contact_force[PLANT_MAX_CONTACTS];
     int32_t contact_flags, landed;
+    double contact_depth[PLANT_MAX_CONTACTS]; /* the event indicators (plant_vars.h) */
     /* internal state, derived at initialization */
     double x[PLANT_NX];
+    double der_x[PLANT_NX]; /* dx/dt at the state and the inputs of the outputs' instant */
     double inertia_inv[3][3];
     FpRotorSet rotors;
     uint64_t rng[4];

@@ -7,6 +7,11 @@
  * X(name, value reference, type, kind, rows, cols, declared type, range, description)
  * XAF: the same for the rows of the airframe table both FMUs share (common/airframe_vars.h),
  * whose members live in the model's `af` (an FpAirframe).
+ * XS: the same for the Model Exchange rows (kind STATE or DERIVATIVE, fp_model.h), which
+ * name parts of one vector member, with two more columns: the member (x, the state; der_x,
+ * its derivative) and the index of the part's first element in it (PLANT_X_POS, ...,
+ * plant.h).  The state rows cover x in order (the order of fmi2GetContinuousStates), each
+ * with its derivative row "der_<name>".
  *
  * - declared type: the physical kind of a Real (FP_DECLARED_TYPES in
  *   common/fp_model.h: its quantity, unit and nominal), NONE otherwise.
@@ -27,7 +32,7 @@
 
 #include "airframe_vars.h"
 
-#define PLANT_VARIABLES(X, XAF)                                                                         \
+#define PLANT_VARIABLES(X, XAF, XS)                                                                      \
     /* parameters: the airframe (common/airframe_vars.h) */                                      \
     FP_AIRFRAME_VARIABLES(XAF, 0)                                                                  \
     X(h_internal, 114, REAL, PARAM_FIXED, 1, 1, TIME, FP_POSITIVE, "Internal RK4 step; a communication step h takes ceil(h / h_internal) equal RK4 steps") \
@@ -93,7 +98,25 @@
     /* outputs: ground contact */                                                                  \
     X(contact_force, 430, REAL, OUTPUT, 8, 1, FORCE, FP_ANY, "Normal force of each contact point on the ground (0: not touching)") \
     X(contact_flags, 438, INTEGER, OUTPUT, 1, 1, NONE, FP_ANY, "Contact points below the ground surface: bit i-1 point i") \
-    X(landed, 439, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "Every contact point in use touches the ground")
+    X(landed, 439, BOOLEAN, OUTPUT, 1, 1, NONE, FP_ANY, "Every contact point in use touches the ground") \
+    X(contact_depth, 440, REAL, LOCAL, 8, 1, LENGTH, FP_ANY, "Depth of each contact point below the ground (negative above it; -1 for the points beyond n_contacts): the event indicators of Model Exchange, where the contact force switches on and off") \
+    /* Model Exchange: the continuous state (vr 500 + its index in x) and its derivative     \
+     * (600 + index); in co-simulation the state at the communication point and the         \
+     * derivative there (the same function of the state and the inputs held) */             \
+    XS(x_pos, 500, REAL, STATE, 3, 1, LENGTH, FP_ANY, "State: position, world NED", x, PLANT_X_POS) \
+    XS(x_vel, 503, REAL, STATE, 3, 1, VELOCITY, FP_ANY, "State: velocity, world NED", x, PLANT_X_VEL) \
+    XS(x_quat, 506, REAL, STATE, 4, 1, DIMENSIONLESS, FP_ANY, "State: attitude quaternion [w, x, y, z] of R_B^W (in co-simulation renormalized after every RK4 step with w >= 0; in Model Exchange the solver's)", x, PLANT_X_QUAT) \
+    XS(x_rate, 510, REAL, STATE, 3, 1, ANGULAR_VELOCITY, FP_ANY, "State: body rates [p, q, r]", x, PLANT_X_RATE) \
+    XS(x_omega, 513, REAL, STATE, 8, 1, ROTOR_SPEED, FP_ANY, "State: rotor speeds (rotors beyond n_rotors: 0, derivative 0)", x, PLANT_X_OMEGA) \
+    XS(x_alpha, 521, REAL, STATE, 8, 1, ANGLE, FP_ANY, "State: servo angles alpha", x, PLANT_X_ALPHA) \
+    XS(x_beta, 529, REAL, STATE, 8, 1, ANGLE, FP_ANY, "State: servo angles beta", x, PLANT_X_BETA) \
+    XS(der_x_pos, 600, REAL, DERIVATIVE, 3, 1, VELOCITY, FP_ANY, "Derivative of x_pos", der_x, PLANT_X_POS) \
+    XS(der_x_vel, 603, REAL, DERIVATIVE, 3, 1, ACCELERATION, FP_ANY, "Derivative of x_vel (acc without sensor effects)", der_x, PLANT_X_VEL) \
+    XS(der_x_quat, 606, REAL, DERIVATIVE, 4, 1, DIMENSIONLESS_RATE, FP_ANY, "Derivative of x_quat", der_x, PLANT_X_QUAT) \
+    XS(der_x_rate, 610, REAL, DERIVATIVE, 3, 1, ANGULAR_ACCELERATION, FP_ANY, "Derivative of x_rate (ang_acc without sensor effects)", der_x, PLANT_X_RATE) \
+    XS(der_x_omega, 613, REAL, DERIVATIVE, 8, 1, ANGULAR_ACCELERATION, FP_ANY, "Derivative of x_omega: (saturated omega_cmd - omega) / tau_motor", der_x, PLANT_X_OMEGA) \
+    XS(der_x_alpha, 621, REAL, DERIVATIVE, 8, 1, ANGULAR_VELOCITY, FP_ANY, "Derivative of x_alpha: (saturated alpha_cmd - alpha) / tau_servo", der_x, PLANT_X_ALPHA) \
+    XS(der_x_beta, 629, REAL, DERIVATIVE, 8, 1, ANGULAR_VELOCITY, FP_ANY, "Derivative of x_beta: (saturated beta_cmd - beta) / tau_servo", der_x, PLANT_X_BETA)
 
 /*
  * What each output is a function of at initialization: the dependencies of its entry in the
@@ -124,6 +147,39 @@
     /* no step yet: no saturation, no timing */                                                  \
     D("sat_flags t_step", "")                                                                    \
     /* the landing gear against the ground at the initial pose and velocity */                  \
-    D("contact_force contact_flags landed", FP_ALL_PARAMETERS)
+    D("contact_force contact_flags landed", FP_ALL_PARAMETERS)                                   \
+    /* Model Exchange: the initial state, and its derivative (which the commands do set) */    \
+    D("x_pos x_vel x_quat x_rate", "pos0 vel0 euler0 rate0")                                    \
+    D("x_omega x_alpha x_beta", FP_AIRFRAME_VARIABLES(FP_AIRFRAME_NAME, 0)                       \
+      "euler0 init_trim omega0 alpha0 beta0")                                                    \
+    D("der_x_pos der_x_vel der_x_quat der_x_rate der_x_omega der_x_alpha der_x_beta",           \
+      FP_ALL_PARAMETERS "omega_cmd alpha_cmd beta_cmd efficiency f_d tau_d a_d")
+
+/*
+ * What each output is a function of in Model Exchange: the dependencies of its entry in the
+ * modelDescription's <Outputs> (FMI 2.0 section 2.2.8: the knowns are the inputs and the
+ * continuous states).  O(outputs, knowns): row names, "@states" for every state row; every
+ * output in exactly one declaration.  In co-simulation no output depends on an input at a
+ * communication point (outputs are computed at the end of a step, from the inputs held over
+ * it): the input dependencies below are Model Exchange's, a conservative statement for
+ * co-simulation.  tests/test_fmus/test_model_exchange.py perturbs the states and the inputs
+ * one by one and fails on any output that moves with a known its declaration leaves out.
+ */
+#define PLANT_OUTPUT_DEPENDENCIES(O)                                                             \
+    O("pos pos_true", "x_pos")                                                                   \
+    O("vel vel_true", "x_vel")                                                                   \
+    O("euler quat euler_true quat_true", "x_quat")                                               \
+    O("rate rate_true", "x_rate")                                                                \
+    O("omega", "x_omega")                                                                        \
+    O("alpha", "x_alpha")                                                                        \
+    O("beta", "x_beta")                                                                          \
+    /* the rotor wrench (efficiency scales it), the contact (pose, velocity, rates), f_d, a_d */ \
+    O("acc", "@states efficiency f_d a_d")                                                       \
+    O("ang_acc", "@states efficiency tau_d")                                                     \
+    O("f_b tau_b", "x_omega x_alpha x_beta efficiency")                                          \
+    /* the commands beyond the limits (Model Exchange: the commands set now) */                 \
+    O("sat_flags", "omega_cmd alpha_cmd beta_cmd")                                               \
+    O("t_step pose_age", "")                                                                     \
+    O("contact_force contact_flags landed", "x_pos x_vel x_quat x_rate")
 
 #endif

@@ -164,6 +164,7 @@ static const FpModelInfo signals_info = {
     signals_check_restored,
     offsetof(SignalsModel, initialized),
     SIGNALS_RESOURCE,
+    NULL, /* co-simulation only: a table played on the communication points */
 };
 
 const FpModelInfo *signals_model_info(void) { return &signals_info; }

@@ -13,6 +13,8 @@
  * clock of constant interval (the default of the model's internal step, Ts), and the inputs
  * and outputs in its model partition (variability "discrete", clocks="<clock>"; clocked
  * outputs are no InitialUnknowns).
+ * The state, derivative and local rows are listed too, with the <ModelStructure>'s
+ * <ContinuousStateDerivative> (as in FMI 2.0, below).
  * With --sources, the C files the FMU's binary is built from (the build's one list of them,
  * as laid out flat in the FMU's sources/ folder DIR) go into the FMI 2.0 <SourceFiles> of
  * <CoSimulation> and into DIR/buildDescription.xml (the FMI 2.0.4 / FMI 3.0 form).
@@ -30,6 +32,14 @@
  * <Outputs> without dependencies (no direct feedthrough at communication points), the
  * <InitialUnknowns> with the knowns that the model's table declares for each output
  * (PLANT_INITIAL_DEPENDENCIES, CONTROLLER_INITIAL_DEPENDENCIES, SIGNALS_INITIAL_DEPENDENCIES).
+ *
+ * A model with a Model Exchange side (FpModelInfo.me) gets, in FMI 2.0, a <ModelExchange>
+ * beside the <CoSimulation> (one archive, both interfaces), numberOfEventIndicators, its state
+ * and derivative rows (fp_model.h FP_STATE, FP_DERIVATIVE) listed last as local continuous
+ * variables, each derivative naming its state (derivative="index"), the <Derivatives> in the
+ * order of the state vector, the states and derivatives among the <InitialUnknowns>, and the
+ * <Outputs> with the dependencies its table declares (PLANT_OUTPUT_DEPENDENCIES: in Model
+ * Exchange the outputs are functions of the states, some of inputs).
  */
 #include <errno.h>
 #include <math.h>
@@ -183,8 +193,15 @@ static void write_range(FILE *f, const FpVar *v) {
     }
 }
 
-static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model) {
-    static const char *const causality[] = {"parameter", "parameter", "input", "output"};
+/* Parameters and inputs have start values; outputs, states and derivatives are calculated. */
+static int has_start(const FpVar *v) { return v->kind <= FP_INPUT; }
+
+/* derivative: the listing index of the state element this one is the derivative of (an
+ * FP_DERIVATIVE row), 0 for none. */
+static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model,
+                          uint32_t derivative) {
+    static const char *const causality[] = {"parameter", "parameter", "input", "output",
+                                            "local",     "local",     "local"};
     static const char *const tag[] = {"Real", "Integer", "Boolean"};
     char name[128];
     const char *variability;
@@ -214,7 +231,8 @@ static int write_variable(FILE *f, const FpVar *v, uint32_t k, const void *model
         fprintf(f, " declaredType=\"%s\" unit=\"%s\"", d->name, d->unit);
     }
     write_range(f, v);
-    if (v->kind != FP_OUTPUT) {
+    if (derivative > 0) fprintf(f, " derivative=\"%u\"", (unsigned)derivative);
+    if (has_start(v)) {
         if (v->type == FP_REAL) {
             fprintf(f, " start=\"%.17g\"", ((const double *)p)[k]);
         } else if (v->type == FP_INTEGER) {
@@ -273,7 +291,7 @@ static int check_table(const FpModelInfo *info, const void *model) {
                         a->name);
                 return -1;
             }
-            if (a->kind != FP_OUTPUT && !fp_range_contains(r, start_value(a, k, model))) {
+            if (has_start(a) && !fp_range_contains(r, start_value(a, k, model))) {
                 fprintf(stderr, "mdgen: the start value %.17g of %s (element %u) is outside its "
                         "range\n", start_value(a, k, model), a->name, (unsigned)(k + 1));
                 return -1;
@@ -310,9 +328,82 @@ static int check_table(const FpModelInfo *info, const void *model) {
 /* ------------------------------------------------------------------------ */
 /* The listing order and the ModelStructure                                 */
 
-/* Where a kind comes in the listing: inputs, outputs, then the parameters. */
+/* Where a kind comes in the listing: inputs, outputs, the parameters, then the local variables
+ * (Model Exchange states and derivatives, other locals). */
+#define N_RANKS 4
 static int listing_rank(FpVarKind kind) {
+    if (kind == FP_STATE || kind == FP_DERIVATIVE || kind == FP_LOCAL) return 3;
     return kind == FP_INPUT ? 0 : kind == FP_OUTPUT ? 1 : 2;
+}
+
+/* The state row whose derivative row d is ("der_" and its name), or NULL. */
+static const FpVar *state_of(const FpModelInfo *info, const FpVar *d) {
+    const FpVar *x;
+    if (d->kind != FP_DERIVATIVE || strncmp(d->name, "der_", 4) != 0) return NULL;
+    x = fp_var_find(info->vars, info->n_vars, d->name + 4);
+    return x != NULL && x->kind == FP_STATE ? x : NULL;
+}
+
+/* The Model Exchange rows as FMI 2.0 needs them: Real rows of states that lie one after the
+ * other in the model (in table order: the order of fmi2GetContinuousStates, which is the
+ * order of <Derivatives>), as many elements as the model has states, each with one
+ * derivative row of its shape, the derivative rows in the order of their states; none for a
+ * model without Model Exchange. */
+static int check_model_exchange(const FpModelInfo *info) {
+    size_t i, j, n_states = 0;
+    const FpVar *prev = NULL, *prev_state = NULL;
+    for (i = 0; i < info->n_vars; i++) {
+        const FpVar *v = &info->vars[i], *x;
+        int n_der = 0;
+        if (v->kind != FP_STATE && v->kind != FP_DERIVATIVE) continue;
+        if (info->me == NULL || v->type != FP_REAL) {
+            fprintf(stderr, "mdgen: %s: row %s is a Model Exchange row of %s\n",
+                    info->model_name, v->name,
+                    info->me == NULL ? "a model without Model Exchange" : "a non-Real type");
+            return -1;
+        }
+        if (v->kind == FP_DERIVATIVE) {
+            x = state_of(info, v);
+            if (x == NULL || x->rows != v->rows || x->cols != v->cols || x <= prev_state) {
+                fprintf(stderr, "mdgen: %s: derivative row %s names no state row \"der_<state>\" "
+                        "of its shape after the previous derivative's\n", info->model_name,
+                        v->name);
+                return -1;
+            }
+            prev_state = x;
+            continue;
+        }
+        if (prev != NULL && v->offset != prev->offset + fp_var_count(prev) * sizeof(double)) {
+            fprintf(stderr, "mdgen: %s: state row %s does not follow %s in the model\n",
+                    info->model_name, v->name, prev->name);
+            return -1;
+        }
+        for (j = 0; j < info->n_vars; j++)
+            if (state_of(info, &info->vars[j]) == v) n_der++;
+        if (n_der != 1) {
+            fprintf(stderr, "mdgen: %s: state row %s has %d derivative rows, not 1\n",
+                    info->model_name, v->name, n_der);
+            return -1;
+        }
+        prev = v;
+        n_states += fp_var_count(v);
+    }
+    if (info->me != NULL && n_states != info->me->n_states) {
+        fprintf(stderr, "mdgen: %s: its state rows hold %lu elements, the model %lu states\n",
+                info->model_name, (unsigned long)n_states, (unsigned long)info->me->n_states);
+        return -1;
+    }
+    if (info->me != NULL && info->me->indicators != NULL) {
+        const FpVar *z = fp_var_find(info->vars, info->n_vars, info->me->indicators);
+        if (z == NULL || z->kind != FP_LOCAL || z->type != FP_REAL ||
+            fp_var_count(z) != info->me->n_event_indicators) {
+            fprintf(stderr, "mdgen: %s: its event indicators %s are no local Real row of %lu "
+                    "elements\n", info->model_name, info->me->indicators,
+                    (unsigned long)info->me->n_event_indicators);
+            return -1;
+        }
+    }
+    return 0;
 }
 
 /* The ScalarVariable index (1-based, listing order) of element 0 of every row; returns the
@@ -323,7 +414,7 @@ static uint32_t listing_indices(const FpModelInfo *info, uint32_t **first) {
     int rank;
     *first = (uint32_t *)calloc(info->n_vars, sizeof **first);
     if (*first == NULL) return 0;
-    for (rank = 0; rank < 3; rank++)
+    for (rank = 0; rank < N_RANKS; rank++)
         for (i = 0; i < info->n_vars; i++)
             if (listing_rank(info->vars[i].kind) == rank) {
                 (*first)[i] = index + 1;
@@ -357,6 +448,23 @@ static const struct {
      sizeof controller_declarations / sizeof controller_declarations[0]},
     {"ScenarioSignals", signals_declarations,
      sizeof signals_declarations / sizeof signals_declarations[0]},
+};
+
+/* The <Outputs> declarations of a model with Model Exchange (plant/plant_vars.h): the
+ * outputs (row names) and the knowns they are functions of (inputs, state rows, "@states").
+ * A model without one declares every output independent of every known (dependencies=""). */
+#define DECLARATION_ROW(unknowns, knowns) {unknowns, knowns},
+static const InitialDeclaration plant_output_declarations[] = {
+    PLANT_OUTPUT_DEPENDENCIES(DECLARATION_ROW)};
+#undef DECLARATION_ROW
+
+static const struct {
+    const char *model;
+    const InitialDeclaration *rows;
+    size_t n;
+} output_declarations[] = {
+    {"MultirotorPlant", plant_output_declarations,
+     sizeof plant_output_declarations / sizeof plant_output_declarations[0]},
 };
 
 /* The next space-separated name of *p into buf: its length, 0 at the end, -1 if too long. */
@@ -402,26 +510,45 @@ static char *dependency_text(const unsigned char *mask, uint32_t n) {
     return text;
 }
 
+/* What a declaration lists: the InitialUnknowns (outputs, states and derivatives as functions
+ * of inputs and parameters, "@parameters") or the Outputs (outputs as functions of inputs and
+ * states, "@states"). */
+enum { DECLARE_INITIAL = 0, DECLARE_OUTPUTS = 1 };
+static const char *const declaration_kind[] = {"InitialUnknowns", "Outputs"};
+
+/* 1 if a row of this kind is a known of that kind of declaration. */
+static int known_kind(FpVarKind kind, int what) {
+    if (kind == FP_INPUT) return 1;
+    return what == DECLARE_INITIAL ? listing_rank(kind) == 2 : kind == FP_STATE;
+}
+
+/* 1 if a row of this kind is an unknown of that kind of declaration (every one is declared). */
+static int unknown_kind(FpVarKind kind, int what) {
+    if (kind == FP_OUTPUT) return 1;
+    return what == DECLARE_INITIAL && (kind == FP_STATE || kind == FP_DERIVATIVE);
+}
+
 /* Marks the elements of the knowns one declaration names (mask, by listing index) and their
  * rows (rows, by table index: the variables of FMI 3.0); -1 (with a message) on a bad name. */
 static int mark_knowns(const FpModelInfo *info, const uint32_t *first, const char *knowns,
-                       unsigned char *mask, unsigned char *rows) {
+                       int what, unsigned char *mask, unsigned char *rows) {
     char name[128];
     const char *p = knowns;
     size_t i;
     uint32_t k;
     int len;
     while ((len = next_name(&p, name, sizeof name)) != 0) {
-        int all = strcmp(name, "@parameters") == 0;
+        int all = strcmp(name, what == DECLARE_INITIAL ? "@parameters" : "@states") == 0;
         const FpVar *row = all ? NULL : fp_var_find(info->vars, info->n_vars, name);
-        if (len < 0 || (!all && (row == NULL || row->kind == FP_OUTPUT))) {
-            fprintf(stderr, "mdgen: InitialUnknowns of %s: known %s is no input or parameter\n",
-                    info->model_name, len < 0 ? "(too long)" : name);
+        if (len < 0 || (!all && (row == NULL || !known_kind(row->kind, what)))) {
+            fprintf(stderr, "mdgen: %s of %s: known %s is no %s\n", declaration_kind[what],
+                    info->model_name, len < 0 ? "(too long)" : name,
+                    what == DECLARE_INITIAL ? "input or parameter" : "input or state");
             return -1;
         }
         for (i = 0; i < info->n_vars; i++) {
             const FpVar *v = &info->vars[i];
-            if (all ? listing_rank(v->kind) != 2 : v != row) continue;
+            if (all ? !known_kind(v->kind, what) || v->kind == FP_INPUT : v != row) continue;
             for (k = 0; k < fp_var_count(v); k++) mask[first[i] + k] = 1;
             rows[i] = 1;
         }
@@ -429,23 +556,16 @@ static int mark_knowns(const FpModelInfo *info, const uint32_t *first, const cha
     return 0;
 }
 
-static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *first, uint32_t n,
-                                    InitialUnknowns *u) {
-    const InitialDeclaration *rows = NULL;
+/* A model's declarations (`rows`, n of them) of one kind, resolved into u. */
+static int resolve_declarations(const FpModelInfo *info, const uint32_t *first, uint32_t n,
+                                const InitialDeclaration *rows, size_t n_rows, int what,
+                                InitialUnknowns *u) {
     unsigned char *mask = NULL;
     char name[128];
     size_t d, i;
     int len;
     memset(u, 0, sizeof *u);
-    for (d = 0; d < sizeof declarations / sizeof declarations[0]; d++)
-        if (strcmp(declarations[d].model, info->model_name) == 0) {
-            rows = declarations[d].rows;
-            u->n = declarations[d].n;
-        }
-    if (rows == NULL) {
-        fprintf(stderr, "mdgen: no InitialUnknowns declaration for %s\n", info->model_name);
-        return -1;
-    }
+    u->n = n_rows;
     u->declaration = (int *)malloc(info->n_vars * sizeof *u->declaration);
     u->dependencies = (char **)calloc(u->n, sizeof *u->dependencies);
     u->known_rows = (unsigned char **)calloc(u->n, sizeof *u->known_rows);
@@ -458,9 +578,11 @@ static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *fir
         const char *p = rows[d].unknowns;
         while ((len = next_name(&p, name, sizeof name)) != 0) {
             const FpVar *row = len < 0 ? NULL : fp_var_find(info->vars, info->n_vars, name);
-            if (row == NULL || row->kind != FP_OUTPUT || u->declaration[row - info->vars] >= 0) {
-                fprintf(stderr, "mdgen: InitialUnknowns of %s: %s is no output, or declared "
-                        "twice\n", info->model_name, len < 0 ? "(too long)" : name);
+            if (row == NULL || !unknown_kind(row->kind, what) ||
+                u->declaration[row - info->vars] >= 0) {
+                fprintf(stderr, "mdgen: %s of %s: %s is no %s, or declared twice\n",
+                        declaration_kind[what], info->model_name, len < 0 ? "(too long)" : name,
+                        what == DECLARE_INITIAL ? "output, state or derivative" : "output");
                 goto fail;
             }
             u->declaration[row - info->vars] = (int)d;
@@ -468,14 +590,15 @@ static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *fir
         memset(mask, 0, (size_t)n + 1);
         u->known_rows[d] = (unsigned char *)calloc(info->n_vars, 1);
         if (u->known_rows[d] == NULL) goto fail;
-        if (mark_knowns(info, first, rows[d].knowns, mask, u->known_rows[d]) != 0) goto fail;
+        if (mark_knowns(info, first, rows[d].knowns, what, mask, u->known_rows[d]) != 0)
+            goto fail;
         u->dependencies[d] = dependency_text(mask, n);
         if (u->dependencies[d] == NULL) goto fail;
     }
     for (i = 0; i < info->n_vars; i++)
-        if (info->vars[i].kind == FP_OUTPUT && u->declaration[i] < 0) {
-            fprintf(stderr, "mdgen: InitialUnknowns of %s: output %s is in no declaration\n",
-                    info->model_name, info->vars[i].name);
+        if (unknown_kind(info->vars[i].kind, what) && u->declaration[i] < 0) {
+            fprintf(stderr, "mdgen: %s of %s: %s is in no declaration\n",
+                    declaration_kind[what], info->model_name, info->vars[i].name);
             goto fail;
         }
     free(mask);
@@ -486,27 +609,70 @@ fail:
     return -1;
 }
 
-/* <ModelStructure>: every output (listing order) in <Outputs> without dependencies (computed
- * at the end of a step from the inputs held over it: no direct feedthrough at communication
- * points, so no algebraic loop for masters) and in <InitialUnknowns> with its declaration's. */
+static int resolve_initial_unknowns(const FpModelInfo *info, const uint32_t *first, uint32_t n,
+                                    InitialUnknowns *u) {
+    size_t d;
+    for (d = 0; d < sizeof declarations / sizeof declarations[0]; d++)
+        if (strcmp(declarations[d].model, info->model_name) == 0)
+            return resolve_declarations(info, first, n, declarations[d].rows, declarations[d].n,
+                                        DECLARE_INITIAL, u);
+    fprintf(stderr, "mdgen: no InitialUnknowns declaration for %s\n", info->model_name);
+    return -1;
+}
+
+/* The <Outputs> declarations (u->n = 0: none, every output's dependencies=""); a model with
+ * Model Exchange must have them. */
+static int resolve_output_dependencies(const FpModelInfo *info, const uint32_t *first,
+                                       uint32_t n, InitialUnknowns *u) {
+    size_t d;
+    memset(u, 0, sizeof *u);
+    for (d = 0; d < sizeof output_declarations / sizeof output_declarations[0]; d++)
+        if (strcmp(output_declarations[d].model, info->model_name) == 0)
+            return resolve_declarations(info, first, n, output_declarations[d].rows,
+                                        output_declarations[d].n, DECLARE_OUTPUTS, u);
+    if (info->me == NULL) return 0;
+    fprintf(stderr, "mdgen: no Outputs declaration for %s, which has Model Exchange\n",
+            info->model_name);
+    return -1;
+}
+
+/* <ModelStructure>: every output (listing order) in <Outputs>, without dependencies when the
+ * model declares none (computed at the end of a step from the inputs held over it: no direct
+ * feedthrough at communication points, so no algebraic loop for masters), else with the
+ * dependencies of its Model Exchange declaration (o); the state derivatives in <Derivatives>
+ * (in the order of the state vector; every known, the attribute absent); in <InitialUnknowns>
+ * the outputs, states and derivatives, ascending, with their declaration's knowns. */
 static void write_model_structure(FILE *f, const FpModelInfo *info, const uint32_t *first,
-                                  const InitialUnknowns *u) {
+                                  const InitialUnknowns *u, const InitialUnknowns *o) {
     size_t i;
     uint32_t k;
-    int pass;
-    fputs("  <ModelStructure>\n", f);
-    for (pass = 0; pass < 2; pass++) {
-        fputs(pass == 0 ? "    <Outputs>\n" : "    <InitialUnknowns>\n", f);
+    int rank;
+    fputs("  <ModelStructure>\n    <Outputs>\n", f);
+    for (i = 0; i < info->n_vars; i++) {
+        if (info->vars[i].kind != FP_OUTPUT) continue;
+        for (k = 0; k < fp_var_count(&info->vars[i]); k++)
+            fprintf(f, "      <Unknown index=\"%u\" dependencies=\"%s\"/>\n",
+                    (unsigned)(first[i] + k), o->n == 0 ? "" : o->dependencies[o->declaration[i]]);
+    }
+    fputs("    </Outputs>\n", f);
+    if (info->me != NULL) {
+        fputs("    <Derivatives>\n", f);
         for (i = 0; i < info->n_vars; i++) {
-            if (info->vars[i].kind != FP_OUTPUT) continue;
+            if (info->vars[i].kind != FP_DERIVATIVE) continue;
+            for (k = 0; k < fp_var_count(&info->vars[i]); k++)
+                fprintf(f, "      <Unknown index=\"%u\"/>\n", (unsigned)(first[i] + k));
+        }
+        fputs("    </Derivatives>\n", f);
+    }
+    fputs("    <InitialUnknowns>\n", f);
+    for (rank = 0; rank < N_RANKS; rank++)
+        for (i = 0; i < info->n_vars; i++) {
+            if (u->declaration[i] < 0 || listing_rank(info->vars[i].kind) != rank) continue;
             for (k = 0; k < fp_var_count(&info->vars[i]); k++)
                 fprintf(f, "      <Unknown index=\"%u\" dependencies=\"%s\"/>\n",
-                        (unsigned)(first[i] + k),
-                        pass == 0 ? "" : u->dependencies[u->declaration[i]]);
+                        (unsigned)(first[i] + k), u->dependencies[u->declaration[i]]);
         }
-        fputs(pass == 0 ? "    </Outputs>\n" : "    </InitialUnknowns>\n", f);
-    }
-    fputs("  </ModelStructure>\n", f);
+    fputs("    </InitialUnknowns>\n  </ModelStructure>\n", f);
 }
 
 /* The FMU's C files: argv[first..argc-1] after "--sources DIR" (none without it). */
@@ -583,8 +749,11 @@ static void write_types3(FILE *f, const FpModelInfo *info) {
  * second one of cols for a matrix, its elements row-major), its start values listed
  * element by element.  A WRENCH row (force then torque) has no declared type or unit: the
  * description says which elements are in N and which in N.m. */
-static void write_variable3(FILE *f, const FpVar *v, const void *model, int clocked) {
-    static const char *const causality[] = {"parameter", "parameter", "input", "output"};
+static void write_variable3(FILE *f, const FpModelInfo *info, const FpVar *v, const void *model,
+                            int clocked) {
+    static const char *const causality[] = {"parameter", "parameter", "input", "output",
+                                            "local",     "local",     "local"};
+    const FpVar *x = state_of(info, v);
     static const char *const tag[] = {"Float64", "Int32", "Boolean"};
     const char *p = (const char *)model + v->offset;
     const char *variability;
@@ -613,7 +782,8 @@ static void write_variable3(FILE *f, const FpVar *v, const void *model, int cloc
         fprintf(f, " declaredType=\"%s\" unit=\"%s\"", d->name, d->unit);
     }
     write_range(f, v);
-    if (v->kind != FP_OUTPUT) {
+    if (x != NULL) fprintf(f, " derivative=\"%u\"", (unsigned)x->vr); /* (the whole array's) */
+    if (has_start(v)) {
         fputs(" start=\"", f);
         for (k = 0; k < n; k++) {
             if (k > 0) fputc(' ', f);
@@ -637,31 +807,46 @@ static int compare_u32(const void *a, const void *b) {
     return x < y ? -1 : x > y;
 }
 
+/* The value references of the knowns of a row's declaration in d, ascending, as the
+ * dependencies attribute (the variables of FMI 3.0). */
+static void write_known_vrs(FILE *f, const FpModelInfo *info, const InitialUnknowns *d, size_t i,
+                            uint32_t *vrs) {
+    const unsigned char *known = d->known_rows[d->declaration[i]];
+    size_t j, n;
+    for (j = 0, n = 0; j < info->n_vars; j++)
+        if (known[j]) vrs[n++] = info->vars[j].vr;
+    qsort(vrs, n, sizeof *vrs, compare_u32);
+    for (j = 0; j < n; j++) fprintf(f, "%s%u", j > 0 ? " " : "", (unsigned)vrs[j]);
+}
+
 /* <ModelStructure> of FMI 3.0: the same declarations as FMI 2.0's, by value reference (a
- * known is a whole variable): every output an <Output> without dependencies and an
- * <InitialUnknown> with its declaration's knowns, ascending; no <InitialUnknown> when the
- * outputs are clocked (Scheduled Execution: FMI 3.0 excludes clocked variables from the
+ * known is a whole variable): every output an <Output>, without dependencies when the model
+ * declares none (o->n = 0), else with its Model Exchange declaration's knowns; the state
+ * derivatives as <ContinuousStateDerivative> (every known); an <InitialUnknown> for every
+ * output, state and derivative with its declaration's knowns, ascending, but no output's when
+ * the outputs are clocked (Scheduled Execution: FMI 3.0 excludes clocked variables from the
  * initial unknowns). */
 static int write_model_structure3(FILE *f, const FpModelInfo *info, const InitialUnknowns *u,
-                                  int clocked) {
+                                  const InitialUnknowns *o, int clocked) {
     uint32_t *vrs = (uint32_t *)malloc(info->n_vars * sizeof *vrs);
-    size_t i, j, n;
+    size_t i;
     if (vrs == NULL) return -1;
     fputs("  <ModelStructure>\n", f);
+    for (i = 0; i < info->n_vars; i++) {
+        if (info->vars[i].kind != FP_OUTPUT) continue;
+        fprintf(f, "    <Output valueReference=\"%u\" dependencies=\"", (unsigned)info->vars[i].vr);
+        if (o->n > 0) write_known_vrs(f, info, o, i, vrs);
+        fputs("\"/>\n", f);
+    }
     for (i = 0; i < info->n_vars; i++)
-        if (info->vars[i].kind == FP_OUTPUT)
-            fprintf(f, "    <Output valueReference=\"%u\" dependencies=\"\"/>\n",
+        if (info->vars[i].kind == FP_DERIVATIVE)
+            fprintf(f, "    <ContinuousStateDerivative valueReference=\"%u\"/>\n",
                     (unsigned)info->vars[i].vr);
     for (i = 0; i < info->n_vars; i++) {
-        const unsigned char *known;
-        if (info->vars[i].kind != FP_OUTPUT || clocked) continue;
-        known = u->known_rows[u->declaration[i]];
-        for (j = 0, n = 0; j < info->n_vars; j++)
-            if (known[j]) vrs[n++] = info->vars[j].vr;
-        qsort(vrs, n, sizeof *vrs, compare_u32);
+        if (u->declaration[i] < 0 || (info->vars[i].kind == FP_OUTPUT && clocked)) continue;
         fprintf(f, "    <InitialUnknown valueReference=\"%u\" dependencies=\"",
                 (unsigned)info->vars[i].vr);
-        for (j = 0; j < n; j++) fprintf(f, "%s%u", j > 0 ? " " : "", (unsigned)vrs[j]);
+        write_known_vrs(f, info, u, i, vrs);
         fputs("\"/>\n", f);
     }
     fputs("  </ModelStructure>\n", f);
@@ -686,10 +871,11 @@ static const FpVar *internal_step(const FpModelInfo *info) {
 /* The FMI 3.0 modelDescription.xml: the header, a <CoSimulation> without Event Mode (and
  * with `scheduled`, a <ScheduledExecution>), the units, types and log categories, the
  * independent variable time (value reference 0), with `scheduled` the input clock, the rows
- * in the listing order of FMI 2.0 (inputs, outputs, parameters) and the ModelStructure. */
+ * in the listing order of FMI 2.0 (inputs, outputs, parameters, locals) and the
+ * ModelStructure. */
 static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const char *guid,
                       const char *date, const char *version, const InitialUnknowns *u,
-                      int scheduled) {
+                      const InitialUnknowns *o, int scheduled) {
     size_t i;
     int c, rank;
     fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n", f);
@@ -743,12 +929,12 @@ static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const
                 FP_SE_CLOCK_NAME, (unsigned)FP_SE_CLOCK_VR, FP_SE_CLOCK_DESCRIPTION,
                 *(const double *)((const char *)model + step->offset), FP_SE_CLOCK_PRIORITY);
     }
-    for (rank = 0; rank < 3; rank++)
+    for (rank = 0; rank < N_RANKS; rank++)
         for (i = 0; i < info->n_vars; i++)
             if (listing_rank(info->vars[i].kind) == rank)
-                write_variable3(f, &info->vars[i], model, scheduled);
+                write_variable3(f, info, &info->vars[i], model, scheduled);
     fputs("  </ModelVariables>\n", f);
-    if (write_model_structure3(f, info, u, scheduled) != 0) return -1;
+    if (write_model_structure3(f, info, u, o, scheduled) != 0) return -1;
     fputs("</fmiModelDescription>\n", f);
     return 0;
 }
@@ -761,7 +947,7 @@ int main(int argc, char **argv) {
     size_t i;
     uint32_t k, n_listed, *first = NULL;
     int c, rank;
-    InitialUnknowns unknowns;
+    InitialUnknowns unknowns, outputs;
     SourceList src = {NULL, NULL, 0};
     int fmi3 = argc > 1 && strcmp(argv[1], "--fmi3") == 0, scheduled = 0;
     if (fmi3) { /* the FMI 3.0 modelDescription.xml of the same table */
@@ -789,7 +975,7 @@ int main(int argc, char **argv) {
     if (model == NULL) return 1;
     info->set_defaults(model);
     n_listed = listing_indices(info, &first);
-    if (check_table(info, model) != 0 || n_listed == 0 ||
+    if (check_table(info, model) != 0 || check_model_exchange(info) != 0 || n_listed == 0 ||
         resolve_initial_unknowns(info, first, n_listed, &unknowns) != 0) {
         free(first);
         free(model);
@@ -830,8 +1016,16 @@ int main(int argc, char **argv) {
         free(model);
         return 1;
     }
+    if (resolve_output_dependencies(info, first, n_listed, &outputs) != 0) {
+        fclose(f);
+        free_initial_unknowns(&unknowns);
+        free(first);
+        free(model);
+        return 1;
+    }
     if (fmi3) {
-        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns, scheduled);
+        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns, &outputs, scheduled);
+        free_initial_unknowns(&outputs);
         free_initial_unknowns(&unknowns);
         free(first);
         free(model);
@@ -849,8 +1043,24 @@ int main(int argc, char **argv) {
     fprintf(f,
             "\"\n  copyright=\"Copyright (c) %.4s %s\" license=\"%s\"\n"
             "  generationTool=\"fullpose mdgen\" generationDateAndTime=\"%s\"\n"
-            "  variableNamingConvention=\"structured\" numberOfEventIndicators=\"0\">\n",
-            date, AUTHOR, LICENSE, date);
+            "  variableNamingConvention=\"structured\" numberOfEventIndicators=\"%lu\">\n",
+            date, AUTHOR, LICENSE, date,
+            (unsigned long)(info->me != NULL ? info->me->n_event_indicators : 0));
+    if (info->me != NULL) {
+        /* Model Exchange before co-simulation (the schema's order); completed integrator
+         * steps are needed: they update the model's discrete state (fp_model.h) */
+        fprintf(f,
+                "  <ModelExchange modelIdentifier=\"%s\" needsExecutionTool=\"false\""
+                " completedIntegratorStepNotNeeded=\"false\""
+                " canBeInstantiatedOnlyOncePerProcess=\"false\""
+                " canNotUseMemoryManagementFunctions=\"false\" canGetAndSetFMUstate=\"true\""
+                " canSerializeFMUstate=\"true\" providesDirectionalDerivative=\"false\"%s\n",
+                info->model_name, src.n > 0 ? ">" : "/>");
+        if (src.n > 0) {
+            write_source_files(f, &src);
+            fputs("  </ModelExchange>\n", f);
+        }
+    }
     fprintf(f,
             "  <CoSimulation modelIdentifier=\"%s\" canHandleVariableCommunicationStepSize=\"true\""
             " canInterpolateInputs=\"false\" maxOutputDerivativeOrder=\"0\""
@@ -872,13 +1082,16 @@ int main(int argc, char **argv) {
     fprintf(f, "  <DefaultExperiment startTime=\"0\" stopTime=\"%.17g\" stepSize=\"%.17g\"/>\n",
             info->default_stop, info->default_step);
     fputs("  <ModelVariables>\n", f);
-    for (rank = 0; rank < 3; rank++)
+    for (rank = 0; rank < N_RANKS; rank++)
         for (i = 0; i < info->n_vars; i++) {
+            const FpVar *x = state_of(info, &info->vars[i]);
             if (listing_rank(info->vars[i].kind) != rank) continue;
             for (k = 0; k < fp_var_count(&info->vars[i]); k++)
-                if (write_variable(f, &info->vars[i], k, model) != 0) {
+                if (write_variable(f, &info->vars[i], k, model,
+                                   x == NULL ? 0 : first[x - info->vars] + k) != 0) {
                     fprintf(stderr, "mdgen: name of %s too long\n", info->vars[i].name);
                     fclose(f);
+                    free_initial_unknowns(&outputs);
                     free_initial_unknowns(&unknowns);
                     free(first);
                     free(model);
@@ -886,8 +1099,9 @@ int main(int argc, char **argv) {
                 }
         }
     fputs("  </ModelVariables>\n", f);
-    write_model_structure(f, info, first, &unknowns);
+    write_model_structure(f, info, first, &unknowns, &outputs);
     fputs("</fmiModelDescription>\n", f);
+    free_initial_unknowns(&outputs);
     free_initial_unknowns(&unknowns);
     free(first);
     free(model);

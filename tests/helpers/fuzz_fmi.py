@@ -556,6 +556,15 @@ class Child:
                            [nm, kind, guid, model.resources, ctypes.addressof(cb),
                             int(rng.random() < 0.5), logging_on], f"variant={variant}",
                            helper=helper, env=env)
+        if variant == "model_exchange" and model.caps["me"]:
+            # a Model Exchange FMU too (the plant): accepted; its calls are fuzzed by
+            # tests/test_fmus/test_model_exchange.py, not here
+            if not handle and self.heap.fail_rate == 0.0:
+                self.finding("instantiate_failed", "fmi2Instantiate(model_exchange) returned "
+                             "NULL for an FMU with <ModelExchange>")
+            if handle:
+                model.dll.fmi2FreeInstance(handle)
+            return None
         if variant != "ok":
             if handle:
                 self.finding("forbidden_accepted", f"fmi2Instantiate({variant}) returned an "
@@ -1240,7 +1249,8 @@ def _spec(key: str, unzip_root: str) -> dict:
         "categories": [c.name for c in md.logCategories],
         "caps": {"dd": bool(md.coSimulation.providesDirectionalDerivative),
                  "interp": bool(md.coSimulation.canInterpolateInputs),
-                 "max_order": int(md.coSimulation.maxOutputDerivativeOrder or 0)},
+                 "max_order": int(md.coSimulation.maxOutputDerivativeOrder or 0),
+                 "me": md.modelExchange is not None},
     }
 
 

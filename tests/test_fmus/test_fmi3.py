@@ -152,7 +152,9 @@ def test_both_model_descriptions_state_the_same_table(model):
     GUID as instantiation token; time the only addition, at vr 0.  The controller's Scheduled
     Execution (test_fmi3_scheduled.py) adds its clock, which is no table row, and clocks its
     inputs and outputs: those are discrete (FMI 3.0 clocks no continuous variable) and, as
-    clocked outputs, no initial unknowns."""
+    clocked outputs, no initial unknowns.  The plant's Model Exchange rows (states, their
+    derivatives, the contact depths) are local variables in both, each derivative naming its
+    state, and its outputs have the same dependencies."""
     md3 = read_model_description(str(fmu_path(model)))
     md2 = read_model_description(str(fmu_path(model, fmi=2)))
     assert md3.guid == md2.guid and re.fullmatch(r"\{[0-9a-f-]{36}\}", md3.guid)
@@ -183,9 +185,12 @@ def test_both_model_descriptions_state_the_same_table(model):
             {(v.causality, v.variability)}
         assert {e.type for e in elements} == {
             {"Float64": "Real", "Int32": "Integer", "Boolean": "Boolean"}[v.type]}
-        if v.causality != "output":
+        if v.causality not in ("output", "local"):
             starts = v.start.split() if v.shape else [v.start]
             assert starts == [e.start for e in elements], v.name
+        if v.derivative is not None:  # the state array, element by element in FMI 2.0
+            assert [e.derivative.valueReference for e in elements] == [
+                v.derivative.valueReference + k for k in range(n)]
         assert {(e.min, e.max) for e in elements} == {(v.min, v.max)}, v.name
         if v.type == "Float64" and v.declaredType is not None:
             assert {e.declaredType.name for e in elements} == {v.declaredType.name}
@@ -207,6 +212,14 @@ def test_both_model_descriptions_state_the_same_table(model):
     deps3 = {u.variable.valueReference: sorted(d.valueReference for d in u.dependencies)
              for u in md3.initialUnknowns}
     assert deps3 == ({} if clocks else deps2)
+    out2 = {row_of[u.variable.valueReference]: sorted({row_of[d.valueReference]
+                                                       for d in u.dependencies})
+            for u in md2.outputs}
+    out3 = {u.variable.valueReference: sorted(d.valueReference for d in u.dependencies)
+            for u in md3.outputs}
+    assert out3 == out2
+    assert [d.variable.valueReference for d in md3.derivatives] == sorted(
+        {row_of[d.variable.valueReference] for d in md2.derivatives})
 
 
 @pytest.mark.parametrize("model", MODELS)

@@ -190,7 +190,9 @@ def _run_mdgen(exe: Path, out: Path, env_epoch: str | None) -> subprocess.Comple
     if env_epoch is not None:
         env["SOURCE_DATE_EPOCH"] = env_epoch
     # as the build runs it: with the C files of the FMU's sources/ (its <SourceFiles>)
-    files = [f.get("name") for f in ET.fromstring(xml_of("MultirotorPlant")).iter("File")]
+    # (listed in <CoSimulation>, and again in the plant's <ModelExchange>)
+    cs = ET.fromstring(xml_of("MultirotorPlant")).find("CoSimulation")
+    files = [f.get("name") for f in cs.iter("File")]
     return subprocess.run([str(exe), str(out), PYPROJECT["version"], "--sources",
                            str(out.parent), *files], env=env, capture_output=True, text=True)
 

@@ -2,15 +2,20 @@
 deliverable 2): the order of the ScalarVariables and the <ModelStructure>.
 
 - The ScalarVariables are listed inputs, then outputs, then parameters, each in the table's
-  order (tools/mdgen.c): importers that find a connector by name scan from the top.  The
-  value references are the tables' (fmu_src/*/*_vars.h, read here from the C source), so
-  nothing that goes by name or value reference notices the order.
+  order (tools/mdgen.c), then the plant's Model Exchange states and derivatives (local):
+  importers that find a connector by name scan from the top.  The value references are the
+  tables' (fmu_src/*/*_vars.h, read here from the C source), so nothing that goes by name or
+  value reference notices the order.
 - <ModelStructure> names variables by their 1-based ScalarVariable index: <Outputs> lists
-  every output in that order with ``dependencies=""`` (no direct feedthrough at communication
-  points); <InitialUnknowns> lists the same outputs, each with the knowns (inputs,
-  parameters: FMI 2.0 section 2.2.8) the table declares it a function of at initialization.
+  every output in that order, the controller's with ``dependencies=""`` (no direct
+  feedthrough at communication points), the plant's with what its outputs are functions of
+  in Model Exchange (states, some inputs: PLANT_OUTPUT_DEPENDENCIES, checked by
+  test_model_exchange.py); <InitialUnknowns> lists the same outputs (and the plant's states
+  and derivatives), each with the knowns (inputs, parameters: FMI 2.0 section 2.2.8) the
+  table declares it a function of at initialization.
 - The declarations are never short: perturbing one known at a time moves only the initial
-  outputs that list it (the shipped paper hexacopter, its design-time force sets given).
+  outputs (and states and derivatives) that list it (the shipped paper hexacopter, its
+  design-time force sets given).
 - The plant's initial outputs do not depend on its actuator commands, so the closed loop
   (plant outputs into controller inputs and back, by name) has no algebraic loop at
   initialization.
@@ -39,7 +44,7 @@ SRC = ROOT / "fmu_src"
 MODELS = ("MultirotorPlant", "FullPoseController")
 TABLES = {"MultirotorPlant": ("plant/plant_vars.h", 0),
           "FullPoseController": ("controller/controller_vars.h", 1)}
-ROW = re.compile(r"\bX\((\w+), ([^,]+), (\w+), (\w+), (\d+), (\d+),")
+ROW = re.compile(r"\bXS?\((\w+), ([^,]+), (\w+), (\w+), (\d+), (\d+),")
 Value = float | int | bool
 
 
@@ -74,10 +79,12 @@ def table_references(model: str) -> dict[str, int]:
 
 def test_inputs_and_outputs_come_before_the_parameters(md):
     causality = [v.causality for v in md.modelVariables]
-    n_in, n_out = causality.count("input"), causality.count("output")
+    n_in, n_out, n_local = (causality.count(c) for c in ("input", "output", "local"))
     assert causality == ["input"] * n_in + ["output"] * n_out + \
-        ["parameter"] * (len(causality) - n_in - n_out)
+        ["parameter"] * (len(causality) - n_in - n_out - n_local) + ["local"] * n_local
     assert n_in > 0 and n_out > 0
+    # the plant's states, their derivatives and its contact depths (the event indicators)
+    assert n_local == (2 * md.numberOfContinuousStates + 8 if md.modelExchange else 0)
 
 
 def test_value_references_are_the_tables(model, md):
@@ -93,9 +100,17 @@ def test_value_references_are_the_tables(model, md):
 def test_model_structure_names_the_outputs_by_their_index(md):
     outputs = [i + 1 for i, v in enumerate(md.modelVariables) if v.causality == "output"]
     index = {id(v): i + 1 for i, v in enumerate(md.modelVariables)}
+    # the continuous states and their derivatives (initial unknowns in FMI 2.0 section 2.2.8)
+    local = sorted([index[id(d.variable)] for d in md.derivatives] +
+                   [index[id(d.variable.derivative)] for d in md.derivatives])
     assert [index[id(u.variable)] for u in md.outputs] == outputs
-    assert all(u.dependencies == [] for u in md.outputs)
-    assert [index[id(u.variable)] for u in md.initialUnknowns] == outputs
+    if md.modelExchange is None:
+        assert all(u.dependencies == [] for u in md.outputs)
+    else:  # Model Exchange: functions of the states and some inputs
+        states = {id(d.variable.derivative) for d in md.derivatives}
+        for u in md.outputs:
+            assert all(d.causality == "input" or id(d) in states for d in u.dependencies)
+    assert [index[id(u.variable)] for u in md.initialUnknowns] == outputs + local
     for u in md.initialUnknowns:
         deps = [index[id(d)] for d in u.dependencies]
         assert deps == sorted(set(deps)), u.variable.name
@@ -112,12 +127,14 @@ def test_every_initial_unknown_declares_its_dependencies(model):
 
 
 def test_no_initial_output_of_the_plant_waits_for_a_command():
+    """(The state derivatives do depend on the commands: no output does, so nothing connected.)"""
     md = read_model_description(str(installed_fmu("MultirotorPlant")))
     commands = {v.name for v in md.modelVariables if v.causality == "input"
                 and v.name.split("[")[0] in ("omega_cmd", "alpha_cmd", "beta_cmd")}
     assert len(commands) == 24
     for u in md.initialUnknowns:
-        assert not commands & {d.name for d in u.dependencies}, u.variable.name
+        if u.variable.causality == "output":
+            assert not commands & {d.name for d in u.dependencies}, u.variable.name
 
 
 def _has_cycle(edges: Mapping[str, set[str]]) -> list[str]:
@@ -190,10 +207,17 @@ def _perturbed(v: ScalarVariable, x: Value, name: str) -> list[Value]:
 OUTPUT_TYPES = ("Real", "Integer", "Boolean")
 
 
+def _unknown(md: ModelDescription, v: ScalarVariable) -> bool:
+    """An initial unknown: an output, or (the plant) a continuous state or its derivative."""
+    return v.causality == "output" or any(v is d.variable or v is d.variable.derivative
+                                          for d in md.derivatives)
+
+
 def _output_names(md: ModelDescription) -> list[str]:
-    """The outputs in the order _outputs reads them: by type, each in listing order."""
+    """The initial unknowns in the order _outputs reads them: by type, each in listing
+    order."""
     return [v.name for kind in OUTPUT_TYPES for v in md.modelVariables
-            if v.causality == "output" and v.type == kind]
+            if _unknown(md, v) and v.type == kind]
 
 
 def _outputs(inst: FmuInstance, md: ModelDescription) -> np.ndarray:
@@ -201,7 +225,7 @@ def _outputs(inst: FmuInstance, md: ModelDescription) -> np.ndarray:
     for kind, get in zip(OUTPUT_TYPES, (inst.slave.getReal, inst.slave.getInteger,
                                         inst.slave.getBoolean), strict=True):
         refs = [v.valueReference for v in md.modelVariables
-                if v.causality == "output" and v.type == kind]
+                if _unknown(md, v) and v.type == kind]
         values += [float(x) for x in get(refs)]
     return np.array(values)
 

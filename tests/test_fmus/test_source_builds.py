@@ -102,13 +102,15 @@ def zig():
     return [sys.executable, "-m", "ziglang", "cc"]
 
 
-def fmi2_functions(header: Path) -> set[str]:
-    """The FMI 2 co-simulation API the header declares (Model Exchange sections left out)."""
+def fmi2_functions(header: Path, model: str = "FullPoseController") -> set[str]:
+    """The FMI 2 API the header declares for ``model``: co-simulation (Model Exchange sections
+    left out), and Model Exchange too for the plant (one FMU, both interfaces)."""
     text = header.read_text()
     text = text[text.index("FMI2_Export fmi2GetTypesPlatformTYPE"):]
     sections = re.split(r"Functions for FMI2 for (Model Exchange|Co-Simulation)", text)
+    wanted = {"Co-Simulation"} | ({"Model Exchange"} if model == "MultirotorPlant" else set())
     kept = sections[0] + "".join(sections[i + 1] for i in range(1, len(sections), 2)
-                                 if sections[i] == "Co-Simulation")
+                                 if sections[i] in wanted)
     return set(re.findall(r"FMI2_Export\s+\w+TYPE\s+(\w+);", kept))
 
 
@@ -231,8 +233,8 @@ def needed(lib):
 
 def test_route_exports_the_fmi_functions_only_and_needs_libm(built, unpacked):
     route, b = built
-    api = fmi2_functions(unpacked["MultirotorPlant"] / "sources" / "fmi2Functions.h")
     for model, lib in b.libs.items():
+        api = fmi2_functions(unpacked["MultirotorPlant"] / "sources" / "fmi2Functions.h", model)
         got = exports(lib)
         print(f"{route} {model}: {len(got)} exported symbols, {len(got - api)} beyond the "
               f"FMI functions; needs {sorted(needed(lib))}")
@@ -395,10 +397,10 @@ def test_zig_aarch64_without_project_flags_has_no_fma_and_flies_under_qemu(
     llvm_nm, llvm_readelf = shutil.which("llvm-nm"), shutil.which("llvm-readelf")
     if llvm_nm is None or llvm_readelf is None:
         pytest.skip(f"llvm-nm or llvm-readelf is missing: run {INSTALL}")
-    api = fmi2_functions(unpacked["MultirotorPlant"] / "sources" / "fmi2Functions.h")
     target = ["-target", "aarch64-linux-gnu.2.17"]
     libs = {}
     for model in MODELS:
+        api = fmi2_functions(unpacked[model] / "sources" / "fmi2Functions.h", model)
         src = unpacked[model] / "sources"
         libs[model] = tmp_path / f"{model}.so"
         run_ok([*cc, *target, "-O2", "-shared", "-fPIC", "-I", src, src / f"{model}_all.c",
@@ -443,7 +445,7 @@ def test_both_fmus_with_their_prefixes_in_one_static_image(unpacked, scenario, o
         foreign = [s for s in defined if not s.startswith(f"{model}_")]
         print(f"static {model}: {len(defined)} global symbols, {len(foreign)} without the prefix")
         assert defined and not foreign, foreign[:10]
-        api = fmi2_functions(src / "fmi2Functions.h")
+        api = fmi2_functions(src / "fmi2Functions.h", model)
         assert {f"{model}_{f}" for f in api} <= set(defined)
         objects.append(obj)
     exe = tmp_path / "static_master"

@@ -80,6 +80,17 @@ def fmi2_cs_functions():
 
 
 FMI2_CS = fmi2_cs_functions()
+# the plant is a Model Exchange FMU too (one archive, both interfaces)
+FMI2_ME = {"fmi2EnterEventMode", "fmi2NewDiscreteStates", "fmi2EnterContinuousTimeMode",
+           "fmi2CompletedIntegratorStep", "fmi2SetTime", "fmi2SetContinuousStates",
+           "fmi2GetDerivatives", "fmi2GetEventIndicators", "fmi2GetContinuousStates",
+           "fmi2GetNominalsOfContinuousStates"}
+
+
+def fmi2_api(model: str) -> set[str]:
+    """What the model's binary exports: the co-simulation API, and the plant's Model
+    Exchange API."""
+    return FMI2_CS | FMI2_ME if model == "MultirotorPlant" else FMI2_CS
 
 
 @pytest.fixture(scope="module")
@@ -121,7 +132,7 @@ def test_linux_binaries_need_glibc_2_17_at_most_and_export_the_fmi_api(built, pl
         assert needed and max(needed) <= GLIBC_FLOOR, f"{model}: needs GLIBC_{max(needed)}"
         exported = set(out([nm, "--dynamic", "--defined-only", "--format=just-symbols", lib])
                        .split())
-        assert exported == FMI2_CS, f"{model}: {sorted(exported ^ FMI2_CS)}"
+        assert exported == fmi2_api(model), f"{model}: {sorted(exported ^ fmi2_api(model))}"
         libs = set(re.findall(r"\(NEEDED\)\s+Shared library: \[([^\]]+)\]",
                               out([readelf, "--dynamic", lib])))
         assert libs <= {"libc.so.6", "libm.so.6"}, libs
@@ -134,7 +145,7 @@ def test_windows_dlls_export_exactly_the_fmi_api_and_import_only_windows(built):
         assert "file format coff-x86-64" in text
         table = text[text.index("Export Table:"):]
         exported = set(re.findall(r"^\s+\d+\s+0x[0-9a-f]+\s+(\w+)$", table, re.M))
-        assert exported == FMI2_CS, f"{model}: {sorted(exported ^ FMI2_CS)}"
+        assert exported == fmi2_api(model), f"{model}: {sorted(exported ^ fmi2_api(model))}"
         dlls = {d.lower() for d in re.findall(r"DLL Name: (\S+)", text)}
         assert dlls and all(d == "kernel32.dll" or d.startswith("api-ms-win-crt-")
                             for d in dlls), dlls
@@ -162,8 +173,8 @@ def test_darwin_binaries_are_dylibs_exporting_the_fmi_api(built, platform, arche
             # its own name (LC_ID_DYLIB), then what it loads: the system library only
             assert re.findall(r"^\s+(\S+) \(", used, re.M) == [
                 f"@rpath/{model}.dylib", "/usr/lib/libSystem.B.dylib"]
-            exported = macho_exports(objdump, lib, arch)
-            assert exported - MACHO_HEADER_SYMBOLS == FMI2_CS, sorted(exported ^ FMI2_CS)
+            exported = macho_exports(objdump, lib, arch) - MACHO_HEADER_SYMBOLS
+            assert exported == fmi2_api(model), sorted(exported ^ fmi2_api(model))
     if platform == "aarch64-darwin":  # the same arm64 slice as in the universal darwin64
         for model, lib in binaries(built, platform).items():
             universal = binaries(built, "x86_64-darwin")[model]

@@ -113,7 +113,7 @@ _INCLUDE = re.compile(r'^\s*#\s*include\s+"([^"]+)"', re.M)
 SRC = ROOT / "fmu_src"
 MODEL_DIRS = ("plant", "controller", "common")
 GLUE = {SRC / "common" / name for name in ("fmi2_glue.c", "fmi2_values.c", "fmi2_fmustate.c",
-                                          "fmi2_resources.c",
+                                          "fmi2_resources.c", "fmi2_me.c",
                                           "fmi2_glue_internal.h",
                                           "fmi3_glue.c", "fmi3_values.c", "fmi3_fmustate.c",
                                           "fmi3_resources.c", "fmi3_glue_internal.h")}
