@@ -47,6 +47,19 @@ static int check_state(Fmi3Instance *inst, const unsigned char *buf, size_t size
 static fmi3Status snapshot_read(Fmi3Instance *inst, const unsigned char *buf, const char *fn) {
     StateHeader h;
     if (!check_state(inst, buf, 0, STATE_ALL, fn, "FMUState", &h)) return fmi3Error;
+    /* Model Exchange's states (Event Mode, Continuous-Time Mode) and the stepping ones
+     * (Step Mode, Clock Activation Mode) belong to their interfaces */
+    if (h.state & (inst->interface == G3_MODEL_EXCHANGE ? S_STEP_COMPLETE | S_STEP_FAILED
+                                                         : S_ME_RUNNING)) {
+        g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
+                "%s: the state was saved by a %s instance (in %s); this instance is %s", fn,
+                inst->interface == G3_MODEL_EXCHANGE ? "co-simulation" : "Model Exchange",
+                g3_state_name(h.state),
+                inst->interface == G3_MODEL_EXCHANGE ? "Model Exchange"
+                : inst->interface == G3_SCHEDULED_EXECUTION ? "Scheduled Execution"
+                                                            : "co-simulation");
+        return fmi3Error;
+    }
     if (inst->interface == G3_SCHEDULED_EXECUTION && h.state == S_STEP_FAILED) {
         g3_logf(inst, FP_ERROR, FP_LOG_ERROR,
                 "%s: the state was saved by a Co-Simulation instance after a discarded step, a "
@@ -84,6 +97,7 @@ static fmi3Status snapshot_read(Fmi3Instance *inst, const unsigned char *buf, co
     inst->dirty = (h.flags & STATE_FLAG_DIRTY) != 0;
     inst->tunables_dirty = (h.flags & STATE_FLAG_TUNABLES_DIRTY) != 0;
     inst->time = h.time;
+    inst->me_stale = 1;
     /* Scheduled Execution: the next activation is due at the state's time (a state saved by
      * either interface after a sample holds the instant of the next one) */
     g3_se_anchor(inst);

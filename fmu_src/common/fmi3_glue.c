@@ -18,12 +18,17 @@
  * sample time.  Clock Activation Mode is the lifecycle state of Step Mode (S_STEP_COMPLETE),
  * told apart by the instance's interface.
  *
+ * The FMU built with FP_FMI3_MODEL_EXCHANGE (the plant, whose model has FpModelInfo.me)
+ * also provides Model Exchange: Instantiated -> Initialization Mode ->
+ * (fmi3ExitInitializationMode) Event Mode <-> Continuous-Time Mode -> Terminated, with
+ * fmi3Reset and the FMU states as above; its functions are fmi3_me.c's.
+ *
  * The value access is fmi3_values.c, FMU states fmi3_fmustate.c (the format of
  * fmu_state.c, as for FMI 2.0), the resources/ folder fmi3_resources.c; what they share is
- * fmi3_glue_internal.h.  Model Exchange is not provided yet, nor Scheduled Execution by the
- * FMUs built without it: their instantiation answers NULL with a message, and every
- * function of theirs (as every other function this FMU does not provide) is exported and
- * answers fmi3Error naming itself.
+ * fmi3_glue_internal.h.  Model Exchange and Scheduled Execution are not provided by the FMUs
+ * built without them: their instantiation answers NULL with a message, and every function
+ * of theirs (as every other function this FMU does not provide) is exported and answers
+ * fmi3Error naming itself.
  */
 #include <math.h>
 #include <stdarg.h>
@@ -45,6 +50,8 @@ const char *g3_state_name(int state) {
     case S_STEP_FAILED: return "Step Mode after a discarded step";
     case S_TERMINATED: return "Terminated";
     case S_ERROR: return "Error";
+    case S_EVENT_MODE: return "Event Mode";
+    case S_CONTINUOUS_TIME: return "Continuous-Time Mode";
     default: return "Fatal";
     }
 }
@@ -142,14 +149,40 @@ static fmi3Status fail(Fmi3Instance *inst, fmi3Status status) {
     return status;
 }
 
+fmi3Status g3_fail(Fmi3Instance *inst, fmi3Status status) { return fail(inst, status); }
+
+/* Model Exchange: the model's derivatives and outputs at the time, states and inputs set
+ * (the model evaluates once per change, however often they are read). */
+static fmi3Status me_refresh(Fmi3Instance *inst) {
+    FpStatus s;
+    if (!inst->me_stale) return fmi3OK;
+    if (inst->tunables_dirty && inst->info->tunables_changed != NULL) {
+        s = inst->info->tunables_changed(inst->model, &inst->model_logger);
+        if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi3Error);
+    }
+    inst->tunables_dirty = 0;
+    s = inst->info->me->evaluate(inst->model, inst->time, &inst->model_logger);
+    if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi3Error);
+    inst->me_stale = 0;
+    return fmi3OK;
+}
+
+/* A Model Exchange instance also checks that its parameters leave it something a solver can
+ * integrate (FpModelExchange.check). */
 fmi3Status g3_refresh(Fmi3Instance *inst) {
     FpStatus s;
+    if (inst->state & S_ME_RUNNING) return me_refresh(inst);
     if (!(inst->state & (S_INIT | S_INSTANTIATED)) || !inst->dirty) return fmi3OK;
     inst->checking = 1;
     s = inst->info->initialize(inst->model, inst->time, &inst->model_logger);
+    if (s != FP_ERROR && s != FP_DISCARD && inst->interface == G3_MODEL_EXCHANGE) {
+        FpStatus me = inst->info->me->check(inst->model, &inst->model_logger);
+        if (me != FP_OK) s = me;
+    }
     inst->checking = 0;
     if (s == FP_ERROR || s == FP_DISCARD) return fail(inst, fmi3Error);
     inst->dirty = 0;
+    inst->me_stale = 1;
     return to_fmi3(s);
 }
 
@@ -375,21 +408,43 @@ fmi3Instance fmi3InstantiateCoSimulation(
     return inst;
 }
 
+/* Model Exchange (the FMU built with FP_FMI3_MODEL_EXCHANGE: fmi3_me.c). */
 fmi3Instance fmi3InstantiateModelExchange(fmi3String instanceName, fmi3String instantiationToken,
                                           fmi3String resourcePath, fmi3Boolean visible,
                                           fmi3Boolean loggingOn,
                                           fmi3InstanceEnvironment instanceEnvironment,
                                           fmi3LogMessageCallback logMessage) {
-    char message[256];
-    (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible,
-        (void)loggingOn;
-    snprintf(message, sizeof message,
-             "fmi3InstantiateModelExchange: %s provides %s only (no <ModelExchange> in its "
-             "modelDescription.xml); use fmi3InstantiateCoSimulation",
-             fp_model_info()->model_name,
-             G3_SE_PROVIDED ? "co-simulation and scheduled execution" : "co-simulation");
-    early_error(logMessage, instanceEnvironment, message);
-    return NULL;
+    static const char fn[] = "fmi3InstantiateModelExchange";
+    Fmi3Instance *inst;
+    if (!G3_ME_PROVIDED || fp_model_info()->me == NULL) {
+        char message[320];
+        (void)instanceName, (void)instantiationToken, (void)resourcePath, (void)visible,
+            (void)loggingOn;
+        snprintf(message, sizeof message,
+                 "fmi3InstantiateModelExchange: %s provides %s only (no <ModelExchange> in its "
+                 "modelDescription.xml): it has no continuous state to hand to a solver, it "
+                 "computes on its own sample grid; use fmi3InstantiateCoSimulation",
+                 fp_model_info()->model_name,
+                 G3_SE_PROVIDED ? "co-simulation and scheduled execution" : "co-simulation");
+        early_error(logMessage, instanceEnvironment, message);
+        return NULL;
+    }
+    inst = new_instance(fn, instanceName, instantiationToken, loggingOn, instanceEnvironment,
+                        logMessage);
+    if (inst == NULL) return NULL;
+    if (complete_instance(inst, fn, resourcePath) != 0) {
+        release_instance(inst);
+        return NULL;
+    }
+    inst->interface = G3_MODEL_EXCHANGE;
+    G3_LOG_CALL(inst,
+                "fmi3InstantiateModelExchange(instanceName = \"%.64s\", instantiationToken = "
+                "\"%s\", resourcePath = \"%.200s\", visible = %d, loggingOn = %d)",
+                instanceName, instantiationToken, resourcePath ? resourcePath : "(null)",
+                (int)visible, (int)loggingOn);
+    g3_logf(inst, FP_OK, FP_LOG_EVENTS, "instantiated %s (FMI 3.0 model exchange)",
+            inst->info->model_name);
+    return inst;
 }
 
 /*
@@ -507,8 +562,8 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance c) {
     set_initialized(inst, 1);
     /* Co-Simulation without Event Mode: Step Mode follows Initialization Mode directly;
      * Scheduled Execution: Clock Activation Mode (the same lifecycle state), its first
-     * activation due at the start time */
-    inst->state = S_STEP_COMPLETE;
+     * activation due at the start time; Model Exchange: Event Mode */
+    inst->state = inst->interface == G3_MODEL_EXCHANGE ? S_EVENT_MODE : S_STEP_COMPLETE;
     inst->tunables_dirty = 0;
     g3_se_anchor(inst);
     g3_logf(inst, FP_OK, FP_LOG_EVENTS, "initialized at t = %g", inst->time);
@@ -516,7 +571,7 @@ fmi3Status fmi3ExitInitializationMode(fmi3Instance c) {
 }
 
 fmi3Status fmi3Terminate(fmi3Instance c) {
-    G3_CHECK("fmi3Terminate", S_STEP_COMPLETE | S_STEP_FAILED);
+    G3_CHECK("fmi3Terminate", S_STEP_COMPLETE | S_STEP_FAILED | S_ME_RUNNING);
     G3_LOG_CALL(inst, "fmi3Terminate()");
     inst->state = S_TERMINATED;
     return fmi3OK;
@@ -633,24 +688,26 @@ static fmi3Status not_provided(fmi3Instance c, const char *fn, const char *why) 
 #define G3_NO_EVENT_MODE "the FMU has no Event Mode (hasEventMode=\"false\")"
 #define G3_NO_CLOCKS "the FMU has no clocks"
 #if G3_SE_PROVIDED
-#define G3_NO_ME \
-    "the FMU provides co-simulation and scheduled execution only (Model Exchange comes later)"
+#define G3_NO_ME "the FMU provides co-simulation and scheduled execution only"
 #define G3_NO_EVALUATE "the FMU has no Event Mode (providesEvaluateDiscreteStates=\"false\")"
 #else
-#define G3_NO_ME "the FMU provides co-simulation only (Model Exchange comes later)"
+#define G3_NO_ME "the FMU provides co-simulation only"
 #define G3_NO_EVALUATE G3_NO_CLOCKS " (providesEvaluateDiscreteStates=\"false\")"
 #endif
 #define G3_NO_SE "the FMU provides co-simulation only (Scheduled Execution comes later)"
 
+#if !G3_ME_PROVIDED /* (fmi3_me.c has them, answering these for the instances without) */
 fmi3Status fmi3EnterEventMode(fmi3Instance c) {
     return not_provided(c, "fmi3EnterEventMode", G3_NO_EVENT_MODE);
 }
+#endif
 
 fmi3Status fmi3EnterStepMode(fmi3Instance c) {
     return not_provided(c, "fmi3EnterStepMode",
                         G3_NO_EVENT_MODE ": fmi3ExitInitializationMode enters Step Mode itself");
 }
 
+#if !G3_ME_PROVIDED
 fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesNeedUpdate,
                                     fmi3Boolean *terminateSimulation,
                                     fmi3Boolean *nominalsOfContinuousStatesChanged,
@@ -661,6 +718,13 @@ fmi3Status fmi3UpdateDiscreteStates(fmi3Instance c, fmi3Boolean *discreteStatesN
         (void)nominalsOfContinuousStatesChanged, (void)valuesOfContinuousStatesChanged,
         (void)nextEventTimeDefined, (void)nextEventTime;
     return not_provided(c, "fmi3UpdateDiscreteStates", G3_NO_EVENT_MODE);
+}
+#endif
+
+/* For fmi3_me.c: a function of Event Mode or Model Exchange called on an instance of another
+ * interface, answered as the FMUs without Model Exchange answer it. */
+fmi3Status g3_no_event_mode(fmi3Instance c, const char *fn) {
+    return not_provided(c, fn, G3_NO_EVENT_MODE);
 }
 
 fmi3Status fmi3EvaluateDiscreteStates(fmi3Instance c) {
@@ -849,8 +913,10 @@ fmi3Status fmi3SetShiftFraction(fmi3Instance c, const fmi3ValueReference valueRe
                         G3_SE_PROVIDED ? G3_CONSTANT_CLOCK : G3_NO_CLOCKS);
 }
 
-/* Model Exchange (an instance of this FMU is never one: these answer on any instance) */
+/* Model Exchange (an instance of this FMU is never one: these answer on any instance; the FMU
+ * with Model Exchange has fmi3_me.c's) */
 
+#if !G3_ME_PROVIDED
 fmi3Status fmi3EnterContinuousTimeMode(fmi3Instance c) {
     return not_provided(c, "fmi3EnterContinuousTimeMode", G3_NO_ME);
 }
@@ -906,6 +972,7 @@ fmi3Status fmi3GetNumberOfContinuousStates(fmi3Instance c, size_t *nContinuousSt
     (void)nContinuousStates;
     return not_provided(c, "fmi3GetNumberOfContinuousStates", G3_NO_ME);
 }
+#endif
 
 /* ------------------------------------------------------------------------ */
 /* Scheduled Execution                                                      */

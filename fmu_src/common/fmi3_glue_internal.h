@@ -38,8 +38,17 @@
 #define G3_SE_PROVIDED 0
 #endif
 
+/* 1 in the FMU that provides Model Exchange (its translation unit defines
+ * FP_FMI3_MODEL_EXCHANGE and includes fmi3_me.c: the plant, whose model has
+ * FpModelInfo.me), 0 in the others. */
+#if defined(FP_FMI3_MODEL_EXCHANGE)
+#define G3_ME_PROVIDED 1
+#else
+#define G3_ME_PROVIDED 0
+#endif
+
 /* The interface an instance was instantiated for. */
-enum { G3_CO_SIMULATION = 0, G3_SCHEDULED_EXECUTION = 1 };
+enum { G3_CO_SIMULATION = 0, G3_SCHEDULED_EXECUTION = 1, G3_MODEL_EXCHANGE = 2 };
 
 /* The distinct warnings one initialization reports once each (beyond them, repeats show). */
 #define G3_MAX_WARNINGS_SEEN 32
@@ -87,6 +96,9 @@ typedef struct {
     double se_base;      /* the next activation is due at se_base + se_k * se_interval */
     int64_t se_k;
     int se_set_pending;  /* a value set in Clock Activation Mode, no activation since */
+    /* Model Exchange (fmi3_me.c): the time, the states or the inputs changed since the model
+     * last evaluated its derivatives and outputs (evaluated again before they are read) */
+    int me_stale;
 } Fmi3Instance;
 
 /* The FMI 3.0 name of a lifecycle state ("Step Mode", ...). */
@@ -124,8 +136,18 @@ Fmi3Instance *g3_enter(fmi3Instance c, const char *fn, int states);
 fmi3Status g3_null_argument(Fmi3Instance *inst, const char *fn, const char *what);
 
 /* Brings initial outputs up to date after parameter changes (values read in Initialization
- * Mode are computed from what was set). */
+ * Mode are computed from what was set); in Model Exchange, the derivatives and outputs after
+ * the time, the states or the inputs changed. */
 fmi3Status g3_refresh(Fmi3Instance *inst);
+
+/* A failure of the model's computation: fmi3Error leaves the instance in Error, fmi3Discard
+ * (co-simulation) after a discarded step; the status is returned. */
+fmi3Status g3_fail(Fmi3Instance *inst, fmi3Status status);
+
+/* An Event Mode function called on an instance that has none (co-simulation without Event
+ * Mode, Scheduled Execution): fmi3Error with the message the FMUs without Model Exchange give
+ * (fmi3_me.c calls it). */
+fmi3Status g3_no_event_mode(fmi3Instance c, const char *fn);
 
 /* The entry of a function taking the instance c: `inst` declared, the call refused when c
  * is not a live instance in one of `states`. */

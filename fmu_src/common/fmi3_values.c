@@ -20,9 +20,11 @@
 #include "fmi3_glue_internal.h"
 
 /* fmi3Get*: from Initialization Mode on, and in Error for diagnosis */
-#define S_READABLE (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR)
-/* fmi3Set*: before and during initialization, and in Step Mode (tunables and inputs) */
-#define S_WRITABLE (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE)
+#define S_READABLE \
+    (S_INIT | S_STEP_COMPLETE | S_STEP_FAILED | S_TERMINATED | S_ERROR | S_ME_RUNNING)
+/* fmi3Set*: before and during initialization, in Step Mode (tunables and inputs), and in
+ * Model Exchange's Event Mode (both) and Continuous-Time Mode (continuous inputs) */
+#define S_WRITABLE (S_INSTANTIATED | S_INIT | S_STEP_COMPLETE | S_ME_RUNNING)
 
 /* logCalls shows at most this many values of one get or set. */
 #define CALL_VALUES 8
@@ -154,9 +156,17 @@ static fmi3Status may_set(Fmi3Instance *inst, const FpVar *v, const char *fn) {
         break;
     case FP_PARAM_TUNABLE:
     case FP_INPUT:
-        if (!(inst->state & S_WRITABLE)) why = "the FMU is not initialized or stepping";
+        if (inst->state == S_CONTINUOUS_TIME &&
+            (v->kind == FP_PARAM_TUNABLE || v->type != FP_REAL))
+            why = "in Continuous-Time Mode only continuous inputs change (the others in Event "
+                  "Mode)";
+        else if (!(inst->state & S_WRITABLE))
+            why = "the FMU is not initialized or stepping";
         break;
-    case FP_STATE: why = "it is a continuous state, computed"; break;
+    case FP_STATE:
+        why = "it is a continuous state (Model Exchange sets the states with "
+              "fmi3SetContinuousStates)";
+        break;
     case FP_DERIVATIVE: why = "it is a state derivative, computed"; break;
     case FP_LOCAL: why = "it is a local variable, computed"; break;
     }
@@ -216,6 +226,7 @@ static fmi3Status check_call(Fmi3Instance *inst, const fmi3ValueReference vr[], 
 static void mark_changed(Fmi3Instance *inst, const FpVar *v) {
     if (inst->state & (S_INSTANTIATED | S_INIT)) inst->dirty = 1;
     else if (v->kind == FP_PARAM_TUNABLE) inst->tunables_dirty = 1;
+    inst->me_stale = 1; /* (Model Exchange: outputs and derivatives follow the inputs) */
 }
 
 /* Scheduled Execution, Clock Activation Mode: "It is not allowed to call fmi3Get{VariableType}

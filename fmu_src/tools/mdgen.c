@@ -3,7 +3,8 @@
  * the model's variable table and default values, so the XML and the binary
  * cannot drift.  Run at build time:
  *
- *     mdgen [--fmi3 [--scheduled-execution]] OUTPUT.xml VERSION [--sources DIR FILE.c ...]
+ *     mdgen [--fmi3 [--scheduled-execution] [--model-exchange]] OUTPUT.xml VERSION
+ *           [--sources DIR FILE.c ...]
  *
  * With --fmi3, the FMI 3.0 modelDescription.xml of the same table (write_fmi3): each row one
  * variable (a scalar or an array with <Dimension>), value references the rows', the
@@ -13,8 +14,10 @@
  * clock of constant interval (the default of the model's internal step, Ts), and the inputs
  * and outputs in its model partition (variability "discrete", clocks="<clock>"; clocked
  * outputs are no InitialUnknowns).
- * The state, derivative and local rows are listed too, with the <ModelStructure>'s
- * <ContinuousStateDerivative> (as in FMI 2.0, below).
+ * With --model-exchange besides, the FMI 3.0 FMU provides Model Exchange too (common/
+ * fmi3_me.c, for a model with FpModelInfo.me): a <ModelExchange> beside the <CoSimulation>.
+ * The state, derivative and local rows are listed either way, with the <ModelStructure>'s
+ * <ContinuousStateDerivative> and <EventIndicator> (as in FMI 2.0, below).
  * With --sources, the C files the FMU's binary is built from (the build's one list of them,
  * as laid out flat in the FMU's sources/ folder DIR) go into the FMI 2.0 <SourceFiles> of
  * <CoSimulation> and into DIR/buildDescription.xml (the FMI 2.0.4 / FMI 3.0 form).
@@ -825,9 +828,10 @@ static void write_known_vrs(FILE *f, const FpModelInfo *info, const InitialUnkno
  * derivatives as <ContinuousStateDerivative> (every known); an <InitialUnknown> for every
  * output, state and derivative with its declaration's knowns, ascending, but no output's when
  * the outputs are clocked (Scheduled Execution: FMI 3.0 excludes clocked variables from the
- * initial unknowns). */
+ * initial unknowns); with Model Exchange (`exchange`) its event indicators as
+ * <EventIndicator>. */
 static int write_model_structure3(FILE *f, const FpModelInfo *info, const InitialUnknowns *u,
-                                  const InitialUnknowns *o, int clocked) {
+                                  const InitialUnknowns *o, int clocked, int exchange) {
     uint32_t *vrs = (uint32_t *)malloc(info->n_vars * sizeof *vrs);
     size_t i;
     if (vrs == NULL) return -1;
@@ -849,6 +853,9 @@ static int write_model_structure3(FILE *f, const FpModelInfo *info, const Initia
         write_known_vrs(f, info, u, i, vrs);
         fputs("\"/>\n", f);
     }
+    if (exchange && info->me->indicators != NULL)
+        fprintf(f, "    <EventIndicator valueReference=\"%u\"/>\n",
+                (unsigned)fp_var_find(info->vars, info->n_vars, info->me->indicators)->vr);
     fputs("  </ModelStructure>\n", f);
     free(vrs);
     return 0;
@@ -868,14 +875,14 @@ static const FpVar *internal_step(const FpModelInfo *info) {
     return NULL;
 }
 
-/* The FMI 3.0 modelDescription.xml: the header, a <CoSimulation> without Event Mode (and
- * with `scheduled`, a <ScheduledExecution>), the units, types and log categories, the
- * independent variable time (value reference 0), with `scheduled` the input clock, the rows
- * in the listing order of FMI 2.0 (inputs, outputs, parameters, locals) and the
- * ModelStructure. */
+/* The FMI 3.0 modelDescription.xml: the header, with `exchange` a <ModelExchange>, a
+ * <CoSimulation> without Event Mode (and with `scheduled`, a <ScheduledExecution>), the units,
+ * types and log categories, the independent variable time (value reference 0), with
+ * `scheduled` the input clock, the rows in the listing order of FMI 2.0 (inputs, outputs,
+ * parameters, locals) and the ModelStructure. */
 static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const char *guid,
                       const char *date, const char *version, const InitialUnknowns *u,
-                      const InitialUnknowns *o, int scheduled) {
+                      const InitialUnknowns *o, int scheduled, int exchange) {
     size_t i;
     int c, rank;
     fputs("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n", f);
@@ -891,6 +898,14 @@ static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const
             "  generationTool=\"fullpose mdgen\" generationDateAndTime=\"%s\"\n"
             "  variableNamingConvention=\"structured\">\n",
             date, AUTHOR, LICENSE, date);
+    if (exchange) /* (its completed integrator steps update the discrete state) */
+        fprintf(f,
+                "  <ModelExchange modelIdentifier=\"%s\" needsCompletedIntegratorStep=\"true\""
+                " providesEvaluateDiscreteStates=\"false\""
+                " canBeInstantiatedOnlyOncePerProcess=\"false\" canGetAndSetFMUState=\"true\""
+                " canSerializeFMUState=\"true\" providesDirectionalDerivatives=\"false\""
+                " providesAdjointDerivatives=\"false\"/>\n",
+                info->model_name);
     fprintf(f,
             "  <CoSimulation modelIdentifier=\"%s\" canHandleVariableCommunicationStepSize=\"true\""
             " canBeInstantiatedOnlyOncePerProcess=\"false\" canGetAndSetFMUState=\"true\""
@@ -934,7 +949,7 @@ static int write_fmi3(FILE *f, const FpModelInfo *info, const void *model, const
             if (listing_rank(info->vars[i].kind) == rank)
                 write_variable3(f, info, &info->vars[i], model, scheduled);
     fputs("  </ModelVariables>\n", f);
-    if (write_model_structure3(f, info, u, o, scheduled) != 0) return -1;
+    if (write_model_structure3(f, info, u, o, scheduled, exchange) != 0) return -1;
     fputs("</fmiModelDescription>\n", f);
     return 0;
 }
@@ -949,7 +964,7 @@ int main(int argc, char **argv) {
     int c, rank;
     InitialUnknowns unknowns, outputs;
     SourceList src = {NULL, NULL, 0};
-    int fmi3 = argc > 1 && strcmp(argv[1], "--fmi3") == 0, scheduled = 0;
+    int fmi3 = argc > 1 && strcmp(argv[1], "--fmi3") == 0, scheduled = 0, exchange = 0;
     if (fmi3) { /* the FMI 3.0 modelDescription.xml of the same table */
         argv++;
         argc--;
@@ -958,11 +973,21 @@ int main(int argc, char **argv) {
             argv++;
             argc--;
         }
+        exchange = argc > 1 && strcmp(argv[1], "--model-exchange") == 0;
+        if (exchange) { /* and Model Exchange besides co-simulation */
+            argv++;
+            argc--;
+        }
     }
     if (argc < 3 || (argc > 3 && (strcmp(argv[3], "--sources") != 0 || argc < 6))) {
-        fprintf(stderr, "usage: mdgen [--fmi3 [--scheduled-execution]] OUTPUT.xml VERSION "
-                        "[--sources DIR FILE.c ...]\n");
+        fprintf(stderr, "usage: mdgen [--fmi3 [--scheduled-execution] [--model-exchange]] "
+                        "OUTPUT.xml VERSION [--sources DIR FILE.c ...]\n");
         return 2;
+    }
+    if (exchange && info->me == NULL) {
+        fprintf(stderr, "mdgen: --model-exchange: %s has no Model Exchange (FpModelInfo.me)\n",
+                info->model_name);
+        return 1;
     }
     if (argc > 3) {
         src.dir = argv[4];
@@ -1024,7 +1049,8 @@ int main(int argc, char **argv) {
         return 1;
     }
     if (fmi3) {
-        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns, &outputs, scheduled);
+        int bad = write_fmi3(f, info, model, guid, date, argv[2], &unknowns, &outputs, scheduled,
+                             exchange);
         free_initial_unknowns(&outputs);
         free_initial_unknowns(&unknowns);
         free(first);

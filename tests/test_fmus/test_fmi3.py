@@ -348,10 +348,15 @@ def test_unprovided_functions_answer_error_naming_themselves(tmp_path):
             "fmi3ActivateModelPartition": lambda: dll.fmi3ActivateModelPartition(c, 1, 0.0),
             "fmi3GetIntervalDecimal": lambda: dll.fmi3GetIntervalDecimal(c, null, 0, null, null),
         }
+        # (the plant provides Model Exchange: its functions name the interface this instance
+        # has, the Event Mode ones answer as without Model Exchange: test_model_exchange.py)
+        me_only = {"fmi3SetTime", "fmi3GetNumberOfContinuousStates"}
         for name, call in calls.items():
             log.lines.clear()
             assert call() == FMI3_ERROR, name
-            assert any(m.startswith(f"{name}: not provided") for m in log.errors()), name
+            said = (f"{name}: the instance was instantiated for co-simulation" if name in me_only
+                    else f"{name}: not provided")
+            assert any(m.startswith(said) for m in log.errors()), name
         # no variable of the other types; a clock call naming one is refused
         vr = (ctypes.c_uint32 * 1)(2)
         val = (ctypes.c_float * 1)()
@@ -363,7 +368,7 @@ def test_unprovided_functions_answer_error_naming_themselves(tmp_path):
         assert do_step(slave, 0.0) == FMI3_OK
 
 
-def test_model_exchange_scheduled_execution_and_event_mode_are_refused(tmp_path):
+def test_model_exchange_in_the_plant_only_scheduled_execution_and_event_mode_refused(tmp_path):
     path = fmu_path("MultirotorPlant")
     md = read_model_description(str(path))
     extract(str(path), str(tmp_path))
@@ -374,9 +379,21 @@ def test_model_exchange_scheduled_execution_and_event_mode_are_refused(tmp_path)
     lib.fmi3InstantiateModelExchange.restype = ctypes.c_void_p
     lib.fmi3InstantiateModelExchange.argtypes = [ctypes.c_char_p] * 3 + [ctypes.c_bool] * 2 + [
         ctypes.c_void_p, fmi3LogMessageCallback]
-    assert lib.fmi3InstantiateModelExchange(b"me", md.guid.encode(), res.encode(), False, False,
-                                            None, cb) is None
-    assert "fmi3InstantiateModelExchange: MultirotorPlant provides co-simulation only" in \
+    # the plant provides Model Exchange (test_model_exchange.py), the player does not
+    me = lib.fmi3InstantiateModelExchange(b"me", md.guid.encode(), res.encode(), False, False,
+                                          None, cb)
+    assert me
+    lib.fmi3FreeInstance.argtypes = [ctypes.c_void_p]
+    lib.fmi3FreeInstance(me)
+    player = fmu_path("ScenarioSignals")
+    extract(str(player), str(tmp_path / "player"))
+    plib = ctypes.CDLL(str(tmp_path / "player" / "binaries" / "x86_64-linux" /
+                           "ScenarioSignals.so"))
+    plib.fmi3InstantiateModelExchange.restype = ctypes.c_void_p
+    plib.fmi3InstantiateModelExchange.argtypes = lib.fmi3InstantiateModelExchange.argtypes
+    assert plib.fmi3InstantiateModelExchange(b"me", md.guid.encode(), res.encode(), False, False,
+                                             None, cb) is None
+    assert "fmi3InstantiateModelExchange: ScenarioSignals provides co-simulation only" in \
         log.text()
     lib.fmi3InstantiateScheduledExecution.restype = ctypes.c_void_p
     lib.fmi3InstantiateScheduledExecution.argtypes = [ctypes.c_char_p] * 3 + [

@@ -26,6 +26,9 @@ Exchange").
   the parameter; the Model Exchange calls out of sequence, with wrong sizes, NULL arrays or
   non-finite states refused with a message, the instance left as it was; FMU states of the
   other interface refused; Model Exchange FMU states round-trip.
+- FMI 3.0 (fmi3_me.c): the archive declares it; its derivatives, event indicators and outputs
+  equal FMI 2.0's to the bit, and so does a simulate_fmu run; its bad cases; an FMI 2.0 Model
+  Exchange state restores in it.
 """
 
 from __future__ import annotations
@@ -52,6 +55,7 @@ from fmpy.fmi2 import (
     fmi2CallbackLoggerTYPE,
     free,
 )
+from fmpy.fmi3 import FMU3Model
 from fmpy.validation import validate_fmu
 from helpers.me_master import MePlant, closed_loop
 
@@ -60,6 +64,7 @@ from orchestrator.export.signals import signals_fmu
 from orchestrator.sim.fmu import FmuInstance
 from orchestrator.sim.start_values import Pose, plant_start_values
 from plant import load_airframe, plant_fmu
+from plant.common.artifacts import find_artifact
 
 H = 0.002
 NX, NZ = 37, 8
@@ -596,3 +601,141 @@ def test_the_friction_anchors_depend_on_where_the_solver_stops():
           {k: f"{v:.3g} m" for k, v in spread.items()})
     assert spread[0.002] < 1e-3 and spread[0.01] < 5e-3 and spread["cs"] < 1e-3
 
+
+# ---------------------------------------------------------------------------
+# FMI 3.0: the same Model Exchange (fmi3_me.c) over the same model
+
+
+def fmu3_path() -> Path:
+    return find_artifact("plant", "fmus", "fmi3/MultirotorPlant.fmu")
+
+
+class Me3:
+    """An FMI 3.0 Model Exchange instance of the plant, left in Continuous-Time Mode (unless
+    its initialization fails: ``messages`` says why)."""
+
+    def __init__(self, parameters: dict | None = None, tmp: Path | None = None) -> None:
+        path = fmu3_path()
+        self.md = read_model_description(str(path))
+        self.messages: list[str] = []
+        self.vr = {v.name: v.valueReference for v in self.md.modelVariables}
+        m = FMU3Model(guid=self.md.guid, unzipDirectory=extract(str(path)),
+                      modelIdentifier="MultirotorPlant", instanceName="me3")
+        m.instantiate(logMessage=self._log)
+        self.model = m
+        for name, value in (parameters or {}).items():
+            m.setFloat64([self.vr[name]], [float(value)])
+        m.enterInitializationMode(startTime=0.0)
+        m.exitInitializationMode()
+        m.updateDiscreteStates()
+        m.enterContinuousTimeMode()
+
+    def _log(self, env, status, category, message) -> None:
+        self.messages.append(message.decode())
+
+
+def test_fmi3_archive_declares_model_exchange():
+    md = read_model_description(str(fmu3_path()))
+    assert md.modelExchange.modelIdentifier == "MultirotorPlant"
+    assert md.modelExchange.needsCompletedIntegratorStep
+    assert md.coSimulation is not None and md.scheduledExecution is None
+    assert validate_fmu(str(fmu3_path())) == []
+    # the states as arrays, each derivative naming its state array
+    assert [d.variable.name for d in md.derivatives] == [f"der_{r}" for r, _ in STATE_ROWS]
+    assert [d.variable.derivative.name for d in md.derivatives] == [r for r, _ in STATE_ROWS]
+    assert [d.variable.name for d in md.eventIndicators] == ["contact_depth"]
+    m = Me3().model
+    assert m.getNumberOfContinuousStates() == NX and m.getNumberOfEventIndicators() == NZ
+    m.terminate()
+    m.freeInstance()
+
+
+def test_fmi3_model_exchange_is_fmi2_model_exchange_to_the_bit():
+    """The same derivatives, event indicators and outputs at random states and inputs, and the
+    same fmpy simulate_fmu run (CVode) from trim."""
+    me2 = MePlant()
+    me3 = Me3()
+    m2, m3 = me2.model, me3.model
+    rng = np.random.default_rng(3)
+    x0 = np.zeros(NX)
+    m2.getContinuousStates(arr(x0), NX)
+    names = ["acc[1]", "acc[3]", "ang_acc[2]", "euler[1]", "f_b[3]", "tau_b[1]"]
+    for _ in range(50):
+        x = x0 + rng.normal(0.0, 0.2, NX) * np.r_[np.ones(13), 50 * np.ones(8), np.ones(16)]
+        u = {f"omega_cmd[{i}]": float(rng.uniform(0, 250)) for i in range(1, 7)}
+        u.update({f"beta_cmd[{i}]": float(rng.normal()) for i in range(1, 7)})
+        m2.setReal(me2.refs(list(u)), list(u.values()))
+        m3.setFloat64([me3.vr["omega_cmd"]], [u[f"omega_cmd[{i}]"] for i in range(1, 7)] +
+                      [0.0, 0.0])
+        m3.setFloat64([me3.vr["beta_cmd"]], [u[f"beta_cmd[{i}]"] for i in range(1, 7)] +
+                      [0.0, 0.0])
+        d2, d3 = np.zeros(NX), np.zeros(NX)
+        z2, z3 = np.zeros(NZ), np.zeros(NZ)
+        m2.setContinuousStates(arr(x), NX)
+        m3.setContinuousStates(arr(x), NX)
+        m2.getDerivatives(arr(d2), NX)
+        m3.getContinuousStateDerivatives(arr(d3), NX)
+        m2.getEventIndicators(arr(z2), NZ)
+        m3.getEventIndicators(arr(z3), NZ)
+        assert d2.tobytes() == d3.tobytes() and z2.tobytes() == z3.tobytes()
+        o3 = dict(zip(("acc", "ang_acc", "euler", "f_b", "tau_b"),
+                      (m3.getFloat64([me3.vr[r]], 3) for r in
+                       ("acc", "ang_acc", "euler", "f_b", "tau_b")), strict=True))
+        o2 = me2.get(names)
+        assert o2.tolist() == [o3["acc"][0], o3["acc"][2], o3["ang_acc"][1], o3["euler"][0],
+                               o3["f_b"][2], o3["tau_b"][0]]
+    me2.close()
+    r2 = simulate_fmu(str(plant_fmu()), fmi_type="ModelExchange", stop_time=2.0,
+                      output_interval=0.01, output=["pos[1]", "pos[3]"])
+    r3 = simulate_fmu(str(fmu3_path()), fmi_type="ModelExchange", stop_time=2.0,
+                      output_interval=0.01, output=["pos"])
+    assert r2["pos[1]"].tolist() == r3["pos"][:, 0].tolist()
+    assert r2["pos[3]"].tolist() == r3["pos"][:, 2].tolist()
+
+
+def test_fmi3_bad_cases_are_refused_with_a_message():
+    # sensor noise: refused at the end of initialization, naming the parameter
+    probe = Me3.__new__(Me3)
+    with pytest.raises(FMICallException):
+        Me3.__init__(probe, {"noise_vel": 0.01})
+    assert any(m.startswith("parameter noise_vel = 0.01 must be 0 in Model Exchange")
+               for m in probe.messages), probe.messages
+    me = Me3()
+    m = me.model
+    lib, c = m.dll, ctypes.c_void_p(m.component)
+    x = np.zeros(NX)
+    m.getContinuousStates(arr(x), NX)
+    lib.fmi3EnterContinuousTimeMode.argtypes = [ctypes.c_void_p]
+    for call, said in [
+        (lambda: lib.fmi3EnterContinuousTimeMode(c),
+         "fmi3EnterContinuousTimeMode may not be called in Continuous-Time Mode"),
+        (lambda: lib.fmi3SetContinuousStates(c, arr(x), NX + 1),
+         "nContinuousStates = 38, but MultirotorPlant has 37 continuous states"),
+        (lambda: lib.fmi3GetEventIndicators(c, None, NZ), "eventIndicators is NULL"),
+    ]:
+        me.messages.clear()
+        assert call() == FMI2_ERROR, said
+        assert any(said in s for s in me.messages), (said, me.messages)
+    m.enterEventMode()
+    me.messages.clear()
+    assert lib.fmi3SetContinuousStates(c, arr(x), NX) == FMI2_ERROR
+    assert "fmi3SetContinuousStates may not be called in Event Mode" in me.messages
+    m.updateDiscreteStates()
+    m.enterContinuousTimeMode()
+    # an FMI 2.0 Model Exchange state restores here (one format, one GUID), a co-simulation
+    # one does not
+    me2 = MePlant({"pos0[1]": 0.25})
+    state = me2.model.serializeFMUstate(me2.model.getFMUstate())
+    m.setFMUState(m.deserializeFMUState(state))
+    assert m.getFloat64([me.vr["x_pos"]], 3)[0] == 0.25
+    with FmuInstance(plant_fmu(), "cs") as cs:
+        cs.initialize()
+        cs_state = cs.slave.serializeFMUstate(cs.slave.getFMUstate())
+    me.messages.clear()
+    with pytest.raises(FMICallException):
+        m.setFMUState(m.deserializeFMUState(cs_state))
+    assert any("saved by a co-simulation instance (in Step Mode); this instance is Model "
+               "Exchange" in s for s in me.messages), me.messages
+    me2.close()
+    m.terminate()
+    m.freeInstance()

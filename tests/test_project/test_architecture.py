@@ -116,7 +116,8 @@ GLUE = {SRC / "common" / name for name in ("fmi2_glue.c", "fmi2_values.c", "fmi2
                                           "fmi2_resources.c", "fmi2_me.c",
                                           "fmi2_glue_internal.h",
                                           "fmi3_glue.c", "fmi3_values.c", "fmi3_fmustate.c",
-                                          "fmi3_resources.c", "fmi3_glue_internal.h")}
+                                          "fmi3_resources.c", "fmi3_glue_internal.h",
+                                          "fmi3_me.c")}
 
 
 def _c_files(folder: str) -> list[Path]:
