@@ -91,6 +91,7 @@ def test_gains_files_round_trip_and_refuse_what_they_are_not(tmp_path):
     assert "Traceback" not in res.stderr and not (tmp_path / "out").exists()
 
 
+@pytest.mark.heavy  # about 2 s: the heavy tier (CI runs it), room in the fast one
 def test_design_command_checks_without_synthesis(tmp_path):
     res = cli("design", "y6")
     assert res.returncode == 0, res.stderr
@@ -116,6 +117,7 @@ def test_a_synthesis_certifies_gains_for_the_slow_vehicle(tmp_path):
     assert res.returncode == 0 and "warning" not in res.stderr, res.stderr
 
 
+@pytest.mark.heavy  # about 2 s: the heavy tier (CI runs it), room in the fast one
 def test_fly_warns_once_outside_and_takes_gains(tmp_path):
     frame = write_kind("heavy_tilting_hexacopter", tmp_path)
     base = ["fly", "--airframe", str(frame), "--speed", "max", "--duration", "0.2", "--gcs",

@@ -50,6 +50,7 @@ def test_a_recording_in_a_file_is_the_same_run(tmp_path):
     assert np.array_equal(kept.data, held.data)
 
 
+@pytest.mark.heavy  # about 2 s: the heavy tier (CI runs it), room in the fast one
 def test_results_folder_of_a_filed_recording(tmp_path):
     """The whole main job (results, metrics, figures drawn by the workers from the mapped
     file) gives the folder of a run held in memory, and leaves no file behind."""

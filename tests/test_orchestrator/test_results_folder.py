@@ -140,6 +140,7 @@ def test_design_sets_serve_shipped_rotors_only():
     assert polytope_cache.design_set_parameters(_tilted_quad()) == {}
 
 
+@pytest.mark.heavy  # about 2 s: the heavy tier (CI runs it), room in the fast one
 def test_shipped_sets_are_fresh_for_every_shipped_airframe():
     """Oracle: controller.force_sets and controller.failures now: each shipped facet's offset
     is the outer bound computed here for its normal (``python -m controller.shipped_sets
@@ -152,6 +153,7 @@ def test_shipped_sets_are_fresh_for_every_shipped_airframe():
         assert shipped_sets.check(af) == [], name
 
 
+@pytest.mark.heavy  # about 2 s: the heavy tier (CI runs it), room in the fast one
 def test_the_shipped_set_check_catches_a_moved_facet():
     """One facet of the shipped AFS moved out by 1 mm of force, or a set of rotors 1 %
     slower: the check names the facet; the shipped set itself passes.  Oracle for the slower
