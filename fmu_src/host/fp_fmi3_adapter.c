@@ -206,6 +206,22 @@ FP_API int fp_fmi3_adapter_free(void *adapter) {
     return 0;
 }
 
+/* The first part of every get: the arguments checked, the variables of the elements refs
+ * read whole into the current values; an FMI status (above fmi3Warning: failed). */
+static int read_elements(Adapter *a, const unsigned int *refs, size_t n, const void *values,
+                         int type) {
+    long nt;
+    if (a == NULL || (n > 0 && (refs == NULL || values == NULL))) return STATUS_ERROR;
+    nt = collect(a, refs, n, type);
+    if (nt < 0) return STATUS_ERROR;
+    return refresh(a, (size_t)nt, type);
+}
+
+/* Where element e's current value is in its type's buffer. */
+static size_t slot(const Adapter *a, unsigned int e) {
+    return a->var_off[a->elem_var[e]] + a->elem_k[e];
+}
+
 FP_API int fp_fmi3_set_real(void *adapter, const unsigned int *refs, size_t n,
                             const double *values) {
     Adapter *a = (Adapter *)adapter;
@@ -214,8 +230,7 @@ FP_API int fp_fmi3_set_real(void *adapter, const unsigned int *refs, size_t n,
     if (a == NULL || (n > 0 && (refs == NULL || values == NULL))) return STATUS_ERROR;
     nt = collect(a, refs, n, FP_FMI3_FLOAT64);
     if (nt < 0) return STATUS_ERROR;
-    for (i = 0; i < n; i++)
-        a->f64[a->var_off[a->elem_var[refs[i]]] + a->elem_k[refs[i]]] = values[i];
+    for (i = 0; i < n; i++) a->f64[slot(a, refs[i])] = values[i];
     total = collected(a, (size_t)nt);
     for (j = 0; j < (size_t)nt; j++) {
         size_t v = a->order[j];
@@ -229,15 +244,9 @@ FP_API int fp_fmi3_set_real(void *adapter, const unsigned int *refs, size_t n,
 FP_API int fp_fmi3_get_real(void *adapter, const unsigned int *refs, size_t n, double *values) {
     Adapter *a = (Adapter *)adapter;
     size_t i;
-    long nt;
-    int st;
-    if (a == NULL || (n > 0 && (refs == NULL || values == NULL))) return STATUS_ERROR;
-    nt = collect(a, refs, n, FP_FMI3_FLOAT64);
-    if (nt < 0) return STATUS_ERROR;
-    st = refresh(a, (size_t)nt, FP_FMI3_FLOAT64);
+    int st = read_elements(a, refs, n, values, FP_FMI3_FLOAT64);
     if (st > (int)fmi3Warning) return st;
-    for (i = 0; i < n; i++)
-        values[i] = a->f64[a->var_off[a->elem_var[refs[i]]] + a->elem_k[refs[i]]];
+    for (i = 0; i < n; i++) values[i] = a->f64[slot(a, refs[i])];
     return st;
 }
 
@@ -245,15 +254,9 @@ FP_API int fp_fmi3_get_integer(void *adapter, const unsigned int *refs, size_t n
                                int *values) {
     Adapter *a = (Adapter *)adapter;
     size_t i;
-    long nt;
-    int st;
-    if (a == NULL || (n > 0 && (refs == NULL || values == NULL))) return STATUS_ERROR;
-    nt = collect(a, refs, n, FP_FMI3_INT32);
-    if (nt < 0) return STATUS_ERROR;
-    st = refresh(a, (size_t)nt, FP_FMI3_INT32);
+    int st = read_elements(a, refs, n, values, FP_FMI3_INT32);
     if (st > (int)fmi3Warning) return st;
-    for (i = 0; i < n; i++)
-        values[i] = (int)a->i32[a->var_off[a->elem_var[refs[i]]] + a->elem_k[refs[i]]];
+    for (i = 0; i < n; i++) values[i] = (int)a->i32[slot(a, refs[i])];
     return st;
 }
 
@@ -261,15 +264,9 @@ FP_API int fp_fmi3_get_boolean(void *adapter, const unsigned int *refs, size_t n
                                int *values) {
     Adapter *a = (Adapter *)adapter;
     size_t i;
-    long nt;
-    int st;
-    if (a == NULL || (n > 0 && (refs == NULL || values == NULL))) return STATUS_ERROR;
-    nt = collect(a, refs, n, FP_FMI3_BOOLEAN);
-    if (nt < 0) return STATUS_ERROR;
-    st = refresh(a, (size_t)nt, FP_FMI3_BOOLEAN);
+    int st = read_elements(a, refs, n, values, FP_FMI3_BOOLEAN);
     if (st > (int)fmi3Warning) return st;
-    for (i = 0; i < n; i++)
-        values[i] = a->b[a->var_off[a->elem_var[refs[i]]] + a->elem_k[refs[i]]] ? 1 : 0;
+    for (i = 0; i < n; i++) values[i] = a->b[slot(a, refs[i])] ? 1 : 0;
     return st;
 }
 
