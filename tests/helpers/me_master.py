@@ -14,7 +14,8 @@ stop, and counts CVode's steps and right-hand-side evaluations.
 plant: ``"cs"`` the co-simulation plant (RK4, 0.5 ms) stepped 2 ms, or ``"me"`` this one
 integrated between the controller's samples, the controller sampling the plant's outputs at
 t_k and the plant holding the commands of t_k until t_k+1 (as tests/test_fmus/
-test_closed_loop.py's master does).
+test_closed_loop.py's master does).  It records the commands and the plant's start values:
+fmusim, which has no master, replays them to its Model Exchange plant.
 """
 
 from __future__ import annotations
@@ -125,7 +126,7 @@ class MePlant:
         self.rhs += rhs
 
     def event(self, t: float, refs: Sequence[int] | None = None,
-              values: Sequence[float] | None = None) -> None:
+              values: Sequence[float] | np.ndarray | None = None) -> None:
         """An event at t (Event Mode, the inputs set, the event iteration, Continuous-Time
         Mode) and the solver restarted there."""
         m = self.model
@@ -163,12 +164,17 @@ class MePlant:
 
 @dataclass
 class LoopResult:
-    """One closed-loop run: positions and Euler angles at every sample (t_0 .. t_n), the wall
-    time, and for the Model Exchange plant CVode's counts and the messages it logged."""
+    """One closed-loop run: positions and Euler angles at every sample (t_0 .. t_n), the
+    controller's commands (``command_names``, one row per sample t_0 .. t_n-1, held by the
+    plant until the next one), the plant's start values, the wall time, and for the Model
+    Exchange plant CVode's counts and the messages it logged."""
 
     pos: np.ndarray
     euler: np.ndarray
     wall: float
+    command_names: list[str] = field(default_factory=list)
+    commands: np.ndarray = field(default_factory=lambda: np.empty((0, 0)))
+    plant_parameters: dict[str, Any] = field(default_factory=dict)
     steps: int = 0
     rhs: int = 0
     events: int = 0
@@ -222,12 +228,14 @@ def closed_loop(kind: str, scenario: str, seconds: float, *, pose: Pose | None =
     ctrl.slave.exitInitializationMode()
     out = np.empty((n + 1, 6))
     out[0] = read(watched)
+    held = np.empty((n, len(commands)))
     t0 = time.perf_counter()
     for k in range(n):
         ctrl.write(reference, np.concatenate([refs[r][k] for r in REFERENCES]))
         ctrl.write(y_ctrl, read(measured))
         ctrl.step(H)
         u = ctrl.read(u_ctrl)
+        held[k] = u
         if me is not None:
             me.event(k * H, command_refs, u)
             me.advance(k * H, (k + 1) * H)
@@ -237,7 +245,7 @@ def closed_loop(kind: str, scenario: str, seconds: float, *, pose: Pose | None =
             cs.step(H)
         out[k + 1] = read(watched)
     wall = time.perf_counter() - t0
-    result = LoopResult(out[:, :3], out[:, 3:], wall)
+    result = LoopResult(out[:, :3], out[:, 3:], wall, commands, held, dict(sv.plant))
     if me is not None:
         result.steps, result.rhs, result.events = me.counts()
         result.messages = list(me.messages)
