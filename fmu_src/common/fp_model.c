@@ -114,7 +114,7 @@ static const FpDeclaredType declared_types[FP_N_TYPES] = {FP_DECLARED_TYPES(FP_T
 #undef FP_TYPE_ROW
 
 const FpDeclaredType *fp_declared_type(FpTypeId id) {
-    return &declared_types[(int)id >= 0 && id < FP_N_TYPES ? id : FP_T_NONE];
+    return &declared_types[(unsigned)id < (unsigned)FP_N_TYPES ? id : FP_T_NONE];
 }
 
 FpTypeId fp_var_element_type(const FpVar *v, uint32_t k) {
