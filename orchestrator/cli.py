@@ -87,6 +87,53 @@ def _print_tracking(m: dict[str, Any]) -> None:
         print(f"... and {len(steps) - STEP_LINES} more steps in metrics.json")
 
 
+def _pil_image(option: str | None, fmi: int) -> Path | None:
+    """The controller image of ``--pil [IMAGE]``: the one given, or built (cached)."""
+    if option is None:
+        return None
+    if fmi != 2:
+        raise ValueError("--pil flies the controller image in place of the controller FMU "
+                         "with the FMI 2.0 plant: leave out --fmi 3 (or the scenario's fmi = 3)")
+    if option != "build":
+        image = Path(option)
+        if not image.is_file():
+            raise ValueError(f"--pil {option}: no such controller image (fpc_pil.elf, from "
+                             "`fullpose build-embedded`)")
+        return image
+    from orchestrator.pil.build import build_embedded
+
+    print("building the controller image for the Cortex-M7 (fullpose build-embedded) ...")
+    sys.stdout.flush()
+    return build_embedded().elf
+
+
+def _print_target(on: object) -> None:
+    """The instructions per sample the target counted, as time at the assumed clock."""
+    if not isinstance(on, dict) or not isinstance(on.get("instructions"), dict):
+        return
+    from orchestrator.pil.cost import CLOCK_HZ, CPI, microseconds, period_share
+
+    ins = on["instructions"]
+    print(f"on the Cortex-M7    {ins['mean']:.0f} / {ins['p99']:.0f} / {ins['max']:.0f} "
+          f"instructions per sample (mean / p99 / max): {microseconds(ins['mean']):.0f} us mean, "
+          f"{100 * period_share(ins['max']):.1f} % of the period at worst "
+          f"({CLOCK_HZ / 1e6:.0f} MHz, {CPI:g} cycle per instruction assumed); "
+          f"stack {on['stack_bytes']} B in a sample, {on['start_stack_bytes']} B in fpc_start")
+
+
+def _cmd_build_embedded(args: argparse.Namespace) -> int:
+    from orchestrator.pil.build import build_embedded, default_folder
+
+    out = args.out if args.out is not None else default_folder()
+    print(f"building the controller for the Cortex-M7 (arm-none-eabi-gcc) -> {out}")
+    sys.stdout.flush()
+    b = build_embedded(out)
+    print(f"{b.library}: {b.library_flash} B code and constants, {b.library_ram} B static data")
+    print(f"{b.elf}: flash {b.memory.flash} B, RAM {b.memory.ram} B + stack "
+          f"{b.memory.stack} B (the processor-in-the-loop image for QEMU's mps2-an500)")
+    return 0
+
+
 def _cmd_run(args: argparse.Namespace) -> int:
     from orchestrator.runner import prepare, run_scenario
     from orchestrator.sim.outcome import EXIT_LOST
@@ -104,12 +151,14 @@ def _cmd_run(args: argparse.Namespace) -> int:
         check_viewer(display=args.view)
     out = args.out if args.out is not None else Path("results") / Path(scenario.source).stem
     fmi = "" if scenario.fmi == 2 else ", FMI 3.0"
+    pil = _pil_image(args.pil, scenario.fmi)
+    on = "" if pil is None else ", the controller on the emulated Cortex-M7"
     print(f"running {scenario.name} ({scenario.duration:g} s, airframe {scenario.airframe.name}, "
-          f"{scenario.coupling}{fmi}) -> {out}")
+          f"{scenario.coupling}{fmi}{on}) -> {out}")
     sys.stdout.flush()
     try:
         output = run_scenario(scenario, out, timing=not args.no_timing, plots=not args.no_plots,
-                              csv=args.csv, engine=args.engine, mcap=args.mcap)
+                              csv=args.csv, engine=args.engine, mcap=args.mcap, pil=pil)
     except (Exception, KeyboardInterrupt):
         kept = (out / "metrics.json").is_file()
         args.after_error = ("no results written" + (f"; the previous results in {out} are "
@@ -122,6 +171,7 @@ def _cmd_run(args: argparse.Namespace) -> int:
           f"({_fmt(wall, '.2f', 's')} wall)")
     for line in output.paper:
         print(line)
+    _print_target(m.get("controller_on"))
     print(f"wrote {out}: {', '.join(f.name for f in output.files)}")
     if args.view or args.save is not None:
         from orchestrator.output.view import replay
@@ -188,11 +238,12 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
             raise ValueError("--duration, --set and --gains apply to a scenario: give it "
                              "with --scenario NAME_OR_FILE")
         euler0 = tuple(math.radians(x) for x in args.euler0_deg or (0.0, 0.0, 0.0))
+        fmi = 2 if args.fmi is None else args.fmi
         path = export_ssp(args.output, airframe=args.airframe or "paper_hexacopter",
                           pos0=tuple(args.pos0 or (0.0, 0.0, -3.0)),
                           stop_time=10.0 if args.stop_time is None else args.stop_time,
-                          euler0=euler0, fmus=args.fmus)
-        print(f"wrote {path}")
+                          euler0=euler0, fmus=args.fmus, fmi=fmi)
+        print(f"wrote {path} ({_ssp_kind(fmi)})")
         return 0
     from orchestrator.runner import prepare
     from orchestrator.scenario_ssp import export_scenario_ssp
@@ -205,11 +256,17 @@ def _cmd_export_ssp(args: argparse.Namespace) -> int:
     duration = args.duration if args.duration is not None else args.stop_time
     sc = prepare(args.scenario, duration, args.set, airframe=args.airframe, gains=args.gains)
     _warn(sc.warnings)
-    path = export_scenario_ssp(args.output, sc, fmus=args.fmus)
-    print(f"wrote {path}: {sc.name} ({sc.duration:g} s at {sc.step * 1e3:g} ms, airframe "
-          f"{sc.airframe.name}) as ScenarioSignals, MultirotorPlant and FullPoseController; "
-          "a fixed-step replay matches `fullpose run` with coupling = \"jacobi\"")
+    fmi = sc.fmi if args.fmi is None else args.fmi
+    path = export_scenario_ssp(args.output, sc, fmus=args.fmus, fmi=fmi)
+    print(f"wrote {path} ({_ssp_kind(fmi)}): {sc.name} ({sc.duration:g} s at "
+          f"{sc.step * 1e3:g} ms, airframe {sc.airframe.name}) as ScenarioSignals, "
+          "MultirotorPlant and FullPoseController; a fixed-step replay matches `fullpose run` "
+          "with coupling = \"jacobi\"")
     return 0
+
+
+def _ssp_kind(fmi: int) -> str:
+    return "SSP 2.0, the FMI 3.0 FMUs" if fmi == 3 else "SSP 1.0, the FMI 2.0 FMUs"
 
 
 def _cmd_design(args: argparse.Namespace) -> int:
@@ -418,6 +475,10 @@ def build_parser() -> argparse.ArgumentParser:
     run.add_argument("--fmi", type=int, choices=(2, 3), default=None,
                      help="the FMUs' FMI version: 2 (default) or 3 (the same model code; "
                           "default: the scenario's `fmi`)")
+    run.add_argument("--pil", nargs="?", const="build", default=None, metavar="IMAGE",
+                     help="fly the controller on an emulated Cortex-M7 (QEMU mps2-an500) in "
+                          "place of its FMU: processor in the loop; IMAGE: an fpc_pil.elf "
+                          "(default: built by `fullpose build-embedded`)")
     run.set_defaults(func=_cmd_run)
 
     run.add_argument("--mcap", action="store_true",
@@ -474,6 +535,10 @@ def build_parser() -> argparse.ArgumentParser:
     ssp.add_argument("--stop-time", type=float, default=None,
                      help="stop time recorded in the archive (s; default 10, or the "
                           "scenario's duration)")
+    ssp.add_argument("--fmi", type=int, choices=(2, 3), default=None,
+                     help="2: the FMI 2.0 FMUs in an SSP 1.0 archive (default); 3: the FMI 3.0 "
+                          "FMUs in an SSP 2.0 archive, vectors as array connectors (default "
+                          "with --scenario: the scenario's `fmi`)")
     ssp.set_defaults(func=_cmd_export_ssp)
 
     hover = sub.add_parser("hover", help="simulate the plant FMU hovering at trim (open loop)")
@@ -552,6 +617,12 @@ def build_parser() -> argparse.ArgumentParser:
                     help="the FMI 2.0 FMUs (default) or the FMI 3.0 ones (binaries/ by FMI 3.0 "
                          "platform tuples)")
     bf.set_defaults(func=_cmd_build_fmus)
+
+    be = sub.add_parser("build-embedded", help="cross-build the controller for a Cortex-M7 "
+                                               "(libfpc.a and the processor-in-the-loop image)")
+    be.add_argument("--out", type=Path, default=None,
+                    help="build folder (default: the user cache, as `fullpose run --pil`)")
+    be.set_defaults(func=_cmd_build_embedded)
     for command in entry_points(group=COMMANDS_GROUP):
         command.load()(sub)
     return parser

@@ -197,7 +197,8 @@ class CoSimulation:
     def __init__(self, scenario: Scenario, *, timing: bool = False,
                  progress: bool | None = None, engine: str = "native",
                  fmus: tuple[FmuInstance, FmuInstance] | None = None,
-                 spill: Path | None = None, spill_above: int = SPILL_BYTES) -> None:
+                 spill: Path | None = None, spill_above: int = SPILL_BYTES,
+                 pil: Path | None = None) -> None:
         if scenario.coupling not in COUPLINGS:
             raise ValueError(f"coupling must be one of {COUPLINGS}, got {scenario.coupling!r}")
         if engine not in ENGINES:
@@ -213,6 +214,9 @@ class CoSimulation:
         # caller removes it (it holds the returned result's data)
         self.spill = None if spill is None else Path(spill)
         self.spill_above = spill_above
+        # the controller image (fullpose build-embedded) flown on the emulated Cortex-M7
+        # instead of the controller FMU: processor in the loop (orchestrator.pil)
+        self.pil = None if pil is None else Path(pil)
 
     def run(self, on_chunk: Callable[[int, int], None] | None = None) -> RunResult:
         """The whole run; stops early, with ``meta["outcome"]`` saying so, when the vehicle
@@ -222,7 +226,7 @@ class CoSimulation:
         fmi = self.scenario.fmi
         plant_inst = open_fmu(plant_fmu(fmi), "plant")
         try:
-            ctrl_inst = open_fmu(controller_fmu(fmi), "controller")
+            ctrl_inst = self._controller(fmi)
         except BaseException:
             plant_inst.close()
             raise
@@ -231,6 +235,13 @@ class CoSimulation:
         finally:
             plant_inst.close()
             ctrl_inst.close()
+
+    def _controller(self, fmi: int) -> FmuInstance:
+        if self.pil is None:
+            return open_fmu(controller_fmu(fmi), "controller")
+        from orchestrator.pil.instance import PilController
+
+        return PilController(self.pil, controller_fmu(2))
 
     def initialize_only(self) -> None:
         """Instantiate and initialize both FMUs exactly as a run would, then stop: whatever
@@ -317,7 +328,8 @@ class CoSimulation:
         columns = rec.columns
         data = rec.data
         fmu_time = None  # the FMUs' own compute time, measured inside them (timing on)
-        if self.timing:
+        on_target = _on_target(ctrl_inst)
+        if self.timing and on_target is None:  # (on the target: instructions, not seconds)
             fmu_time = {"plant": float(data[1:rows, columns.index("plant.t_step")].sum()),
                         "controller": float(data[:rows, columns.index("ctrl.t_step")].sum())}
         warnings = [m for s, _, m in plant_inst.messages + ctrl_inst.messages if s == "WARNING"]
@@ -354,6 +366,8 @@ class CoSimulation:
         }
         if feed is not None:
             meta["mission"] = feed.record()
+        if on_target is not None:
+            meta["controller_on"] = on_target
         return RunResult(columns=columns + rec.int_columns, data=full, meta=meta,
                          integer=frozenset(rec.int_columns))
 
@@ -406,10 +420,18 @@ class CoSimulation:
         return time.perf_counter() - start, (lost, answered)
 
 
+def _on_target(ctrl: FmuInstance) -> dict[str, object] | None:
+    """What the controller image measured on the emulated Cortex-M7, or None for an FMU."""
+    from orchestrator.pil.instance import PilController
+
+    return ctrl.summary() if isinstance(ctrl, PilController) else None
+
+
 def run(scenario: Scenario, *, timing: bool = False, progress: bool | None = None,
         engine: str = "native", spill: Path | None = None,
-        spill_above: int = SPILL_BYTES) -> RunResult:
+        spill_above: int = SPILL_BYTES, pil: Path | None = None) -> RunResult:
     """Run a scenario and return every exchanged signal at every step (a recording larger
-    than ``spill_above`` bytes in the ``spill`` file, when given: :class:`CoSimulation`)."""
+    than ``spill_above`` bytes in the ``spill`` file, when given: :class:`CoSimulation`;
+    ``pil``: the controller image flown on the emulated Cortex-M7)."""
     return CoSimulation(scenario, timing=timing, progress=progress, engine=engine,
-                        spill=spill, spill_above=spill_above).run()
+                        spill=spill, spill_above=spill_above, pil=pil).run()

@@ -322,7 +322,7 @@ def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: boo
                  plots: bool = True, csv: bool = False, progress: bool | None = None,
                  engine: str = "native", figure_workers: bool | None = None,
                  mcap: bool = False,
-                 spill_above: int = SPILL_BYTES) -> RunOutput:
+                 spill_above: int = SPILL_BYTES, pil: Path | None = None) -> RunOutput:
     """Run and, with an output directory, write results, metrics and figures (whole or not
     at all: :func:`publish`).  A lost vehicle is a completed call: ``metrics["outcome"]``
     says ``"lost"``, with the time and reason in ``metrics["lost"]``.  ``figure_workers``:
@@ -345,7 +345,7 @@ def run_scenario(scenario: Scenario, out_dir: Path | None = None, *, timing: boo
     try:
         out = _run_and_write(scenario, out_dir, pool, timing=timing, plots=draw, csv=csv,
                              progress=progress, engine=engine, spill=spill,
-                             spill_above=spill_above, mcap=mcap)
+                             spill_above=spill_above, mcap=mcap, pil=pil)
         return out
     finally:
         if pool is not None:
@@ -413,7 +413,8 @@ def _start_pool(scenario: Scenario) -> FigurePool | None:
 def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | None, *,
                    timing: bool, plots: bool, csv: bool, progress: bool | None,
                    engine: str, spill: Path | None = None,
-                   spill_above: int = SPILL_BYTES, mcap: bool = False) -> RunOutput:
+                   spill_above: int = SPILL_BYTES, mcap: bool = False,
+                   pil: Path | None = None) -> RunOutput:
     timings: dict[str, float] = {}
     mark = time.perf_counter()
 
@@ -424,7 +425,7 @@ def _run_and_write(scenario: Scenario, out_dir: Path | None, pool: FigurePool | 
         mark = now
 
     result = run(scenario, timing=timing, progress=progress, engine=engine, spill=spill,
-                 spill_above=spill_above)
+                 spill_above=spill_above, pil=pil)
     spilled = spill is not None and spill.exists()  # a long run: its recording is that file
     phase("setup")
     timings["loop"] = float(result.meta["wall_time"])

@@ -60,6 +60,11 @@ Keys (units in brackets)
     ``start``, ``reached``, ``end`` [s], ``flying_s``, ``position_error`` {``max``, ``rms``}
     [m] of the error norm, ``attitude_error`` {``max``, ``rms``} [deg] of the largest axis
     error, both in the air and against the flown reference); None without a mission.
+``controller_on``
+    A run with the controller image on the emulated Cortex-M7 (``fullpose run --pil``): the
+    machine, the instructions per sample (``mean``, ``p99``, ``max``), of fpc_start, the
+    deepest stack and the C library's heap and formatting calls during the samples
+    (:meth:`orchestrator.pil.instance.PilController.summary`); None with the controller FMU.
 ``infeasible_fraction`` [-]
     Fraction of samples where the reference pose was infeasible: 1 - mean(``ctrl.feasible``).
 ``saturation`` [-]
@@ -327,6 +332,7 @@ def compute_metrics(result: RunResult) -> dict[str, Any]:
     m["measured"] = _tracking(result, "plant.pos", "plant.euler") if truth else None
     m["steps"] = step_metrics(result, *judged)
     m["mission_legs"] = mission_legs(result)
+    m["controller_on"] = meta.get("controller_on")
 
     feasible = result.optional("ctrl.feasible")
     m["infeasible_fraction"] = (None if feasible is None or feasible.size == 0

@@ -21,6 +21,7 @@ import numpy as np
 
 from orchestrator.pil.target import (
     FP_WARNING,
+    MACHINE,
     PilError,
     PilTarget,
     Reply,
@@ -303,6 +304,27 @@ class PilController(FmuInstance):
         if status == _OK:
             ctypes.memmove(out or 0, values.astype("<i4").ctypes.data, 4 * n)
         return status
+
+    def summary(self) -> dict[str, object]:
+        """What the target measured, for a run's metadata: instructions per sample (mean,
+        p99, max), of fpc_start, the deepest stack of fpc_start and of the samples, and the C library's heap bytes and
+        formatting calls taken during the samples (0 and 0: the sample path uses neither)."""
+        s = self.samples
+        ins = s.instructions(self.shift)
+        first = self._init_reply
+        return {
+            "machine": f"{MACHINE} (Cortex-M7, fpv5-d16) under QEMU, -icount shift={self.shift}",
+            "samples": len(ins),
+            "instructions": ({"mean": float(ins.mean()), "p99": float(np.percentile(ins, 99)),
+                              "max": float(ins.max())} if len(ins) else None),
+            "start_instructions": self.start_instructions,
+            "start_stack_bytes": first.stack_bytes if first is not None else 0,
+            "stack_bytes": max(s.stack_bytes, default=0),
+            "heap_bytes_in_samples": (s.heap_bytes[-1] - first.heap_bytes
+                                      if first is not None and s.heap_bytes else 0),
+            "format_calls_in_samples": (s.format_calls[-1] - first.format_calls
+                                        if first is not None and s.format_calls else 0),
+        }
 
     def close(self) -> None:
         """Stop the target."""

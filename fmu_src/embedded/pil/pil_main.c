@@ -5,7 +5,7 @@
  * A request is a little-endian u32 body length, then the body: an operation byte and its
  * arguments.  Every reply is: i32 status (FpStatus), u32 ticks (the board timer over the
  * operation's controller call), u32 format calls and u32 heap bytes of the C library so far,
- * u32 stack bytes so far, u32 length + values, u32 length + the messages said (text).
+ * u32 stack bytes so far (since the start, after it: the samples' depth), u32 length + values, u32 length + the messages said (text).
  *
  *   'h'                                   hello: values = the model's GUID (text)
  *   'R' u32 n, u32 vr[n], f64 v[n]        fpc_set_reals_vr
@@ -248,5 +248,8 @@ int pil_main(void) {
         status = serve(p, op, &c, &ticks);
         if (c.bad) keep_message(p, FP_ERROR, "pil: a request's arguments were cut short");
         if (reply(p, status, ticks) != 0) return 5;
+        /* from the start on, the stack depth measured is the samples' (initialization,
+         * which derives the force sets, goes deeper: its reply said how deep) */
+        if (op == 's') board_paint_stack();
     }
 }
