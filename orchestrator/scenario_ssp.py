@@ -9,7 +9,10 @@ the scenario's own functions; the start values are the run's (``CoSimulation.sta
 the airframe, the pose at the reference's start, the scenario's overrides).  The archive
 (``orchestrator.export.ssp_signals``) replayed at its step with Jacobi coupling, as libcosim,
 OMSimulator and fmpy's runner step it, equals ``fullpose run`` with ``coupling = "jacobi"``
-(tests/test_orchestrator/test_ssp_scenario.py, test_omsimulator.py: within 1e-9 m).
+(tests/test_orchestrator/test_ssp_scenario.py, test_omsimulator.py: within 1e-9 m).  With
+``fmi=3`` (or the scenario's ``fmi = 3``) the archive is SSP 2.0 of the FMI 3.0 FMUs, whose
+replay (``orchestrator.export.ssp_replay``) equals the FMI 2.0 archive's to the bit
+(tests/test_orchestrator/test_ssp_fmi3.py).
 """
 
 from __future__ import annotations
@@ -45,12 +48,14 @@ def scenario_table(scenario: Scenario, stop_time: float | None = None) -> Signal
 
 
 def export_scenario_ssp(path: Path, scenario: Scenario, stop_time: float | None = None,
-                        fmus: Path | None = None) -> Path:
-    """Write ``scenario`` (until ``stop_time``, default its duration) as an SSP 1.0 archive
+                        fmus: Path | None = None, fmi: int | None = None) -> Path:
+    """Write ``scenario`` (until ``stop_time``, default its duration) as an SSP archive
     whose fixed-step replay is ``fullpose run`` under Jacobi coupling; returns its path.
-    ``fmus``: a folder to take the FMUs from (e.g. ``fullpose build-fmus --out``: binaries
-    for every platform), else the installed ones."""
+    ``fmi``: 2 (SSP 1.0, the FMI 2.0 FMUs) or 3 (SSP 2.0, the FMI 3.0 FMUs); default the
+    scenario's ``fmi``.  ``fmus``: a folder to take the FMUs from (e.g. ``fullpose build-fmus
+    --out``: binaries for every platform), else the installed ones."""
     table = scenario_table(scenario, stop_time)
     start = CoSimulation(scenario).start_values()  # (the same for either coupling)
     return export_signals_ssp(path, f"fullpose_{scenario.name}", table, start.plant,
-                              start.controller, scenario.step, scenario.name, fmus)
+                              start.controller, scenario.step, scenario.name, fmus,
+                              scenario.fmi if fmi is None else fmi)

@@ -1,7 +1,9 @@
-"""Export the closed loop (plant FMU + controller FMU) as an SSP 1.0 archive.
+"""Export the closed loop (plant FMU + controller FMU) as an SSP archive: SSP 1.0 with the FMI
+2.0 FMUs (the default), or SSP 2.0 with the FMI 3.0 FMUs (``fmi=3``).
 
     export_ssp(Path("hover.ssp"))                     # paper hexacopter hovering at [0, 0, -3]
     export_ssp(Path("quad.ssp"), airframe="quadrotor")
+    export_ssp(Path("hover3.ssp"), fmi=3)             # SSP 2.0, fmi3/*.fmu, array connectors
 
 Archive layout (zip, entries in this order, all timestamps 1980-01-01 00:00:00)::
 
@@ -11,6 +13,19 @@ Archive layout (zip, entries in this order, all timestamps 1980-01-01 00:00:00):
     resources/MultirotorPlant.fmu       recompressed)
     resources/FullPoseController.ssv    one SSV parameter set per component, bare FMU variable
     resources/MultirotorPlant.ssv       names (the binding sits on the component)
+
+With ``fmi=3`` the layout is the same; the SSD and SSVs declare ``version="2.0"`` (SSP 2.0,
+the first version with FMI 3.0 types and arrays) and name FMI 3.0 variables: a vector is one
+array connector (``<ssd:Connector name="pos" kind="output"><ssc:Float64/><ssc:Dimension
+size="3"/>``), a connection joins two whole arrays (no ``startIndices``/``endIndices``), and a
+parameter is one value list in row-major order (``<ssv:Parameter name="poly_A"><ssv:Float64
+value="..."/><ssc:Dimension size="64"/><ssc:Dimension size="3"/>``); the types are the FMI 3.0
+ones (``Float64``, ``Int32``, ``Boolean``), every component says
+``implementation="CoSimulation"`` (the plant's archive also has Model Exchange, the
+controller's Scheduled Execution), and the controller's clock ``sample`` (Scheduled
+Execution's) is neither a connector nor connected.  The numbers are the FMI 2.0 archive's,
+element for element.  fmpy's and libcosim's SSP loaders read SSP 1.0 with FMI 2.0 only;
+``orchestrator.export.ssp_replay`` plays either archive.
 
 Connections are derived by name from the two modelDescriptions (:func:`connection_table`):
 every controller input named like a plant output (pos, vel, acc, euler, rate, omega, alpha,
@@ -98,6 +113,8 @@ from controller import CONTROLLER_FMU, controller_fmu
 from orchestrator.export.archive import add_entry
 from orchestrator.export.signals import SIGNALS_FMU, signals_fmu
 from orchestrator.sim.fmu import FmuInstance
+from orchestrator.sim.fmu3 import Element, Fmu3Instance
+from orchestrator.sim.fmu3 import elements as fmi3_elements
 from orchestrator.sim.start_values import Pose, controller_start_values, plant_start_values
 from plant import PLANT_FMU, load_airframe, plant_fmu
 
@@ -130,9 +147,37 @@ _REFERENCES = ("pos_ref", "euler_ref", "vel_ref", "acc_ref", "euler_rate_ref")
 Connection = tuple[str, str, str, str]
 Value = float | int | bool
 
+FMI_VERSIONS = (2, 3)
+SSP_VERSION = {2: "1.0", 3: "2.0"}
+"""The SSP version an archive of FMI 2.0 / FMI 3.0 FMUs declares (SSP 1.0 knows neither the FMI
+3.0 types nor arrays)."""
+_SSV3_TYPE = {"Real": "Float64", "Integer": "Int32", "Boolean": "Boolean"}
+
+
+def check_fmi(fmi: object) -> int:
+    """``fmi`` if it is 2 or 3, else a ValueError saying what each means."""
+    if isinstance(fmi, int) and not isinstance(fmi, bool) and fmi in FMI_VERSIONS:
+        return fmi
+    raise ValueError(f"fmi must be 2 (the FMI 2.0 FMUs in an SSP 1.0 archive) or 3 (the FMI 3.0 "
+                     f"FMUs in an SSP 2.0 archive), got {fmi!r}")
+
+
+def fmi_of_md(md: ModelDescription) -> int:
+    """2 or 3: the FMI version of a modelDescription."""
+    return 3 if str(md.fmiVersion).startswith("3") else 2
+
+
+def _shape(v: object) -> tuple[int, ...]:
+    """An FMI 3.0 variable's array shape (() for a scalar and for every FMI 2.0 variable)."""
+    return tuple(int(x) for x in (getattr(v, "shape", None) or ()))
+
 
 def _variables(md: ModelDescription, causality: str) -> list[tuple[str, str]]:
-    return [(v.name, v.type) for v in md.modelVariables if v.causality == causality]
+    """(name, type) of the variables of ``causality``, the type with the array shape for FMI
+    3.0 (``Float64[3]``); clocks are left out (the controller's ``sample`` belongs to Scheduled
+    Execution; the archives use co-simulation)."""
+    return [(v.name, v.type + (str(list(_shape(v))) if _shape(v) else ""))
+            for v in md.modelVariables if v.causality == causality and v.type != "Clock"]
 
 
 def connect_by_name(src: str, src_md: ModelDescription, dst: str,
@@ -168,6 +213,27 @@ def connection_table(plant_md: ModelDescription,
     if loose_p:
         log.info("unconnected %s inputs: %s", PLANT, ", ".join(loose_p))
     return to_ctrl + to_plant
+
+
+def element_connections(connections: Iterable[Connection],
+                        mds: Mapping[str, ModelDescription]) -> list[Connection]:
+    """The connections element by element, by FMI 2.0 names: an FMI 3.0 connection of two
+    arrays (``pos`` -> ``pos``) becomes one per element (``pos[1]`` -> ``pos[1]``, ...,
+    row-major); FMI 2.0 connections are that already.  The start values are computed on
+    these (:func:`consistent_start`), so that they are one computation for both versions."""
+    names: dict[str, dict[str, list[str]]] = {}
+    for comp, md in mds.items():
+        if fmi_of_md(md) == 3:
+            by_var: dict[str, list[str]] = {}
+            for e in fmi3_elements(md):
+                by_var.setdefault(e.variable, []).append(e.name)
+            names[comp] = by_var
+    out: list[Connection] = []
+    for fc, fv, tc, tv in connections:
+        src = names[fc].get(fv, [fv]) if fc in names else [fv]
+        dst = names[tc].get(tv, [tv]) if tc in names else [tv]
+        out += [(fc, a, tc, b) for a, b in zip(src, dst, strict=True)]
+    return out
 
 
 def unconnected_inputs(plant_md: ModelDescription,
@@ -207,9 +273,59 @@ def _typed(md: ModelDescription, values: Mapping[str, Value]) -> list[tuple[str,
     return out
 
 
-def _initial_outputs(params: Mapping[str, Value], names: Iterable[str]) -> dict[str, float]:
-    """The plant's outputs after initialization with ``params`` (its trim at pos0)."""
-    with FmuInstance(plant_fmu(), PLANT) as fmu:
+def _start(e: Element) -> Value:
+    """An FMI 3.0 element's start value from its modelDescription (0 when none is given)."""
+    text = e.start if e.start is not None else "0"
+    if e.type == "Real":
+        return float(text)
+    if e.type == "Integer":
+        return int(text)
+    return text in ("true", "1")
+
+
+Array = tuple[str, str, list[Value], tuple[int, ...]]
+"""An FMI 3.0 parameter value of an SSV 2.0: (variable, SSP type, values row-major, shape)."""
+
+
+def _typed3(md: ModelDescription, values: Mapping[str, Value]) -> list[Array]:
+    """``values`` (by FMI 2.0 element names, ``poly_A[2,3]``) as whole FMI 3.0 variables, in
+    modelDescription order: every variable with an element in ``values``, its other elements
+    at the FMU's start values; unknown names are an error."""
+    els = fmi3_elements(md)
+    known = {e.name for e in els}
+    unknown = sorted(set(values) - known)
+    if unknown:
+        raise ValueError(f"{md.modelName} has no variables {unknown}")
+    shapes = {v.name: _shape(v) for v in md.modelVariables}
+    groups: dict[str, list[Element]] = {}
+    for e in els:
+        groups.setdefault(e.variable, []).append(e)
+    out: list[Array] = []
+    for var, group in groups.items():
+        if not any(e.name in values for e in group):
+            continue
+        vals: list[Value] = []
+        for e in group:
+            value = values[e.name] if e.name in values else _start(e)
+            if e.type == "Real":
+                x = float(value)
+                if not math.isfinite(x):
+                    raise ValueError(f"{md.modelName}.{e.name} = {x} is not finite")
+                vals.append(x)
+            elif e.type == "Integer":
+                vals.append(int(value))
+            else:
+                vals.append(bool(value))
+        out.append((var, _SSV3_TYPE[group[0].type], vals, shapes[var]))
+    return out
+
+
+def _initial_outputs(params: Mapping[str, Value], names: Iterable[str],
+                     fmi: int = 2) -> dict[str, float]:
+    """The plant's outputs after initialization with ``params`` (its trim at pos0), from the
+    installed plant of FMI version ``fmi`` (names: FMI 2.0 element names)."""
+    inst = Fmu3Instance(plant_fmu(3), PLANT) if fmi == 3 else FmuInstance(plant_fmu(), PLANT)
+    with inst as fmu:
         fmu.initialize(parameters=params)
         return {n: float(fmu.get(n)) for n in names}
 
@@ -217,9 +333,11 @@ def _initial_outputs(params: Mapping[str, Value], names: Iterable[str]) -> dict[
 def component_parameters(airframe: str | Path = "paper_hexacopter",
                          pos0: Sequence[float] = (0.0, 0.0, -3.0),
                          connections: Iterable[Connection] = (),
-                         euler0: Sequence[float] = (0.0, 0.0, 0.0),
+                         euler0: Sequence[float] = (0.0, 0.0, 0.0), fmi: int = 2,
                          ) -> dict[str, dict[str, Value]]:
-    """Start values per component (by FMU variable name) for a hover at ``pos0``, ``euler0``.
+    """Start values per component (by FMI 2.0 variable name; ``connections`` element by
+    element, :func:`element_connections`) for a hover at ``pos0``, ``euler0``; ``fmi``: the
+    plant whose initialization gives the trim (FMI 2.0 or 3.0, the same numbers).
 
     One pose, written to both FMUs: the plant starts there (``pos0``, ``euler0``,
     ``init_trim = true``, and for its connected command inputs the trim it initialises to)
@@ -239,21 +357,23 @@ def component_parameters(airframe: str | Path = "paper_hexacopter",
     for ref in _REFERENCES:
         for i in range(3):
             ctrl[f"{ref}[{i + 1}]"] = held[ref][i] if ref in held else 0.0
-    return consistent_start(plant, ctrl, connections)
+    return consistent_start(plant, ctrl, connections, fmi)
 
 
 def consistent_start(plant: Mapping[str, Value], ctrl: Mapping[str, Value],
-                     connections: Iterable[Connection]) -> dict[str, dict[str, Value]]:
+                     connections: Iterable[Connection],
+                     fmi: int = 2) -> dict[str, dict[str, Value]]:
     """Both FMUs' start values made consistent at t = 0 for a runner that initialises
     connected inputs from start values: the controller's connected measurement inputs get the
     plant's initial outputs (with ``plant`` set), the plant's connected command inputs the
-    actuator state it initialises to (its trim)."""
+    actuator state it initialises to (its trim).  ``connections`` element by element
+    (:func:`element_connections`); ``fmi``: the plant initialised to find them."""
     conns = list(connections)
     measured = [fv for fc, fv, _, _ in conns if fc == PLANT]
     commanded = [tv for fc, _, tc, tv in conns if tc == PLANT and fc == CONTROLLER]
     # the plant's trim: its measured actuator states are what the commands must be
     trim_of = {n: n.replace("_cmd[", "[") for n in commanded}
-    y0 = _initial_outputs(plant, sorted(set(measured) | set(trim_of.values())))
+    y0 = _initial_outputs(plant, sorted(set(measured) | set(trim_of.values())), fmi)
     plant_out, ctrl_out = dict(plant), dict(ctrl)
     ctrl_out.update({n: y0[n] for n in measured})
     plant_out.update({n: y0[trim_of[n]] for n in commanded})
@@ -292,13 +412,42 @@ def ssv_document(name: str, values: Sequence[tuple[str, str, Value]]) -> bytes:
     return _xml(root)
 
 
+def _text(typ: str, value: Value) -> str:
+    if typ in ("Real", "Float64"):
+        return _num(float(value))
+    if typ in ("Integer", "Int32"):
+        return str(int(value))
+    return "true" if value else "false"
+
+
+def _dimensions(parent: etree._Element, shape: Sequence[int]) -> None:
+    """SSP 2.0's ``ssc:Dimension size`` elements of an array connector or parameter."""
+    for n in shape:
+        etree.SubElement(parent, _q(NS_SSC, "Dimension"), size=str(n))
+
+
+def ssv_document_v2(name: str, values: Sequence[Array]) -> bytes:
+    """An SSV 2.0 ParameterSet of FMI 3.0 variables: one Parameter per (variable, type, values,
+    shape), an array's values as one row-major list with its ``ssc:Dimension``s."""
+    root = etree.Element(_q(NS_SSV, "ParameterSet"), nsmap={"ssv": NS_SSV, "ssc": NS_SSC},
+                         version="2.0", name=name)
+    params = etree.SubElement(root, _q(NS_SSV, "Parameters"))
+    for var, typ, vals, shape in values:
+        p = etree.SubElement(params, _q(NS_SSV, "Parameter"), name=var)
+        etree.SubElement(p, _q(NS_SSV, typ), value=" ".join(_text(typ, x) for x in vals))
+        _dimensions(p, shape)
+    return _xml(root)
+
+
 def ssd_document(name: str, mds: Mapping[str, ModelDescription],
                  connections: Sequence[Connection], ssv: Mapping[str, str],
                  step: float, stop_time: float) -> bytes:
-    """The SystemStructure.ssd (SSP 1.0) of the components ``mds`` (name -> modelDescription)."""
+    """The SystemStructure.ssd of the components ``mds`` (name -> modelDescription): SSP 1.0
+    for FMI 2.0 FMUs, SSP 2.0 (array connectors, FMI 3.0 types) for FMI 3.0 ones."""
+    fmi = _one_version(mds)
     root = etree.Element(_q(NS_SSD, "SystemStructureDescription"),
                          nsmap={"ssd": NS_SSD, "ssc": NS_SSC, "osp": NS_OSP, "oms": NS_OMS},
-                         version="1.0",
+                         version=SSP_VERSION[fmi],
                          name=name,
                          generationTool="fullpose orchestrator.export.ssp")
     system = etree.SubElement(root, _q(NS_SSD, "System"), name=SYSTEM,
@@ -309,13 +458,20 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
         el = etree.SubElement(elements, _q(NS_SSD, "Component"), name=comp,
                               type="application/x-fmu-sharedlibrary",
                               source=f"resources/{comp}.fmu")
+        if fmi == 3:  # the plant's archive also has Model Exchange, the controller's SE
+            el.set("implementation", "CoSimulation")
         conns = etree.SubElement(el, _q(NS_SSD, "Connectors"))
         for v in md.modelVariables:
+            if v.type == "Clock":
+                continue
             if v.causality == "output" or (
                     v.causality == "input" and (comp, v.name) in connected_inputs):
                 c = etree.SubElement(conns, _q(NS_SSD, "Connector"), name=v.name,
                                      kind=v.causality)
-                if v.type in ("Real", "Integer", "Boolean", "String"):
+                if fmi == 3:
+                    etree.SubElement(c, _q(NS_SSC, v.type))  # Float64, Int32, Boolean
+                    _dimensions(c, _shape(v))
+                elif v.type in ("Real", "Integer", "Boolean", "String"):
                     etree.SubElement(c, _q(NS_SSC, v.type))  # optional: for readers
         if comp in ssv:
             bindings = etree.SubElement(el, _q(NS_SSD, "ParameterBindings"))
@@ -351,8 +507,9 @@ def ssd_document(name: str, mds: Mapping[str, ModelDescription],
 def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
                pos0: Sequence[float] = (0.0, 0.0, -3.0), step: float = 0.002,
                stop_time: float = 10.0, euler0: Sequence[float] = (0.0, 0.0, 0.0),
-               fmus: Path | None = None) -> Path:
-    """Write the closed loop hovering at ``pos0``, ``euler0`` as an SSP 1.0 archive.
+               fmus: Path | None = None, fmi: int = 2) -> Path:
+    """Write the closed loop hovering at ``pos0``, ``euler0`` as an SSP archive: SSP 1.0 with
+    the FMI 2.0 FMUs, or with ``fmi=3`` SSP 2.0 with the FMI 3.0 ones.
 
     Returns its path; ``path`` gets the ``.ssp`` suffix if it has another one.  ``step`` and
     ``stop_time`` are recorded in the SSD's DefaultExperiment (libcosim applies both; for
@@ -360,33 +517,53 @@ def export_ssp(path: Path, airframe: str | Path = "paper_hexacopter",
     (:func:`fmu_file`), e.g. with binaries for every platform.  The output is deterministic:
     the same inputs (and FMUs) give identical bytes.
     """
+    fmi = check_fmi(fmi)
     if not (math.isfinite(step) and step > 0):
         raise ValueError(f"step must be positive, got {step}")
     if not (math.isfinite(stop_time) and stop_time > 0):
         raise ValueError(f"stop_time must be positive, got {stop_time}")
-    data = {PLANT: fmu_file(PLANT, fmus).read_bytes(),
-            CONTROLLER: fmu_file(CONTROLLER, fmus).read_bytes()}
+    data = {PLANT: fmu_file(PLANT, fmus, fmi).read_bytes(),
+            CONTROLLER: fmu_file(CONTROLLER, fmus, fmi).read_bytes()}
     mds = {comp: read_model_description(io.BytesIO(b)) for comp, b in data.items()}
     connections = connection_table(mds[PLANT], mds[CONTROLLER])
-    values = component_parameters(airframe, pos0, connections, euler0)
+    values = component_parameters(airframe, pos0, element_connections(connections, mds), euler0,
+                                  fmi)
     af_name = load_airframe(airframe).name
     return write_archive(path, f"fullpose_{af_name}_hover", data, mds, connections, values,
                          step, stop_time, af_name)
 
 
-def fmu_file(model: str, folder: Path | None = None) -> Path:
-    """The FMU ``model`` (``MultirotorPlant``, ``FullPoseController``, ``ScenarioSignals``)
-    from ``folder`` (e.g. ``fullpose build-fmus --out`` with binaries for every platform),
-    else the installed one; a missing file is a FileNotFoundError naming it."""
+def fmu_file(model: str, folder: Path | None = None, fmi: int = 2) -> Path:
+    """The FMU ``model`` (``MultirotorPlant``, ``FullPoseController``, ``ScenarioSignals``) of
+    FMI version ``fmi`` from ``folder`` (e.g. ``fullpose build-fmus [--fmi 3] --out`` with
+    binaries for every platform), else the installed one; a missing file is a
+    FileNotFoundError naming it, an FMU of the other FMI version a ValueError."""
+    fmi = check_fmi(fmi)
     if folder is None:
         found = {PLANT: plant_fmu, CONTROLLER: controller_fmu, SIGNALS_FMU: signals_fmu}
-        return Path(found[model]())
+        return Path(found[model](fmi))
     path = Path(folder) / f"{model}.fmu"
+    flag = " --fmi 3" if fmi == 3 else ""
     if not path.is_file():
         raise FileNotFoundError(f"{path}: no such FMU (--fmus {folder} must hold "
                                 f"{PLANT}.fmu, {CONTROLLER}.fmu and, for a scenario, "
-                                "ScenarioSignals.fmu, as `fullpose build-fmus --out` writes)")
+                                f"ScenarioSignals.fmu, as `fullpose build-fmus{flag} --out` "
+                                "writes)")
+    found_fmi = fmi_of_md(read_model_description(str(path), validate=False))
+    if found_fmi != fmi:
+        raise ValueError(f"{path} is an FMI {found_fmi}.0 FMU, but the archive is of FMI {fmi}.0 "
+                         f"FMUs: export with --fmi {found_fmi}, or take FMUs built with "
+                         f"`fullpose build-fmus{flag} --out DIR`")
     return path
+
+
+def _one_version(mds: Mapping[str, ModelDescription]) -> int:
+    """The FMI version all components share (an archive mixes none)."""
+    found = {comp: fmi_of_md(md) for comp, md in mds.items()}
+    if len(set(found.values())) != 1:
+        raise ValueError("the components are of different FMI versions: "
+                         + ", ".join(f"{c} FMI {v}.0" for c, v in found.items()))
+    return next(iter(found.values()))
 
 
 def write_archive(path: Path, name: str, fmus: Mapping[str, bytes],
@@ -394,18 +571,22 @@ def write_archive(path: Path, name: str, fmus: Mapping[str, bytes],
                   values: Mapping[str, Mapping[str, Value]], step: float, stop_time: float,
                   label: str) -> Path:
     """Write an SSP archive of the components ``fmus`` (name -> FMU bytes, in SSD order)
-    connected by ``connections``, one SSV per component of ``values`` (named
-    ``"<component> (<label>)"``), the step and stop time in the DefaultExperiment; returns
-    its path (``.ssp`` suffix added when missing).  Deterministic; written whole or not at
-    all (a temporary file renamed into place)."""
+    connected by ``connections``, one SSV per component of ``values`` (by FMI 2.0 element
+    names, named ``"<component> (<label>)"``), the step and stop time in the
+    DefaultExperiment; returns its path (``.ssp`` suffix added when missing).  SSP 1.0 for
+    FMI 2.0 FMUs, SSP 2.0 for FMI 3.0 ones (``values`` grouped into whole variables).
+    Deterministic; written whole or not at all (a temporary file renamed into place)."""
     path = Path(path)
     if path.suffix != ".ssp":
         path = path.with_suffix(".ssp")
+    fmi = _one_version(mds)
     ssv_files = {comp: f"resources/{comp}.ssv" for comp in fmus if comp in values}
     entries: dict[str, tuple[bytes, int]] = {}
     for comp, data in fmus.items():
         if comp in values:
-            doc = ssv_document(f"{comp} ({label})", _typed(mds[comp], values[comp]))
+            title = f"{comp} ({label})"
+            doc = (ssv_document_v2(title, _typed3(mds[comp], values[comp])) if fmi == 3
+                   else ssv_document(title, _typed(mds[comp], values[comp])))
             entries[ssv_files[comp]] = (doc, zipfile.ZIP_DEFLATED)
         entries[f"resources/{comp}.fmu"] = (data, zipfile.ZIP_STORED)
     ssd = ssd_document(name, mds, connections, ssv_files, step, stop_time)
@@ -468,6 +649,12 @@ def experiment(ssp_path: str | Path) -> tuple[float, float, float]:
     return (float(exp.get("startTime", 0.0)), float(exp.get("stopTime")), float(steps[0]))
 
 
+def ssp_version(ssp_path: str | Path) -> str:
+    """The ``version`` its SSD declares: "1.0" (FMI 2.0 FMUs) or "2.0" (FMI 3.0 ones)."""
+    with zipfile.ZipFile(ssp_path) as zf:
+        return str(etree.fromstring(zf.read(SSD_NAME)).get("version"))
+
+
 def fmpy_options(ssp_path: str | Path) -> dict[str, object]:
     """Keyword arguments that make fmpy's runner play the archive as recorded.
 
@@ -476,6 +663,11 @@ def fmpy_options(ssp_path: str | Path) -> dict[str, object]:
     experiment, far beyond the controller's 2 ms sample time): ``simulate_ssp(path,
     **fmpy_options(path))`` passes the recorded start, stop and step and the bindings.
     """
+    version = ssp_version(ssp_path)
+    if version != "1.0":
+        raise ValueError(f"{ssp_path} is an SSP {version} archive (FMI 3.0 FMUs): fmpy's SSP "
+                         "runner reads SSP 1.0 with FMI 2.0 FMUs only; play it with "
+                         "orchestrator.export.ssp_replay.replay_ssp")
     start, stop, step = experiment(ssp_path)
     return {"start_time": start, "stop_time": stop, "step_size": step,
             "parameter_set": parameter_set(ssp_path)}

@@ -1,6 +1,7 @@
 """The closed loop with its input signals as an SSP archive: plant, controller and the
 ScenarioSignals FMU (``orchestrator.export.signals``) playing a table of references and
-disturbances.
+disturbances; the FMI 2.0 FMUs in SSP 1.0, or the FMI 3.0 ones in SSP 2.0 (``fmi=3``, array
+connectors: ``orchestrator.export.ssp``).
 
     export_signals_ssp(path, "fullpose_s1", table, plant_values, controller_values, step=0.002)
 
@@ -35,9 +36,11 @@ from orchestrator.export.ssp import (
     PLANT,
     Connection,
     Value,
+    check_fmi,
     connect_by_name,
     connection_table,
     consistent_start,
+    element_connections,
     fmu_file,
     write_archive,
 )
@@ -65,20 +68,25 @@ def signal_connections(mds: Mapping[str, ModelDescription]) -> list[Connection]:
 def export_signals_ssp(path: Path, name: str, table: SignalTable,
                        plant_values: Mapping[str, Value],
                        controller_values: Mapping[str, Value], step: float,
-                       label: str | None = None, fmus: Path | None = None) -> Path:
-    """Write the loop fed by ``table`` (rows on the grid t_k = k * ``step``) as an SSP 1.0
-    archive whose stop time is the table's last row; returns its path.  ``fmus``: a folder to
-    take the three FMUs from (``orchestrator.export.ssp.fmu_file``), else the installed ones."""
-    data = {SIGNALS: signals_fmu_with(table, fmu_file(SIGNALS, fmus)),
-            PLANT: fmu_file(PLANT, fmus).read_bytes(),
-            CONTROLLER: fmu_file(CONTROLLER, fmus).read_bytes()}
+                       label: str | None = None, fmus: Path | None = None,
+                       fmi: int = 2) -> Path:
+    """Write the loop fed by ``table`` (rows on the grid t_k = k * ``step``) as an SSP archive
+    (SSP 1.0 with the FMI 2.0 FMUs, SSP 2.0 with the FMI 3.0 ones for ``fmi=3``) whose stop
+    time is the table's last row; returns its path.  ``plant_values``, ``controller_values``
+    by FMI 2.0 element names.  ``fmus``: a folder to take the three FMUs from
+    (``orchestrator.export.ssp.fmu_file``), else the installed ones."""
+    fmi = check_fmi(fmi)
+    data = {SIGNALS: signals_fmu_with(table, fmu_file(SIGNALS, fmus, fmi)),
+            PLANT: fmu_file(PLANT, fmus, fmi).read_bytes(),
+            CONTROLLER: fmu_file(CONTROLLER, fmus, fmi).read_bytes()}
     mds = {comp: read_model_description(io.BytesIO(b)) for comp, b in data.items()}
     connections = signal_connections(mds)
+    flat = element_connections(connections, mds)
     at0 = {n: float(table.values[0, i]) for i, n in enumerate(table.names)}
     plant, ctrl = dict(plant_values), dict(controller_values)
-    for fc, fv, tc, tv in connections:  # the signals' inputs at t = 0
+    for fc, fv, tc, tv in flat:  # the signals' inputs at t = 0
         if fc == SIGNALS:
             (ctrl if tc == CONTROLLER else plant)[tv] = at0[fv]
-    values = consistent_start(plant, ctrl, connections)
+    values = consistent_start(plant, ctrl, flat, fmi)
     return write_archive(path, name, data, mds, connections, values, step,
                          float(table.times[-1]), label or name)
