@@ -307,8 +307,9 @@ class PilController(FmuInstance):
 
     def summary(self) -> dict[str, object]:
         """What the target measured, for a run's metadata: instructions per sample (mean,
-        p99, max), of fpc_start, the deepest stack of fpc_start and of the samples, and the C library's heap bytes and
-        formatting calls taken during the samples (0 and 0: the sample path uses neither)."""
+        p99, max) and of fpc_start, the deepest stack of fpc_start and of the samples, and
+        the C library's heap bytes and text formatting calls during the samples (0 and 0:
+        the sample path uses neither; a message said in a sample formats text)."""
         s = self.samples
         ins = s.instructions(self.shift)
         first = self._init_reply

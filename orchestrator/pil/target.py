@@ -100,7 +100,7 @@ class PilTarget:
         self._got_reply = False
         os.mkfifo(self.folder / "pil.in")
         os.mkfifo(self.folder / "pil.out")
-        self._log = open(self.folder / "qemu.log", "w+b")  # noqa: SIM115 (kept open)
+        self._log = open(self.folder / "qemu.log", "w+b")
         self.proc = subprocess.Popen(qemu_command(self.elf, shift), cwd=self.folder,
                                      stdin=subprocess.DEVNULL, stdout=self._log,
                                      stderr=subprocess.STDOUT)
