@@ -58,6 +58,10 @@ def register(sub: Any) -> None:
                      help="watch the flight in 3-D (Rerun): pip install 'fullpose[view]'")
     fly.add_argument("--save", type=Path, default=None, metavar="FILE.rrd",
                      help="write the 3-D view of the flight as a Rerun recording")
+    fly.add_argument("--pil", nargs="?", const="build", default=None, metavar="IMAGE",
+                     help="fly the controller on an emulated Cortex-M7 (QEMU mps2-an500) in "
+                          "place of its FMU; IMAGE: an fpc_pil.elf (default: built by "
+                          "`fullpose build-embedded`); one vehicle")
     fly.set_defaults(func=_fly)
 
 
@@ -130,6 +134,12 @@ def _fly(args: argparse.Namespace) -> int:
                 setattr(config, option, load_key(path))
             except (OSError, UnicodeDecodeError) as e:
                 raise ValueError(f"--{option.replace('_', '-')}: {e}") from None
+    if args.pil is not None:
+        if args.count > 1:
+            raise ValueError("--pil flies one vehicle: not with --count above 1")
+        from orchestrator.pil.build import image_of
+
+        config.pil = image_of(args.pil)
     if args.count > 1:
         return _fly_fleet(config, templates, args)
     if args.view:  # before the sockets open: a viewer that cannot show is said at once

@@ -13,6 +13,7 @@ import math
 import time
 from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -117,6 +118,9 @@ class BridgeConfig:
     # SITL); "air": hovering at pos0 from the start, the rotors spinning whatever the arming
     start: str = "ground"
     mission: Sequence[MissionItem] = ()  # a mission held from the start (a scenario's)
+    # the controller image (fullpose build-embedded) on the emulated Cortex-M7 in place of
+    # the controller FMU (processor in the loop); None: the FMU
+    pil: Path | None = None
 
 
 def stopping_point(pos: np.ndarray, vel: np.ndarray, acc: np.ndarray, acc_limit: np.ndarray,
@@ -177,11 +181,18 @@ class Context:
         if not 1 <= config.system_id <= 255:
             raise ValueError(f"system id {config.system_id} outside 1..255")
         self.config = config
+        controller = None
+        if config.pil is not None:  # the controller image on the emulated Cortex-M7
+            from controller import controller_fmu
+            from orchestrator.pil.instance import PilController
+
+            controller = PilController(config.pil, controller_fmu())
         self.session = LiveSession(config.airframe, pos0=config.pos0, euler0=config.euler0,
                                    chunk=config.chunk,
                                    plant_parameters=config.plant_parameters,
                                    controller_parameters_=config.controller_parameters,
-                                   coupling=config.coupling, ground=config.start == "ground")
+                                   coupling=config.coupling, ground=config.start == "ground",
+                                   controller=controller)
         self.endpoints: list[Endpoint] = []
         try:
             for i, url in enumerate(config.urls):

@@ -94,17 +94,9 @@ def _pil_image(option: str | None, fmi: int) -> Path | None:
     if fmi != 2:
         raise ValueError("--pil flies the controller image in place of the controller FMU "
                          "with the FMI 2.0 plant: leave out --fmi 3 (or the scenario's fmi = 3)")
-    if option != "build":
-        image = Path(option)
-        if not image.is_file():
-            raise ValueError(f"--pil {option}: no such controller image (fpc_pil.elf, from "
-                             "`fullpose build-embedded`)")
-        return image
-    from orchestrator.pil.build import build_embedded
+    from orchestrator.pil.build import image_of
 
-    print("building the controller image for the Cortex-M7 (fullpose build-embedded) ...")
-    sys.stdout.flush()
-    return build_embedded().elf
+    return image_of(option)
 
 
 def _print_target(on: object) -> None:

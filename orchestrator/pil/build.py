@@ -43,6 +43,7 @@ class EmbeddedBuild:
     folder: Path
     library: Path
     elf: Path
+    trace_elf: Path  # the same image recording its libm calls (fpc_pil_trace.elf)
     memory: Memory
     library_flash: int  # code and constants of libfpc.a's objects (size -t)
     library_ram: int  # data and bss of libfpc.a's objects (0: nothing static)
@@ -113,4 +114,19 @@ def build_embedded(folder: Path | None = None, werror: bool = False) -> Embedded
     _run(["cmake", "--build", str(folder)], "the cross build")
     elf, lib = folder / "fpc_pil.elf", folder / "libfpc.a"
     flash, ram = _library_sizes(lib)
-    return EmbeddedBuild(folder, lib, elf, _sizes(elf), flash, ram)
+    return EmbeddedBuild(folder, lib, elf, folder / "fpc_pil_trace.elf", _sizes(elf), flash, ram)
+
+
+def image_of(option: str, say: bool = True) -> Path:
+    """The controller image a ``--pil [IMAGE]`` option names: IMAGE itself, or for
+    ``"build"`` (the option without a value) the image built (incrementally) into
+    :func:`default_folder`.  ValueError for an image that does not exist."""
+    if option != "build":
+        if not Path(option).is_file():
+            raise ValueError(f"--pil {option}: no such controller image (fpc_pil.elf, from "
+                             "`fullpose build-embedded`)")
+        return Path(option)
+    if say:
+        print("building the controller image for the Cortex-M7 (fullpose build-embedded) ...",
+              flush=True)
+    return build_embedded().elf

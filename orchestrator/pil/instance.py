@@ -72,7 +72,7 @@ class PilController(FmuInstance):
     """The controller image under QEMU, with the controller FMU's interface."""
 
     def __init__(self, elf: str | Path, fmu_path: str | Path | None = None,
-                 instance_name: str | None = None) -> None:
+                 instance_name: str | None = None, trace_libm: bool = False) -> None:
         from controller import controller_fmu
 
         # (FmuInstance.__init__ would instantiate the FMU: only its description is used)
@@ -96,6 +96,10 @@ class PilController(FmuInstance):
             self.target.close()
             raise
         self.samples = SampleLog()
+        # trace_libm (the tracing image): every sample's calls of libm's inexact functions
+        self.trace_libm = trace_libm
+        self.libm_calls: list[np.ndarray] = []
+        self.libm_dropped = 0
         self._init_reply: Reply | None = None
         self._ts = 0.0
         self._pending: tuple[bytes, np.ndarray] | None = None
@@ -199,6 +203,8 @@ class PilController(FmuInstance):
     def exit_initialization(self) -> None:
         """fpc_start on the target: the parameters checked, the states started."""
         self._init_reply = self._check(self.target.start(self.time), "fpc_start")
+        if self.trace_libm:  # (from the first sample on)
+            self._check(self.target.record_libm(True), "recording libm calls")
         self._ts = float(self.get("Ts"))
 
     def reset(self) -> None:
@@ -259,6 +265,10 @@ class PilController(FmuInstance):
         if reply.failed:
             return _ERROR
         self.samples.add(reply)
+        if self.trace_libm:
+            calls, dropped = self.target.take_libm()
+            self.libm_calls.append(calls.copy())
+            self.libm_dropped += dropped
         n_real = sum(len(g.refs) for g in reals)
         got_r = np.frombuffer(reply.values[:8 * n_real], dtype="<f8")
         got_i = np.frombuffer(reply.values[8 * n_real:], dtype="<i4")

@@ -235,6 +235,28 @@ class PilTarget:
             out.append(np.frombuffer(reply.values, dtype="<f8"))
         return np.concatenate(out) if out else np.zeros(0)
 
+    def calibrate(self, turns: int) -> float:
+        """Instructions counted over a loop of exactly 2 turns + 1 instructions (pil_main.c 'c';
+        plus the timer reads' own, the same for any turns): checks the counting."""
+        reply = self.request(b"c", struct.pack("<I", turns))
+        if reply.failed:
+            raise PilError(f"calibration refused: {reply.text.strip()}")
+        return float(instructions(reply.ticks, self.shift))
+
+    def record_libm(self, on: bool) -> Reply:
+        """Record the controller's calls of the :data:`LIBM` functions (the tracing image,
+        fpc_pil_trace.elf; another image refuses)."""
+        return self.request(b"l", bytes([1 if on else 0]))
+
+    def take_libm(self) -> tuple[np.ndarray, int]:
+        """The calls recorded since the last take, as rows (function index in :data:`LIBM`,
+        x, y, result), and how many did not fit the image's log (256 per take)."""
+        reply = self.request(b"L")
+        if reply.failed or len(reply.values) < 4:
+            raise PilError(f"the target cannot give its libm calls: {reply.text.strip()}")
+        (dropped,) = struct.unpack("<I", reply.values[:4])
+        return np.frombuffer(reply.values[4:], dtype="<f8").reshape(-1, 4), dropped
+
     def close(self) -> None:
         """Stop QEMU and remove the pipes."""
         if self._in >= 0:

@@ -34,7 +34,8 @@ class LiveSession:
     set to that pose; with ``ground``, resting level on its landing gear on the ground below
     ``pos0`` (heading ``euler0[2]``), rotors stopped, the controller disarmed (``pos0``: the
     pose it starts at).  ``state()`` returns the latest plant outputs and controller
-    outputs by variable name.
+    outputs by variable name.  ``controller``: an instance in place of the controller FMU
+    (the controller image on the emulated Cortex-M7), closed with the session.
     """
 
     def __init__(self, airframe: str | Airframe = "paper_hexacopter", *,
@@ -43,7 +44,8 @@ class LiveSession:
                  plant_parameters: Mapping[str, float | int | bool] | None = None,
                  controller_parameters_: Mapping[str, float | int | bool] | None = None,
                  coupling: str = "gauss-seidel", engine: str = "native",
-                 timing: bool = False, ground: bool = False) -> None:
+                 timing: bool = False, ground: bool = False,
+                 controller: FmuInstance | None = None) -> None:
         if coupling not in COUPLINGS or engine not in ENGINES:
             raise ValueError(f"coupling must be one of {COUPLINGS}, engine one of {ENGINES}")
         if chunk < 1:
@@ -52,8 +54,16 @@ class LiveSession:
         self.step_size = step
         self.chunk = chunk
         self.steps_done = 0
-        self.plant_inst = FmuInstance(plant_fmu(), "plant")
-        self.ctrl_inst = FmuInstance(controller_fmu(), "controller")
+        try:
+            self.plant_inst = FmuInstance(plant_fmu(), "plant")
+        except BaseException:
+            if controller is not None:
+                controller.close()
+            raise
+        # the controller FMU, or an instance in its place the session then owns (the
+        # controller image on the emulated Cortex-M7: orchestrator.pil)
+        self.ctrl_inst = (controller if controller is not None
+                          else FmuInstance(controller_fmu(), "controller"))
         try:
             pose = Pose.of(pos0, euler0)
             plant_over: dict[str, float | int | bool] = {}

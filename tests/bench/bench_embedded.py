@@ -9,13 +9,17 @@ call (``fpc_step``) and of the guidance and allocation QPs alone (the controller
 timing outputs t_guid, t_alloc, read on the board timer), mean / p99 / max, as microseconds
 at 480 MHz with 1 cycle per instruction (orchestrator/pil/cost.py says why) and as a share
 of the 2 ms period; then the largest difference of the rotor commands and of the positions
-to the FMU run.  Also: flash, RAM and stack of the image.
+to the FMU run, and which of libm's functions gave other results than the host's (glibc's,
+through Python's math) on the same arguments in the run (the tracing image records every
+call).  The host's own time per sample (the FMU's t_step on this machine) is printed beside
+as the peer.  Also: flash, RAM and stack of the image.
 """
 
 from __future__ import annotations
 
 import argparse
 import dataclasses
+import math
 import sys
 import time
 from pathlib import Path
@@ -28,8 +32,12 @@ sys.path.insert(0, str(ROOT))
 from orchestrator.master import CoSimulation  # noqa: E402
 from orchestrator.pil.build import build_embedded  # noqa: E402
 from orchestrator.pil.cost import CLOCK_HZ, CPI, microseconds, period_share  # noqa: E402
-from orchestrator.pil.target import instructions  # noqa: E402
+from orchestrator.pil.instance import PilController  # noqa: E402
+from orchestrator.pil.target import LIBM, instructions  # noqa: E402
 from orchestrator.scenario.catalogue import load_scenario  # noqa: E402
+from orchestrator.scenario.model import Scenario  # noqa: E402
+from orchestrator.sim.fmu3 import open_fmu  # noqa: E402
+from plant import plant_fmu  # noqa: E402
 
 DEFAULT = ("hover", "hover_varying_orientation", "rotor_failure_detected",
            "fixed_tilt_translation")
@@ -41,6 +49,32 @@ def row(label: str, ins: np.ndarray) -> str:
     return (f"  {label:11s} {mean:9.0f} {p99:9.0f} {worst:9.0f}   {microseconds(mean):7.1f} "
             f"{microseconds(p99):7.1f} {microseconds(worst):7.1f} us   "
             f"{100 * period_share(worst):5.2f} %")
+
+
+def libm_report(sc: Scenario, trace_elf: Path) -> str:
+    """The run again on the tracing image: per libm function, the calls and how many gave
+    another result than the host's C library on the same arguments, and by how many ulps."""
+    plant = open_fmu(plant_fmu(2), "plant")
+    ctrl = PilController(trace_elf, trace_libm=True)
+    try:
+        CoSimulation(sc, fmus=(plant, ctrl)).run()
+    finally:
+        plant.close()
+        ctrl.close()
+    calls = np.concatenate(ctrl.libm_calls) if ctrl.libm_calls else np.zeros((0, 4))
+    parts = []
+    for i, name in enumerate(LIBM):
+        sel = calls[calls[:, 0] == i]
+        if not len(sel):
+            continue
+        fn = getattr(math, name)
+        want = np.array([fn(x, y) if name in ("atan2", "hypot") else fn(x)
+                         for _, x, y, _ in sel])
+        ulps = np.abs(sel[:, 3] - want) / np.spacing(np.abs(want))
+        parts.append(f"{name} {int(np.count_nonzero(sel[:, 3] != want))} of {len(sel)} "
+                     f"(max {ulps.max():.0f} ulp)")
+    dropped = f"; {ctrl.libm_dropped} calls not recorded" if ctrl.libm_dropped else ""
+    return "; ".join(parts) + dropped
 
 
 def main() -> int:
@@ -58,7 +92,7 @@ def main() -> int:
     for name in args.scenarios.split(","):
         sc = load_scenario(name)
         sc = dataclasses.replace(sc, duration=min(args.duration, sc.duration))
-        fmu = CoSimulation(sc, timing=False).run()
+        fmu = CoSimulation(sc, timing=True).run()  # (timing changes no result)
         t0 = time.perf_counter()
         pil_run = CoSimulation(sc, timing=True, pil=built.elf)
         res = pil_run.run()
@@ -83,6 +117,11 @@ def main() -> int:
         print(row("sample", step_ins))
         print(row("guidance QP", ticks_of("ctrl.t_guid")))
         print(row("alloc. QP", ticks_of("ctrl.t_alloc")))
+        host = np.asarray(fmu.data)[1:, list(fmu.columns).index("ctrl.t_step")] * 1e6
+        print(f"  peer: the FMU's sample on this host {host.mean():.1f} us mean, "
+              f"{np.percentile(host, 99):.1f} p99, {host.max():.1f} max: the target at "
+              f"{CLOCK_HZ / 1e6:.0f} MHz takes "
+              f"{microseconds(float(step_ins.mean())) / host.mean():.0f}x as long")
         cmd = [i for i, c in enumerate(cols) if c.startswith(("ctrl.omega_cmd", "ctrl.alpha_cmd",
                                                               "ctrl.beta_cmd"))]
         pos = [cols.index(f"plant.pos[{k}]") for k in (1, 2, 3)]
@@ -93,6 +132,8 @@ def main() -> int:
         print(f"  to the FMU: commands equal to the bit in {same} of {rows} samples, largest "
               f"difference {dcmd.max():.3g} ({rel.max():.2g} relative); positions within "
               f"{dpos:.3g} m")
+        print("  libm calls whose result differs from the host's: "
+              + libm_report(sc, built.trace_elf))
         print(f"  fpc_start {on['start_instructions']:.0f} instructions "
               f"({microseconds(float(on['start_instructions'])) / 1e3:.1f} ms); stack "
               f"{on['stack_bytes']} B per sample, {on['start_stack_bytes']} B in fpc_start; "

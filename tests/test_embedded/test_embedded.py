@@ -160,3 +160,36 @@ def test_cli_runs_the_controller_on_the_target(built: EmbeddedBuild, tmp_path: P
                               "--out", str(tmp_path / "s")], capture_output=True, text=True)
     assert missing.returncode == 2 and "no such controller image" in missing.stderr
     assert "Traceback" not in missing.stderr and not (tmp_path / "s").exists()
+
+
+@needs_tools
+def test_every_libm_call_of_a_flight_within_one_ulp_of_the_hosts(built: EmbeddedBuild) -> None:
+    from orchestrator.pil.instance import PilController
+    from orchestrator.sim.fmu3 import open_fmu
+    from plant import plant_fmu
+
+    sc = prepare("hover_varying_orientation", 1.0)
+    plant = open_fmu(plant_fmu(2), "plant")
+    ctrl = PilController(built.trace_elf, trace_libm=True)
+    try:
+        CoSimulation(sc, fmus=(plant, ctrl)).run()
+    finally:
+        plant.close()
+        ctrl.close()
+    calls = np.concatenate(ctrl.libm_calls)
+    assert ctrl.libm_dropped == 0
+    seen = {LIBM[int(f)] for f in calls[:, 0]}
+    assert {"sin", "cos", "atan2", "asin"} <= seen  # the attitude's trigonometry, every sample
+    for f, x, y, r in calls:
+        name = LIBM[int(f)]
+        want = getattr(math, name)(x, y) if name in ("atan2", "hypot") else getattr(math, name)(x)
+        assert abs(r - want) <= np.spacing(abs(want)), (name, x, y)
+
+
+@needs_tools
+def test_instruction_counting_is_exact_on_a_loop_of_known_length(target: PilTarget) -> None:
+    # subs + bne per turn: the count grows by exactly 2 per turn (to the timer's 0.625 of an
+    # instruction), whatever the fixed cost of the reads
+    a, b, c = (target.calibrate(n) for n in (1_000, 11_000, 101_000))
+    assert abs((b - a) - 20_000) <= 1.0 and abs((c - a) - 200_000) <= 1.0
+    assert 2_000 <= a <= 2_020

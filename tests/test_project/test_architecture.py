@@ -203,6 +203,7 @@ ORCHESTRATOR_FLOORS = {
     "sim": {"output", "sim"},
     "scenario": {"output", "sim", "mission", "scenario"},
     "export": {"output", "sim", "export"},
+    "pil": {"sim", "pil"},
 }
 """What each orchestrator subpackage may import of its siblings (docs/architecture.md)."""
 

@@ -74,6 +74,65 @@ int __wrap_snprintf(char *buf, size_t size, const char *fmt, ...) {
 
 uint32_t board_format_calls(void) { return format_calls; }
 
+/* libm's inexact functions, recorded while asked (the tracing image links with --wrap for
+ * each) */
+static struct {
+    int on;
+    uint32_t n, dropped;
+    BoardLibmCall calls[BOARD_LIBM_LOG];
+} libm_log;
+
+int board_libm_record(int on) {
+#if defined(BOARD_LIBM_TRACE)
+    libm_log.on = on;
+    libm_log.n = libm_log.dropped = 0;
+    return 1;
+#else
+    (void)on;
+    return 0;
+#endif
+}
+
+const BoardLibmCall *board_libm_take(uint32_t *n, uint32_t *dropped) {
+    *n = libm_log.n;
+    *dropped = libm_log.dropped;
+    libm_log.n = libm_log.dropped = 0;
+    return libm_log.calls;
+}
+
+#if defined(BOARD_LIBM_TRACE)
+static double noted(int fn, double x, double y, double r) {
+    if (libm_log.on) {
+        if (libm_log.n < BOARD_LIBM_LOG) {
+            BoardLibmCall *c = &libm_log.calls[libm_log.n++];
+            c->fn = (double)fn;
+            c->x = x;
+            c->y = y;
+            c->result = r;
+        } else {
+            libm_log.dropped++;
+        }
+    }
+    return r;
+}
+
+#define WRAP1(name, id)                                                   \
+    double __real_##name(double x);                                       \
+    double __wrap_##name(double x);                                       \
+    double __wrap_##name(double x) { return noted(id, x, 0.0, __real_##name(x)); }
+#define WRAP2(name, id)                                                   \
+    double __real_##name(double x, double y);                             \
+    double __wrap_##name(double x, double y);                             \
+    double __wrap_##name(double x, double y) { return noted(id, x, y, __real_##name(x, y)); }
+WRAP1(sin, 0)
+WRAP1(cos, 1)
+WRAP1(tan, 2)
+WRAP1(asin, 3)
+WRAP1(acos, 4)
+WRAP2(atan2, 5)
+WRAP2(hypot, 6)
+#endif
+
 /* The stack: painted with a pattern at start; the deepest word overwritten since tells. */
 #define STACK_PAINT 0x5AC3C35Au
 extern uint32_t __stack_limit[], __stack_top[];

@@ -23,6 +23,19 @@ size_t board_stack_used(void);
 /* Paint the stack below the caller's frame, for board_stack_used. */
 void board_paint_stack(void);
 
+/* The controller's calls of libm's inexact functions, recorded while on (board_libm_record)
+ * in the tracing image (fpc_pil_trace.elf, built with BOARD_LIBM_TRACE and --wrap for each;
+ * the measuring image fpc_pil.elf records nothing, so its counts are the controller's own):
+ * function (0 sin, 1 cos, 2 tan, 3 asin, 4 acos, 5 atan2, 6 hypot), arguments and result. */
+typedef struct {
+    double fn, x, y, result; /* (fn as a double: the record is four doubles on the wire) */
+} BoardLibmCall;
+#define BOARD_LIBM_LOG 256
+/* 0 when the image cannot record (not the tracing image). */
+int board_libm_record(int on);
+/* The calls recorded since the last take (at most BOARD_LIBM_LOG; *dropped: the rest). */
+const BoardLibmCall *board_libm_take(uint32_t *n, uint32_t *dropped);
+
 /* The image's program (pil_main.c), called by the reset handler: its exit code. */
 int pil_main(void);
 

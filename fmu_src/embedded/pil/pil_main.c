@@ -20,6 +20,12 @@
  *                                         1 cos, 2 tan, 3 asin, 4 acos, 5 atan2(x, y),
  *                                         6 hypot(x, y)), the functions the controller calls
  *                                         that are not exact by definition
+ *   'l' u8 on                             record the controller's calls of those functions
+ *                                         (the tracing image only)
+ *   'L'                                   the calls recorded since the last 'L': u32 dropped,
+ *                                         then per call f64 function, x, y, result
+ *   'c' u32 n                             calibration: a loop of exactly 2 n + 2 instructions
+ *                                         between the timer reads (ticks: its count)
  *   'd'                                   fpc_defaults
  *   'q'                                   stop (QEMU exits 0)
  *
@@ -42,7 +48,8 @@ typedef struct {
     FpcController ctrl;
     int in, out;
     unsigned char request[MAX_REQUEST] __attribute__((aligned(8)));
-    unsigned char values[8 * MAX_VALUES] __attribute__((aligned(8)));
+    unsigned char values[8 * MAX_VALUES + 8 + sizeof(BoardLibmCall) * BOARD_LIBM_LOG]
+        __attribute__((aligned(8)));
     uint32_t n_values; /* bytes */
     char text[MAX_TEXT];
     uint32_t n_text;
@@ -148,6 +155,22 @@ static int32_t sample(Pil *p, Cursor *c, uint32_t *ticks) {
     return s;
 }
 
+/* 'c': n turns of a two-instruction loop (subs, bne) after a mov, with the timer restarted
+ * before and read after; the host checks the ticks against 2 n + 2 instructions plus the
+ * reads' own (the same for every n), the measuring chain's calibration. */
+static uint32_t calibrate(uint32_t n) {
+    uint32_t ticks;
+    board_timer_restart();
+    __asm__ volatile("movs r0, %0\n"
+                     "1: subs r0, r0, #1\n"
+                     "bne 1b\n"
+                     :
+                     : "r"(n)
+                     : "r0", "cc");
+    ticks = board_timer_ticks();
+    return ticks;
+}
+
 /* The board's libm on the host's arguments ('m'). */
 static int32_t libm(Pil *p, Cursor *c) {
     unsigned char f;
@@ -214,6 +237,27 @@ static int32_t serve(Pil *p, unsigned char op, Cursor *c, uint32_t *ticks) {
     }
     case 'x': return sample(p, c, ticks);
     case 'm': return libm(p, c);
+    case 'c': {
+        uint32_t n = take_u32(c);
+        if (c->bad || n == 0) return FP_ERROR;
+        *ticks = calibrate(n);
+        return FP_OK;
+    }
+    case 'l': {
+        unsigned char on;
+        take(c, &on, 1);
+        if (c->bad) return FP_ERROR;
+        if (board_libm_record(on != 0)) return FP_OK;
+        keep_message(p, FP_ERROR, "this image does not record libm calls (fpc_pil_trace.elf does)");
+        return FP_ERROR;
+    }
+    case 'L': {
+        uint32_t k, dropped;
+        const BoardLibmCall *calls = board_libm_take(&k, &dropped);
+        put(p, &dropped, sizeof dropped);
+        put(p, calls, (size_t)k * sizeof *calls);
+        return FP_OK;
+    }
     default: return FP_ERROR;
     }
 }
