@@ -15,6 +15,7 @@ import subprocess
 from dataclasses import dataclass
 from pathlib import Path
 
+from orchestrator.pil.target import check_image
 from plant.common.artifacts import NativeBuildMissing, find_artifact
 
 TOOLS = ("arm-none-eabi-gcc", "arm-none-eabi-size", "cmake")
@@ -125,6 +126,7 @@ def image_of(option: str, say: bool = True) -> Path:
         if not Path(option).is_file():
             raise ValueError(f"--pil {option}: no such controller image (fpc_pil.elf, from "
                              "`fullpose build-embedded`)")
+        check_image(Path(option))
         return Path(option)
     if say:
         print("building the controller image for the Cortex-M7 (fullpose build-embedded) ...",

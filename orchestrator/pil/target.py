@@ -76,6 +76,19 @@ class Reply:
         return self.status >= FP_DISCARD
 
 
+def check_image(elf: Path) -> None:
+    """ValueError unless elf is a 32-bit little-endian Arm ELF executable (what the emulated
+    Cortex-M7 runs), naming the file."""
+    with open(elf, "rb") as f:
+        head = f.read(20)
+    # e_ident: magic, class 1 (32-bit), data 1 (little-endian); e_type 2 (executable);
+    # e_machine 40 (EM_ARM)
+    if (len(head) < 20 or head[:4] != b"\x7fELF" or head[4] != 1 or head[5] != 1
+            or struct.unpack("<HH", head[16:20]) != (2, 40)):
+        raise ValueError(f"{elf} is not an Arm ELF executable: the controller image is the "
+                         "fpc_pil.elf that `fullpose build-embedded` builds")
+
+
 def qemu_command(elf: Path, shift: int = ICOUNT_SHIFT) -> list[str]:
     """The qemu-system-arm command line that runs the image (in the pipes' folder)."""
     return ["qemu-system-arm", "-M", MACHINE, "-nographic", "-monitor", "none",
@@ -91,6 +104,7 @@ class PilTarget:
         if not self.elf.is_file():
             raise PilError(f"no controller image at {self.elf}: build it with "
                            "'fullpose build-embedded'")
+        check_image(self.elf)
         if shutil.which("qemu-system-arm") is None:
             raise PilError("qemu-system-arm is not installed (Debian: apt-get install "
                            "qemu-system-arm)")
@@ -115,7 +129,9 @@ class PilTarget:
     def _qemu_said(self) -> str:
         self._log.flush()
         self._log.seek(0)
-        text = self._log.read().decode(errors="replace").strip()
+        lines = self._log.read().decode(errors="replace").strip().splitlines()
+        # the first lines say what happened; a fault's register dump follows them
+        text = "; ".join(line.strip() for line in lines[:3] if line.strip())
         return f" (QEMU: {text})" if text else ""
 
     def _dead(self, what: str) -> PilError:
