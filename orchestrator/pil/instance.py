@@ -13,9 +13,10 @@ measures of each sample is kept in :attr:`PilController.samples`.
 from __future__ import annotations
 
 import ctypes
-from collections.abc import Iterable, Mapping
+from collections.abc import Callable, Iterable, Mapping
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -105,10 +106,11 @@ class PilController(FmuInstance):
         self._pending: tuple[bytes, np.ndarray] | None = None
         self._groups: dict[int, _Group] = {}  # by the engine's reference-array address
         self._fresh: set[int] = set()  # groups the last sample's reply filled
-        self._entries = {"fmi2SetReal": _ARRAY(self._set_real), "fmi2DoStep": _STEP(self._step),
-                         "fmi2GetReal": _ARRAY(self._get_real),
-                         "fmi2GetInteger": _ARRAY(self._get_int),
-                         "fmi2GetBoolean": _ARRAY(self._get_int)}
+        self._entries = {"fmi2SetReal": _ARRAY(self._guarded(self._set_real)),
+                         "fmi2DoStep": _STEP(self._guarded(self._step)),
+                         "fmi2GetReal": _ARRAY(self._guarded(self._get_real)),
+                         "fmi2GetInteger": _ARRAY(self._guarded(self._get_int)),
+                         "fmi2GetBoolean": _ARRAY(self._guarded(self._get_int))}
 
     @property
     def shift(self) -> int:
@@ -228,6 +230,19 @@ class PilController(FmuInstance):
         """The FMI 2.0-shaped entries, as callbacks into this instance (component unused)."""
         return Kernel(1, {n: ctypes.cast(f, ctypes.c_void_p).value or 0
                           for n, f in self._entries.items()})
+
+    def _guarded(self, entry: Callable[..., int]) -> Callable[..., int]:
+        """entry as a C callback may run it: an exception (the target stopped answering)
+        becomes an error status with its message kept, as an FMU's failed call (ctypes would
+        print it and return 0, an OK)."""
+        def call(*args: Any) -> int:
+            try:
+                return entry(*args)
+            except Exception as e:  # (every failure is the call's status)
+                self.messages.append(("ERROR", "", str(e)))
+                return _ERROR
+
+        return call
 
     @staticmethod
     def _refs_at(address: int | None, n: int) -> list[int]:

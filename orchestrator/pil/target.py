@@ -135,7 +135,10 @@ class PilTarget:
         return f" (QEMU: {text})" if text else ""
 
     def _dead(self, what: str) -> PilError:
-        code = self.proc.poll()
+        try:  # a target that closed its pipe is exiting: its status tells why
+            code: int | None = self.proc.wait(timeout=1.0)
+        except subprocess.TimeoutExpired:
+            code = None
         state = f"QEMU exited with code {code}" if code is not None else "QEMU is running"
         return PilError(f"the controller target {what}: {state}{self._qemu_said()}")
 

@@ -193,3 +193,25 @@ def test_instruction_counting_is_exact_on_a_loop_of_known_length(target: PilTarg
     a, b, c = (target.calibrate(n) for n in (1_000, 11_000, 101_000))
     assert abs((b - a) - 20_000) <= 1.0 and abs((c - a) - 200_000) <= 1.0
     assert 2_000 <= a <= 2_020
+
+
+@needs_tools
+def test_a_target_that_dies_mid_run_fails_the_run_with_the_reason(built: EmbeddedBuild) -> None:
+    from orchestrator.pil.instance import PilController
+    from orchestrator.sim.engine import RunError
+    from orchestrator.sim.fmu3 import open_fmu
+    from plant import plant_fmu
+
+    plant = open_fmu(plant_fmu(2), "plant")
+    ctrl = PilController(built.elf)
+
+    def kill(first: int, last: int) -> None:
+        if last > 100:
+            ctrl.target.proc.kill()
+
+    try:
+        with pytest.raises(RunError, match="stopped answering: QEMU exited with code -9"):
+            CoSimulation(prepare("hover", 2.0), fmus=(plant, ctrl)).run(on_chunk=kill)
+    finally:
+        plant.close()
+        ctrl.close()
