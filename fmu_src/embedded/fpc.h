@@ -15,7 +15,8 @@
  * initializes the FMU initializes this, and a sample computes what the FMU's sample
  * computes from the same inputs.  Every function returns FP_OK, or FP_WARNING (usable,
  * something was said), or FP_ERROR with the reason given to the log function (naming the
- * parameter or input); an FP_ERROR leaves the controller as it was.
+ * parameter or input); an FP_ERROR changes none of the controller's state (inputs passed
+ * to a refused fpc_step stay set, as an FMU's inputs do).
  *
  * Nothing here allocates, and no function keeps state outside its FpcController.  The
  * sample path calls libm only; text (snprintf) is formatted when something is said.  A
