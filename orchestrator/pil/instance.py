@@ -105,6 +105,8 @@ class PilController(FmuInstance):
         self._ts = 0.0
         self._pending: tuple[bytes, np.ndarray] | None = None
         self._groups: dict[int, _Group] = {}  # by the engine's reference-array address
+        self._layout: tuple[bytes, bytes, list[_Group], list[_Group], int] | None = None
+        self._packed: dict[tuple[int, int], bytes] = {}  # input references, packed
         self._fresh: set[int] = set()  # groups the last sample's reply filled
         self._entries = {"fmi2SetReal": _ARRAY(self._guarded(self._set_real)),
                          "fmi2DoStep": _STEP(self._guarded(self._step)),
@@ -215,6 +217,8 @@ class PilController(FmuInstance):
         self.messages.clear()
         self.samples = SampleLog()
         self._groups.clear()
+        self._layout = None
+        self._packed.clear()
         self._fresh.clear()
         self.time = 0.0
 
@@ -253,14 +257,28 @@ class PilController(FmuInstance):
     def _set_real(self, comp: int, vr: int | None, n: int, values: int | None) -> int:
         if n == 0:
             return _OK
-        refs = self._refs_at(vr, n)
         data = np.ctypeslib.as_array((ctypes.c_double * n).from_address(values or 0)).copy()
         if self._pending is not None:  # two sets before a step: the earlier one now
-            reply = self.target.set_reals(refs, data)
+            reply = self.target.set_reals(self._refs_at(vr, n), data)
             self._said(reply)
             return _ERROR if reply.failed else _OK
-        self._pending = (packed_refs(refs), data)
+        key = (int(vr or 0), n)  # the engine's reference arrays are fixed: packed once
+        packed = self._packed.get(key)
+        if packed is None:
+            packed = self._packed[key] = packed_refs(self._refs_at(vr, n))
+        self._pending = (packed, data)
         return _OK
+
+    def _outputs(self) -> tuple[bytes, bytes, list[_Group], list[_Group], int]:
+        """What a sample asks back: the Real and the Integer/Boolean groups' references
+        (packed), the groups, and the Real count; made again only when a group joins."""
+        if self._layout is None:
+            reals = [g for g in self._groups.values() if g.kind == "real"]
+            ints = [g for g in self._groups.values() if g.kind == "int"]
+            self._layout = (packed_refs([r for g in reals for r in g.refs]),
+                            packed_refs([r for g in ints for r in g.refs]), reals, ints,
+                            sum(len(g.refs) for g in reals))
+        return self._layout
 
     def _step(self, comp: int | None, t: float, h: float, flag: int) -> int:
         ts = self._ts
@@ -271,11 +289,8 @@ class PilController(FmuInstance):
         refs, data = self._pending if self._pending is not None else (packed_refs([]),
                                                                       np.zeros(0))
         self._pending = None
-        reals = [g for g in self._groups.values() if g.kind == "real"]
-        ints = [g for g in self._groups.values() if g.kind == "int"]
-        reply = self.target.sample(t, refs, data,
-                                   packed_refs([r for g in reals for r in g.refs]),
-                                   packed_refs([r for g in ints for r in g.refs]))
+        real_refs, int_refs, reals, ints, n_real = self._outputs()
+        reply = self.target.sample(t, refs, data, real_refs, int_refs)
         self._said(reply)
         if reply.failed:
             return _ERROR
@@ -284,7 +299,6 @@ class PilController(FmuInstance):
             calls, dropped = self.target.take_libm()
             self.libm_calls.append(calls.copy())
             self.libm_dropped += dropped
-        n_real = sum(len(g.refs) for g in reals)
         got_r = np.frombuffer(reply.values[:8 * n_real], dtype="<f8")
         got_i = np.frombuffer(reply.values[8 * n_real:], dtype="<i4")
         a = b = 0
@@ -311,6 +325,7 @@ class PilController(FmuInstance):
             if reply.failed:
                 return _ERROR, np.zeros(0)
             group = self._groups[key] = _Group(kind, refs, np.array(values))
+            self._layout = None  # the next sample asks for this group too
         self._fresh.discard(key)
         return _OK, group.values
 

@@ -133,12 +133,18 @@ static int reply(Pil *p, int32_t status, uint32_t ticks) {
     return 0;
 }
 
+/* n value references, then n reals, into p->refs and p->reals ('R' and 'x'). */
+static uint32_t take_reals(Pil *p, Cursor *c) {
+    uint32_t n = take_refs(c, p->refs), i;
+    for (i = 0; i < n; i++) p->reals[i] = take_f64(c);
+    return n;
+}
+
 /* One sample ('x'). */
 static int32_t sample(Pil *p, Cursor *c, uint32_t *ticks) {
     double t = take_f64(c);
-    uint32_t n = take_refs(c, p->refs), nr, ni, i;
+    uint32_t n = take_reals(p, c), nr, ni;
     FpStatus s;
-    for (i = 0; i < n; i++) p->reals[i] = take_f64(c);
     if (c->bad) return FP_ERROR;
     s = fpc_set_reals_vr(&p->ctrl, p->refs, n, p->reals);
     if (s != FP_OK) return s;
@@ -208,8 +214,7 @@ static int32_t serve(Pil *p, unsigned char op, Cursor *c, uint32_t *ticks) {
         return FP_OK;
     case 'd': return fpc_defaults(&p->ctrl, keep_message, p);
     case 'R':
-        n = take_refs(c, p->refs);
-        for (i = 0; i < n; i++) p->reals[i] = take_f64(c);
+        n = take_reals(p, c);
         return c->bad ? FP_ERROR : fpc_set_reals_vr(&p->ctrl, p->refs, n, p->reals);
     case 'I':
         n = take_refs(c, p->refs);
